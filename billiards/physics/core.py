@@ -1,0 +1,729 @@
+"""Numba kernels of the event-based simulator: evolve, detect, resolve, and the event loop.
+
+Pure functions over arrays. A table state is ``st`` (4, 7) float64 rows
+``x, y, vx, vy, wx, wy, wz`` plus ``lab`` (4,) int64 motion labels. Parameters arrive as the
+packed vector of :class:`billiards.physics.params.PhysicsParams`. Formulas and their sources
+are in ``shared/physics_reference.md``; section numbers below refer to it.
+
+Layout (pooltool's split, our code):
+* evolve: closed-form slide / roll / spin motion (§2);
+* detect: transition times, ball–cushion quadratics, ball–ball quartics (§3);
+* resolve: cue strike (§1), ball–ball (§4), Han 2005 cushion (§5), transitions (§2);
+* loop: next event, advance every ball, resolve, invalidate caches (§3.4).
+
+Detection differs from pooltool in one deliberate way: instead of a general quartic solver we
+isolate the earliest root inside the *validity horizon* of the two trajectories (the earliest
+transition or cushion time of either ball). Any root beyond that horizon would be invalidated
+by the horizon event anyway (§6.8), so the chosen event is the same, and the degenerate
+quartic of §6.3 (equal accelerations) cannot produce spurious events.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .params import (
+    P_BALL_BALL, P_CUE_END_M, P_CUE_M, P_E_B, P_E_C, P_F_C, P_G, P_H, P_L, P_M,
+    P_MAX_EVENTS, P_MIN_DIST, P_R, P_SQUIRT, P_U_R, P_U_S, P_U_SP, P_W,
+)
+
+# Motion labels (pooltool's numbering).
+STATIONARY, SPINNING, SLIDING, ROLLING = 0, 1, 2, 3
+# Event kinds in the log.
+EV_STRIKE, EV_TRANSITION, EV_BALL_BALL, EV_CUSHION, EV_STOP = 0, 1, 2, 3, 4
+# Cushions: 0 is x = 0, 1 is x = w, 2 is y = 0, 3 is y = l.
+N_BALLS = 4
+EPS = 100.0 * np.finfo(np.float64).eps  # pooltool's EPS, 2.2e-14
+INF = np.inf
+# Pairs of balls, in a fixed order.
+PAIR_I = np.array([0, 0, 0, 1, 1, 2], dtype=np.int64)
+PAIR_J = np.array([1, 2, 3, 2, 3, 3], dtype=np.int64)
+# Outcome slots of the integer and float result vectors.
+O_FIRST, O_HIT1, O_HIT2, O_HIT3, O_NEVENTS, O_TRUNC, O_CUSHIONS = range(7)
+N_OUT_INT = 7
+OF_CLOSE2, OF_CLOSE3, OF_TIME = range(3)
+N_OUT_FLOAT = 3
+# Validation error codes (see api.py for the messages).
+ERR_OK, ERR_NONFINITE, ERR_OFF_TABLE, ERR_OVERLAP = 0, 1, 2, 3
+
+
+# ----------------------------------------------------------------------------- evolve (§2)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _norm(x, y):
+    return math.sqrt(x * x + y * y)
+
+
+@njit(cache=True, error_model="numpy")
+def _spin_after(wz, t, alpha):
+    """Spin law: w_z decays linearly at alpha, clamped at zero."""
+    if abs(wz) < EPS:
+        return wz
+    return wz - math.copysign(1.0, wz) * alpha * min(t, abs(wz) / alpha)
+
+
+@njit(cache=True, error_model="numpy")
+def _slip_dir(st, i, R):
+    """Unit contact-point slip direction; the heading if the slip is exactly zero."""
+    ux = st[i, 2] - R * st[i, 5]
+    uy = st[i, 3] + R * st[i, 4]
+    un = _norm(ux, uy)
+    if un > 0.0:
+        return ux / un, uy / un, un
+    vn = _norm(st[i, 2], st[i, 3])
+    if vn > 0.0:
+        return st[i, 2] / vn, st[i, 3] / vn, 0.0
+    return 0.0, 0.0, 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def evolve_ball(st, lab, i, t, p):
+    """Advance ball i by t seconds inside its current motion state, in place."""
+    if t == 0.0:
+        return
+    R, g = p[P_R], p[P_G]
+    alpha = 5.0 * p[P_U_SP] * g / (2.0 * R)
+    s = lab[i]
+    if s == SLIDING:
+        ux, uy, _ = _slip_dir(st, i, R)
+        mg = p[P_U_S] * g
+        st[i, 0] += st[i, 2] * t - 0.5 * mg * t * t * ux
+        st[i, 1] += st[i, 3] * t - 0.5 * mg * t * t * uy
+        st[i, 2] -= mg * t * ux
+        st[i, 3] -= mg * t * uy
+        k = 5.0 * mg * t / (2.0 * R)
+        st[i, 4] -= k * uy
+        st[i, 5] += k * ux
+        st[i, 6] = _spin_after(st[i, 6], t, alpha)
+    elif s == ROLLING:
+        vn = _norm(st[i, 2], st[i, 3])
+        if vn > 0.0:
+            hx, hy = st[i, 2] / vn, st[i, 3] / vn
+        else:
+            hx, hy = 0.0, 0.0
+        mg = p[P_U_R] * g
+        st[i, 0] += st[i, 2] * t - 0.5 * mg * t * t * hx
+        st[i, 1] += st[i, 3] * t - 0.5 * mg * t * t * hy
+        st[i, 2] -= mg * t * hx
+        st[i, 3] -= mg * t * hy
+        st[i, 4] = -st[i, 3] / R
+        st[i, 5] = st[i, 2] / R
+        st[i, 6] = _spin_after(st[i, 6], t, alpha)
+    elif s == SPINNING:
+        st[i, 6] = _spin_after(st[i, 6], t, alpha)
+
+
+@njit(cache=True, error_model="numpy")
+def _poly(st, lab, i, p):
+    """Trajectory polynomial p(t) = c + b t + a t^2 of ball i (§3.1): returns ax, ay, bx, by."""
+    s = lab[i]
+    if s == SLIDING:
+        ux, uy, _ = _slip_dir(st, i, p[P_R])
+        k = -0.5 * p[P_U_S] * p[P_G]
+        return k * ux, k * uy, st[i, 2], st[i, 3]
+    if s == ROLLING:
+        vn = _norm(st[i, 2], st[i, 3])
+        if vn > 0.0:
+            k = -0.5 * p[P_U_R] * p[P_G] / vn
+            return k * st[i, 2], k * st[i, 3], st[i, 2], st[i, 3]
+    return 0.0, 0.0, 0.0, 0.0
+
+
+# ----------------------------------------------------------------------------- detect (§3)
+
+
+@njit(cache=True, error_model="numpy")
+def transition_time(st, lab, i, p):
+    """Time until ball i's next motion transition, and the label it goes to (§2)."""
+    R, g = p[P_R], p[P_G]
+    s = lab[i]
+    alpha = 5.0 * p[P_U_SP] * g / (2.0 * R)
+    if s == SLIDING:
+        _, _, un = _slip_dir(st, i, R)
+        return 2.0 * un / (7.0 * p[P_U_S] * g), ROLLING
+    if s == ROLLING:
+        tau_r = _norm(st[i, 2], st[i, 3]) / (p[P_U_R] * g)
+        tau_sp = abs(st[i, 6]) / alpha
+        if tau_sp > tau_r:
+            return tau_r, SPINNING
+        return tau_r, STATIONARY
+    if s == SPINNING:
+        return abs(st[i, 6]) / alpha, STATIONARY
+    return INF, STATIONARY
+
+
+@njit(cache=True, error_model="numpy")
+def _quadratic_roots(a, b, c):
+    """Real roots of a t^2 + b t + c, ascending, NaN where absent; handles a = 0 and b = 0."""
+    if a == 0.0:
+        if b == 0.0:
+            return np.nan, np.nan
+        return -c / b, np.nan
+    disc = b * b - 4.0 * a * c
+    if disc < 0.0:
+        return np.nan, np.nan
+    q = -0.5 * (b + math.copysign(math.sqrt(disc), b))
+    if q == 0.0:
+        return 0.0, 0.0
+    r1, r2 = q / a, c / q
+    if r1 > r2:
+        r1, r2 = r2, r1
+    return r1, r2
+
+
+@njit(cache=True, error_model="numpy")
+def _cubic_eval(c3, c2, c1, c0, t):
+    return ((c3 * t + c2) * t + c1) * t + c0
+
+
+@njit(cache=True, error_model="numpy")
+def _cubic_root(c3, c2, c1, c0, lo, hi, flo):
+    """Root of a cubic that is monotone on [lo, hi] and changes sign there (flo = value at
+    lo): Newton steps kept inside the shrinking bracket, bisection when a step leaves it."""
+    t = 0.5 * (lo + hi)
+    for _ in range(100):
+        ft = _cubic_eval(c3, c2, c1, c0, t)
+        if ft == 0.0:
+            return t
+        if (ft > 0.0) == (flo > 0.0):
+            lo = t
+        else:
+            hi = t
+        dft = (3.0 * c3 * t + 2.0 * c2) * t + c1
+        tn = t - ft / dft if dft != 0.0 else 0.5 * (lo + hi)
+        if not (lo < tn < hi):
+            tn = 0.5 * (lo + hi)
+        if abs(tn - t) <= 1e-15 * abs(t) or tn == lo or tn == hi:
+            return tn
+        t = tn
+    return t
+
+
+@njit(cache=True, error_model="numpy")
+def _cubic_roots_in(c3, c2, c1, c0, T):
+    """Real roots of the cubic inside (0, T), ascending: (count, r0, r1, r2).
+
+    The cubic is split at the roots of its derivative into monotone pieces, and each piece
+    with a sign change is solved, so degenerate (lower-degree) cubics need no special case.
+    """
+    q1, q2 = _quadratic_roots(3.0 * c3, 2.0 * c2, c1)
+    if not (q1 == q1 and 0.0 < q1 < T):
+        q1 = np.nan
+    if not (q2 == q2 and 0.0 < q2 < T and not q2 <= q1):
+        q2 = np.nan
+    if q1 != q1:
+        q1, q2 = q2, np.nan
+    n = 0
+    r0, r1, r2 = np.nan, np.nan, np.nan
+    lo = 0.0
+    flo = _cubic_eval(c3, c2, c1, c0, lo)
+    for k in range(3):
+        hi = q1 if k == 0 else (q2 if k == 1 else T)
+        if hi != hi:
+            if k < 2:
+                continue
+        fhi = _cubic_eval(c3, c2, c1, c0, hi)
+        if flo != 0.0 and fhi != 0.0 and (flo > 0.0) != (fhi > 0.0):
+            r = _cubic_root(c3, c2, c1, c0, lo, hi, flo)
+        elif fhi == 0.0 and hi < T:
+            r = hi
+        else:
+            r = np.nan
+        if r == r:
+            if n == 0:
+                r0 = r
+            elif n == 1:
+                r1 = r
+            else:
+                r2 = r
+            n += 1
+        lo, flo = hi, fhi
+    return n, r0, r1, r2
+
+
+@njit(cache=True, error_model="numpy")
+def _sep2(dax, day, dbx, dby, dcx, dcy, t):
+    """Squared centre distance at t of two balls with relative polynomial dA t^2 + dB t + dC."""
+    x = (dax * t + dbx) * t + dcx
+    y = (day * t + dby) * t + dcy
+    return x * x + y * y
+
+
+@njit(cache=True, error_model="numpy")
+def _relative_poly(st, poly, i, j):
+    return (poly[j, 0] - poly[i, 0], poly[j, 1] - poly[i, 1], poly[j, 2] - poly[i, 2],
+            poly[j, 3] - poly[i, 3], st[j, 0] - st[i, 0], st[j, 1] - st[i, 1])
+
+
+@njit(cache=True, error_model="numpy")
+def _span(a, b, c, T):
+    """Range [lo, hi] of the parabola c + b t + a t^2 over t in [0, T]."""
+    if a == 0.0 and b == 0.0:
+        return c, c
+    end = (a * T + b) * T + c
+    lo, hi = min(c, end), max(c, end)
+    if a != 0.0:
+        tv = -b / (2.0 * a)
+        if 0.0 < tv < T:
+            v = (a * tv + b) * tv + c
+            lo, hi = min(lo, v), max(hi, v)
+    return lo, hi
+
+
+@njit(cache=True, error_model="numpy")
+def _box_gap(st, poly, i, j, T):
+    """A lower bound on the centre distance of balls i and j over [0, T]: the gap between
+    the axis-aligned boxes their trajectory polynomials sweep."""
+    ilx, ihx = _span(poly[i, 0], poly[i, 2], st[i, 0], T)
+    ily, ihy = _span(poly[i, 1], poly[i, 3], st[i, 1], T)
+    jlx, jhx = _span(poly[j, 0], poly[j, 2], st[j, 0], T)
+    jly, jhy = _span(poly[j, 1], poly[j, 3], st[j, 1], T)
+    gx = max(jlx - ihx, ilx - jhx, 0.0)
+    gy = max(jly - ihy, ily - jhy, 0.0)
+    return _norm(gx, gy)
+
+
+@njit(cache=True, error_model="numpy")
+def _quartic_derivative(dax, day, dbx, dby, dcx, dcy):
+    """Coefficients of d/dt |dA t^2 + dB t + dC|^2, a cubic."""
+    a4 = dax * dax + day * day
+    a3 = 2.0 * (dax * dbx + day * dby)
+    a2 = dbx * dbx + dby * dby + 2.0 * (dax * dcx + day * dcy)
+    a1 = 2.0 * (dbx * dcx + dby * dcy)
+    return 4.0 * a4, 3.0 * a3, 2.0 * a2, a1
+
+
+@njit(cache=True, error_model="numpy")
+def ball_ball_time(st, poly, lab, i, j, R, T):
+    """Earliest time in [0, T] at which balls i and j come into contact (§3.2), or INF.
+
+    f(t) = |dA t^2 + dB t + dC|^2 - (2R)^2 is a quartic. Its derivative's real roots split
+    [0, T] into monotone pieces; the first piece on which f falls from > 0 to <= 0 holds the
+    contact, found by safeguarded Newton on the direct (non-expanded) form of f.
+    """
+    if lab[i] <= SPINNING and lab[j] <= SPINNING:
+        return INF
+    d2 = 2.0 * R
+    if _box_gap(st, poly, i, j, T) > d2:
+        return INF
+    dax, day, dbx, dby, dcx, dcy = _relative_poly(st, poly, i, j)
+    r2 = d2 * d2
+    f0 = dcx * dcx + dcy * dcy - r2
+    c3, c2, c1, c0 = _quartic_derivative(dax, day, dbx, dby, dcx, dcy)
+    if f0 <= 0.0 and c0 < 0.0:
+        return 0.0  # already touching or overlapping and approaching: contact now (§3.2)
+    n, q0, q1, q2 = _cubic_roots_in(c3, c2, c1, c0, T)
+    lo, flo = 0.0, f0
+    for k in range(n + 1):
+        hi = T if k == n else (q0 if k == 0 else (q1 if k == 1 else q2))
+        fhi = _sep2(dax, day, dbx, dby, dcx, dcy, hi) - r2
+        if flo > 0.0 and fhi <= 0.0:
+            # safeguarded Newton inside the bracket [lo, hi], f(lo) > 0 >= f(hi)
+            t = lo
+            for _ in range(100):
+                x = (dax * t + dbx) * t + dcx
+                y = (day * t + dby) * t + dcy
+                ft = x * x + y * y - r2
+                if ft > 0.0:
+                    lo = t
+                else:
+                    hi = t
+                dft = 2.0 * (x * (2.0 * dax * t + dbx) + y * (2.0 * day * t + dby))
+                tn = t - ft / dft if dft != 0.0 else 0.5 * (lo + hi)
+                if not (lo < tn < hi):
+                    tn = 0.5 * (lo + hi)
+                if abs(tn - t) <= 1e-15 * abs(t) or tn == lo or tn == hi:
+                    return tn
+                t = tn
+            return t
+        lo, flo = hi, fhi
+    return INF
+
+
+@njit(cache=True, error_model="numpy")
+def min_separation(st, poly, lab, i, j, T):
+    """Smallest centre distance between balls i and j over [0, T] along their polynomials."""
+    dax, day, dbx, dby, dcx, dcy = _relative_poly(st, poly, i, j)
+    best = _sep2(dax, day, dbx, dby, dcx, dcy, 0.0)
+    if lab[i] <= SPINNING and lab[j] <= SPINNING:
+        return math.sqrt(best)
+    c3, c2, c1, c0 = _quartic_derivative(dax, day, dbx, dby, dcx, dcy)
+    n, q0, q1, q2 = _cubic_roots_in(c3, c2, c1, c0, T)
+    if n > 0:
+        best = min(best, _sep2(dax, day, dbx, dby, dcx, dcy, q0))
+    if n > 1:
+        best = min(best, _sep2(dax, day, dbx, dby, dcx, dcy, q1))
+    if n > 2:
+        best = min(best, _sep2(dax, day, dbx, dby, dcx, dcy, q2))
+    best = min(best, _sep2(dax, day, dbx, dby, dcx, dcy, T))
+    return math.sqrt(best)
+
+
+@njit(cache=True, error_model="numpy")
+def cushion_time(st, poly, lab, i, p, T):
+    """Earliest time in (EPS, T] at which ball i reaches a cushion (§3.3): (time, cushion)."""
+    if lab[i] <= SPINNING:
+        return INF, -1
+    R = p[P_R]
+    ax, ay, bx, by = poly[i, 0], poly[i, 1], poly[i, 2], poly[i, 3]
+    best, which = INF, -1
+    for w in range(4):
+        if w < 2:
+            a, b, c = ax, bx, st[i, 0] - (R if w == 0 else p[P_W] - R)
+        else:
+            a, b, c = ay, by, st[i, 1] - (R if w == 2 else p[P_L] - R)
+        if abs(a) < EPS:
+            if abs(b) < EPS:
+                continue
+            r1, r2 = -c / b, np.nan
+        else:
+            r1, r2 = _quadratic_roots(a, b, c)
+        for r in (r1, r2):
+            if r == r and EPS < r <= T and r < best:
+                best, which = r, w
+    return best, which
+
+
+# ----------------------------------------------------------------------------- resolve
+
+
+@njit(cache=True, error_model="numpy")
+def strike(st, lab, V0, phi, a, b, p):
+    """Level-cue instantaneous-point strike of ball 0 (§1); a, b are fractions of R."""
+    R, m = p[P_R], p[P_M]
+    v = 2.0 * V0 / (1.0 + m / p[P_CUE_M] + 2.5 * (a * a + b * b))
+    heading = phi
+    if p[P_SQUIRT] != 0.0:
+        heading += -math.atan2(2.5 * a * math.sqrt(1.0 - a * a),
+                               1.0 + m / p[P_CUE_END_M] + 2.5 * (1.0 - a * a))
+    k = 5.0 * v / (2.0 * R)
+    st[0, 2] = v * math.cos(heading)
+    st[0, 3] = v * math.sin(heading)
+    st[0, 4] = -k * b * math.sin(phi)
+    st[0, 5] = k * b * math.cos(phi)
+    st[0, 6] = -k * a
+    lab[0] = SLIDING if v > 0.0 else STATIONARY
+
+
+@njit(cache=True, error_model="numpy")
+def _kiss_balls(st, lab, i, j, p):
+    """make_kiss (§4): separate touching balls to 2R + min_dist, along their velocities."""
+    dist = 2.0 * p[P_R] + p[P_MIN_DIST]
+    md = p[P_MIN_DIST]
+    rx, ry = st[j, 0] - st[i, 0], st[j, 1] - st[i, 1]
+    vx, vy = st[j, 2] - st[i, 2], st[j, 3] - st[i, 3]
+    r1, r2 = _quadratic_roots(vx * vx + vy * vy, 2.0 * (rx * vx + ry * vy), rx * rx + ry * ry - dist * dist)
+    t = np.nan
+    if r1 == r1:
+        t = r1
+        if r2 == r2 and abs(r2) < abs(r1):
+            t = r2
+    moving = lab[i] > SPINNING or lab[j] > SPINNING
+    if t == t and moving:
+        mx = 0.5 * t * (st[i, 2] + st[j, 2])
+        my = 0.5 * t * (st[i, 3] + st[j, 3])
+        if _norm(mx, my) <= 5.0 * md:
+            for k in (i, j):
+                st[k, 0] += t * st[k, 2]
+                st[k, 1] += t * st[k, 3]
+            return
+    # fallback: push apart symmetrically along the line of centres
+    cx, cy = 0.5 * (st[i, 0] + st[j, 0]), 0.5 * (st[i, 1] + st[j, 1])
+    n = _norm(rx, ry)
+    nx, ny = rx / n, ry / n
+    st[i, 0], st[i, 1] = cx - 0.5 * dist * nx, cy - 0.5 * dist * ny
+    st[j, 0], st[j, 1] = cx + 0.5 * dist * nx, cy + 0.5 * dist * ny
+
+
+@njit(cache=True, error_model="numpy")
+def resolve_ball_ball(st, lab, i, j, p):
+    """Equal-mass restitution exchange along the line of centres (§4b; e = 1 gives §4a)."""
+    _kiss_balls(st, lab, i, j, p)
+    e = 1.0 if p[P_BALL_BALL] == 1.0 else p[P_E_B]
+    nx, ny = st[j, 0] - st[i, 0], st[j, 1] - st[i, 1]
+    n = _norm(nx, ny)
+    nx, ny = nx / n, ny / n
+    vin = st[i, 2] * nx + st[i, 3] * ny
+    vjn = st[j, 2] * nx + st[j, 3] * ny
+    vin_new = 0.5 * ((1.0 - e) * vin + (1.0 + e) * vjn)
+    vjn_new = 0.5 * ((1.0 + e) * vin + (1.0 - e) * vjn)
+    st[i, 2] += (vin_new - vin) * nx
+    st[i, 3] += (vin_new - vin) * ny
+    st[j, 2] += (vjn_new - vjn) * nx
+    st[j, 3] += (vjn_new - vjn) * ny
+    lab[i] = SLIDING
+    lab[j] = SLIDING
+
+
+@njit(cache=True, error_model="numpy")
+def _cushion_normal(w):
+    """Outward (into the cushion) unit normal of cushion w."""
+    if w == 0:
+        return -1.0, 0.0
+    if w == 1:
+        return 1.0, 0.0
+    if w == 2:
+        return 0.0, -1.0
+    return 0.0, 1.0
+
+
+@njit(cache=True, error_model="numpy")
+def resolve_cushion(st, lab, i, w, p):
+    """Han 2005 ball–cushion impulse, corrected form (§5), with make_kiss to R + min_dist."""
+    R, m, md = p[P_R], p[P_M], p[P_MIN_DIST]
+    nx, ny = _cushion_normal(w)
+    # make_kiss: back along the velocity to distance R + min_dist, else along the normal
+    if w == 0:
+        d = st[i, 0]
+    elif w == 1:
+        d = p[P_W] - st[i, 0]
+    elif w == 2:
+        d = st[i, 1]
+    else:
+        d = p[P_L] - st[i, 1]
+    need = R + md - d
+    vn = _norm(st[i, 2], st[i, 3])
+    along = (st[i, 2] * nx + st[i, 3] * ny) / vn if vn > 0.0 else 0.0
+    shift = need / along if along > 0.0 else INF
+    if abs(shift) <= 5.0 * md:
+        st[i, 0] -= shift * st[i, 2] / vn
+        st[i, 1] -= shift * st[i, 3] / vn
+    else:
+        st[i, 0] -= need * nx
+        st[i, 1] -= need * ny
+    # rail frame: x along the normal oriented with the velocity, y = z cross x
+    if st[i, 2] * nx + st[i, 3] * ny < 0.0:
+        nx, ny = -nx, -ny
+    yx, yy = -ny, nx
+    vx = st[i, 2] * nx + st[i, 3] * ny
+    vy = st[i, 2] * yx + st[i, 3] * yy
+    wx = st[i, 4] * nx + st[i, 5] * ny
+    wy = st[i, 4] * yx + st[i, 5] * yy
+    wz = st[i, 6]
+    theta = math.asin(p[P_H] / R - 1.0)
+    sa, ca = math.sin(theta), math.cos(theta)
+    e, mu = p[P_E_C], p[P_F_C]
+    sx = vx * sa + R * wy
+    sy = -vy - R * wz * ca + R * wx * sa
+    s = _norm(sx, sy)
+    pze = (1.0 + e) * m * vx * ca
+    pzs = 2.0 * m / 7.0 * s
+    if pzs <= mu * pze:
+        pxe = 2.0 * m / 7.0 * sx
+        pye = 2.0 * m / 7.0 * sy
+    else:
+        pxe = mu * pze * sx / s
+        pye = mu * pze * sy / s
+    PX = -pxe * sa - pze * ca
+    PY = pye
+    PZ = pxe * ca - pze * sa
+    k = 5.0 / (2.0 * m * R)
+    vx += PX / m
+    vy += PY / m
+    wx -= k * PY * sa
+    wy += k * (PX * sa - PZ * ca)
+    wz += k * PY * ca
+    st[i, 2] = vx * nx + vy * yx
+    st[i, 3] = vx * ny + vy * yy
+    st[i, 4] = wx * nx + wy * yx
+    st[i, 5] = wx * ny + wy * yy
+    st[i, 6] = wz
+    lab[i] = SLIDING
+
+
+@njit(cache=True, error_model="numpy")
+def resolve_transition(st, lab, i, new_label):
+    """Enter a new motion state (§2): residual velocities are zeroed on entering spin/rest."""
+    if new_label == SPINNING or new_label == STATIONARY:
+        st[i, 2] = 0.0
+        st[i, 3] = 0.0
+        st[i, 4] = 0.0
+        st[i, 5] = 0.0
+        if new_label == STATIONARY:
+            st[i, 6] = 0.0
+    lab[i] = new_label
+
+
+# ----------------------------------------------------------------------------- event loop
+
+
+@njit(cache=True, error_model="numpy")
+def _grow(arr, n):
+    out = np.empty((2 * arr.shape[0],) + arr.shape[1:], dtype=arr.dtype)
+    out[:n] = arr[:n]
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def run_shot(positions, V0, phi, a, b, p, record):
+    """Simulate one shot from rest to rest.
+
+    positions: (4, 2) ball centres; V0 cue speed (m/s); phi aim (rad); a, b contact offsets
+    (fractions of R). Returns ``(st, out_int, out_float, ev_time, ev_info, ev_state)``: the
+    final state, the outcome vectors (slots ``O_*`` and ``OF_*``) and, if ``record``, the
+    event log (time; kind, ball, other; all balls' state and labels after the event).
+    """
+    st = np.zeros((N_BALLS, 7))
+    lab = np.zeros(N_BALLS, dtype=np.int64)
+    for k in range(N_BALLS):
+        st[k, 0] = positions[k, 0]
+        st[k, 1] = positions[k, 1]
+    out_int = np.zeros(N_OUT_INT, dtype=np.int64)
+    out_float = np.zeros(N_OUT_FLOAT)
+    out_int[O_FIRST] = -1
+    R = p[P_R]
+    max_events = int(p[P_MAX_EVENTS])
+    cap = 64 if record else 1
+    ev_time = np.zeros(cap)
+    ev_info = np.zeros((cap, 3), dtype=np.int64)
+    ev_state = np.zeros((cap, N_BALLS, 8))
+    closest = np.empty(2)
+    for r in range(2):
+        closest[r] = _norm(st[2 + r, 0] - st[0, 0], st[2 + r, 1] - st[0, 1])
+
+    strike(st, lab, V0, phi, a, b, p)
+    n_ev = 0
+    if record:
+        ev_time[0] = 0.0
+        ev_info[0, 0], ev_info[0, 1], ev_info[0, 2] = EV_STRIKE, 0, -1
+        for k in range(N_BALLS):
+            ev_state[0, k, :7] = st[k]
+            ev_state[0, k, 7] = lab[k]
+    n_rec = 1
+
+    t = 0.0
+    trans_t = np.full(N_BALLS, INF)
+    trans_to = np.zeros(N_BALLS, dtype=np.int64)
+    cush_t = np.full(N_BALLS, INF)
+    cush_w = np.full(N_BALLS, -1, dtype=np.int64)
+    pair_t = np.full(6, INF)
+    dirty = np.ones(N_BALLS, dtype=np.bool_)
+    poly = np.empty((N_BALLS, 4))
+    while True:
+        for k in range(N_BALLS):
+            poly[k, 0], poly[k, 1], poly[k, 2], poly[k, 3] = _poly(st, lab, k, p)
+        # refresh the caches of the balls whose trajectory changed (§3.4)
+        for k in range(N_BALLS):
+            if dirty[k]:
+                tau, to = transition_time(st, lab, k, p)
+                trans_t[k] = t + tau
+                trans_to[k] = to
+                tc, w = cushion_time(st, poly, lab, k, p, tau)
+                cush_t[k] = t + tc
+                cush_w[k] = w
+        for q in range(6):
+            i, j = PAIR_I[q], PAIR_J[q]
+            if dirty[i] or dirty[j]:
+                horizon = min(min(trans_t[i], cush_t[i]), min(trans_t[j], cush_t[j])) - t
+                pair_t[q] = t + ball_ball_time(st, poly, lab, i, j, R, horizon)
+        for k in range(N_BALLS):
+            dirty[k] = False
+        # next event: transitions win exact ties over collisions (§3.4)
+        kind, who, other, t_next = -1, -1, -1, INF
+        for k in range(N_BALLS):
+            if trans_t[k] < t_next:
+                kind, who, other, t_next = EV_TRANSITION, k, trans_to[k], trans_t[k]
+        for q in range(6):
+            if pair_t[q] < t_next:
+                kind, who, other, t_next = EV_BALL_BALL, PAIR_I[q], PAIR_J[q], pair_t[q]
+        for k in range(N_BALLS):
+            if cush_t[k] < t_next:
+                kind, who, other, t_next = EV_CUSHION, k, cush_w[k], cush_t[k]
+        if kind < 0:
+            break
+        dt = t_next - t
+        # the carom facts: cue ball's closest approach to each red not yet hit
+        for r in range(2):
+            if out_int[O_HIT2 + r] == 0 and (lab[0] > SPINNING or lab[2 + r] > SPINNING):
+                if _box_gap(st, poly, 0, 2 + r, dt) < closest[r]:
+                    closest[r] = min(closest[r], min_separation(st, poly, lab, 0, 2 + r, dt))
+        for k in range(N_BALLS):
+            evolve_ball(st, lab, k, dt, p)
+        t = t_next
+        if kind == EV_TRANSITION:
+            resolve_transition(st, lab, who, other)
+            dirty[who] = True
+        elif kind == EV_BALL_BALL:
+            resolve_ball_ball(st, lab, who, other, p)
+            dirty[who] = True
+            dirty[other] = True
+            if who == 0:
+                out_int[O_HIT1 + other - 1] = 1
+                if out_int[O_FIRST] < 0:
+                    out_int[O_FIRST] = other
+                if other >= 2:
+                    closest[other - 2] = 2.0 * R
+        else:
+            resolve_cushion(st, lab, who, other, p)
+            dirty[who] = True
+            if who == 0:
+                out_int[O_CUSHIONS] += 1
+        n_ev += 1
+        if record:
+            if n_rec >= ev_time.shape[0]:
+                ev_time = _grow(ev_time, n_rec)
+                ev_info = _grow(ev_info, n_rec)
+                ev_state = _grow(ev_state, n_rec)
+            ev_time[n_rec] = t
+            ev_info[n_rec, 0], ev_info[n_rec, 1], ev_info[n_rec, 2] = kind, who, other
+            for k in range(N_BALLS):
+                ev_state[n_rec, k, :7] = st[k]
+                ev_state[n_rec, k, 7] = lab[k]
+            n_rec += 1
+        if n_ev >= max_events:
+            # safety net: stop every ball where it is and flag the shot
+            for k in range(N_BALLS):
+                resolve_transition(st, lab, k, STATIONARY)
+            out_int[O_TRUNC] = 1
+            if record:
+                if n_rec >= ev_time.shape[0]:
+                    ev_time = _grow(ev_time, n_rec)
+                    ev_info = _grow(ev_info, n_rec)
+                    ev_state = _grow(ev_state, n_rec)
+                ev_time[n_rec] = t
+                ev_info[n_rec, 0], ev_info[n_rec, 1], ev_info[n_rec, 2] = EV_STOP, -1, -1
+                for k in range(N_BALLS):
+                    ev_state[n_rec, k, :7] = st[k]
+                    ev_state[n_rec, k, 7] = lab[k]
+                n_rec += 1
+            break
+    out_int[O_NEVENTS] = n_ev
+    out_float[OF_CLOSE2] = max(closest[0] - 2.0 * R, 0.0)
+    out_float[OF_CLOSE3] = max(closest[1] - 2.0 * R, 0.0)
+    out_float[OF_TIME] = t
+    return st, out_int, out_float, ev_time[:n_rec], ev_info[:n_rec], ev_state[:n_rec]
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def run_batch(positions, cue, p, out_pos, out_int, out_float):
+    """N shots in parallel over all numba threads; cue rows are (V0, phi, a, b)."""
+    for n in prange(positions.shape[0]):
+        st, oi, of, _, _, _ = run_shot(positions[n], cue[n, 0], cue[n, 1], cue[n, 2], cue[n, 3], p, False)
+        for k in range(N_BALLS):
+            out_pos[n, k, 0] = st[k, 0]
+            out_pos[n, k, 1] = st[k, 1]
+        out_int[n] = oi
+        out_float[n] = of
+
+
+@njit(cache=True, error_model="numpy")
+def check_positions(positions, p, tol):
+    """Validate (N, 4, 2) ball centres: (code, shot, ball, other ball); code ERR_OK if fine."""
+    R, W, L = p[P_R], p[P_W], p[P_L]
+    for n in range(positions.shape[0]):
+        for k in range(N_BALLS):
+            x, y = positions[n, k, 0], positions[n, k, 1]
+            if not (math.isfinite(x) and math.isfinite(y)):
+                return ERR_NONFINITE, n, k, -1
+            if x < R - tol or x > W - R + tol or y < R - tol or y > L - R + tol:
+                return ERR_OFF_TABLE, n, k, -1
+        for k in range(N_BALLS):
+            for j in range(k + 1, N_BALLS):
+                d = _norm(positions[n, j, 0] - positions[n, k, 0], positions[n, j, 1] - positions[n, k, 1])
+                if d < 2.0 * R - tol:
+                    return ERR_OVERLAP, n, k, j
+    return ERR_OK, -1, -1, -1
