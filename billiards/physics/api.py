@@ -90,30 +90,26 @@ def _as_float_array(x, name: str) -> np.ndarray:
 
 
 def check_actions(actions: np.ndarray, name: str = "action") -> None:
-    """Raise ValueError unless every row is a finite (theta, p, a, b) inside the convention."""
+    """Raise ValueError unless actions is (N, 4) of finite (theta, p, a, b) inside the convention."""
     if actions.ndim != 2 or actions.shape[1] != 4:
         raise ValueError(f"{name} must have shape (4,) or (N, 4) = (theta, p, a, b); got shape {actions.shape}")
-    finite = np.isfinite(actions)
-    if not finite.all():
-        n, k = np.argwhere(~finite)[0]
-        raise ValueError(f"{name}[{n}] has a non-finite {('theta', 'p', 'a', 'b')[k]}: {actions[n].tolist()}")
-    p = actions[:, 1]
-    bad = (p < 0.0) | (p > 1.0)
-    if bad.any():
-        n = int(np.argmax(bad))
-        raise ValueError(f"{name}[{n}]: power p = {p[n]!r} is outside [0, 1]")
-    ab = actions[:, 2:]
-    bad = (ab < -1.0) | (ab > 1.0)
-    if bad.any():
-        n, k = np.argwhere(bad)[0]
-        raise ValueError(f"{name}[{n}]: tip offset {'ab'[k]} = {ab[n, k]!r} is outside [-1, 1]")
+    code, n, k = core.check_actions(np.ascontiguousarray(actions, dtype=np.float64))
+    if code == core.ERR_OK:
+        return
+    where = f"{name}[{n}]" if actions.shape[0] > 1 else name
+    field = ("theta", "p", "a", "b")[k]
+    if code == core.ERR_ACTION_NONFINITE:
+        raise ValueError(f"{where} has a non-finite {field}: {actions[n].tolist()}")
+    if code == core.ERR_POWER:
+        raise ValueError(f"{where}: power p = {float(actions[n, 1])!r} is outside [0, 1]")
+    raise ValueError(f"{where}: tip offset {field} = {float(actions[n, k])!r} is outside [-1, 1]")
 
 
 def check_positions(positions: np.ndarray, params: PhysicsParams = DEFAULT_PARAMS, name: str = "positions") -> None:
     """Raise ValueError unless positions is (N, 4, 2) of finite, on-table, non-overlapping balls."""
     if positions.ndim != 3 or positions.shape[1:] != (4, 2):
         raise ValueError(f"{name} must have shape (4, 2) or (N, 4, 2) (white, yellow, red1, red2 × x, y); got {positions.shape}")
-    code, n, k, j = core.check_positions(positions, params.array, POSITION_TOL)
+    code, n, k, j = core.check_positions(np.ascontiguousarray(positions, dtype=np.float64), params.array, POSITION_TOL)
     if code == core.ERR_OK:
         return
     where = f"{name}[{n}]" if positions.shape[0] > 1 else name
@@ -144,21 +140,10 @@ def action_to_cue(action, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
     """
     arr = _as_float_array(action, "action")
     single = arr.ndim == 1
-    actions = arr.reshape(1, -1) if single else arr
+    actions = np.ascontiguousarray(arr.reshape(1, -1) if single else arr)
     check_actions(actions)
-    cue = _cue_from_valid(actions, params)
+    cue = core.actions_to_cue(actions, params.array)
     return cue[0] if single else cue
-
-
-def _cue_from_valid(actions: np.ndarray, params: PhysicsParams) -> np.ndarray:
-    cue = np.empty_like(actions)
-    cue[:, 0] = actions[:, 1] * params.cue_speed_max
-    cue[:, 1] = np.mod(actions[:, 0], TWO_PI)
-    norm = np.hypot(actions[:, 2], actions[:, 3])
-    scale = params.max_english / np.maximum(norm, 1.0)
-    cue[:, 2] = actions[:, 2] * scale
-    cue[:, 3] = actions[:, 3] * scale
-    return cue
 
 
 # ----------------------------------------------------------------------------- racks
@@ -202,29 +187,17 @@ def random_racks(rng: np.random.Generator, n: int, params: PhysicsParams = DEFAU
 # ----------------------------------------------------------------------------- simulation
 
 
-def _prepare(positions, actions, params: PhysicsParams, batch: bool):
-    pos = _as_float_array(positions, "positions")
-    act = _as_float_array(actions, "actions" if batch else "action")
-    if batch:
-        if pos.ndim != 3 or act.ndim != 2 or pos.shape[0] != act.shape[0]:
-            raise ValueError(
-                f"simulate_batch needs positions (N, 4, 2) and actions (N, 4) with the same N; "
-                f"got {pos.shape} and {act.shape}"
-            )
-    else:
-        if pos.shape != (4, 2):
-            raise ValueError(f"positions must have shape (4, 2) (white, yellow, red1, red2 × x, y); got {pos.shape}")
-        if act.shape != (4,):
-            raise ValueError(f"action must have shape (4,) = (theta, p, a, b); got {act.shape}")
-        pos, act = pos[None], act[None]
-    check_actions(act, "actions" if batch else "action")
-    check_positions(np.ascontiguousarray(pos), params)
-    return np.ascontiguousarray(pos), _cue_from_valid(act, params)
-
-
-def _outcome(hits: np.ndarray):
-    """Carom rules, vectorised over the last axis of hits = (yellow, red1, red2)."""
-    return carom_outcome(hits[..., 0], hits[..., 1], hits[..., 2])
+def _prepare_batch(positions, actions, params: PhysicsParams):
+    pos = np.ascontiguousarray(_as_float_array(positions, "positions"))
+    act = np.ascontiguousarray(_as_float_array(actions, "actions"))
+    if pos.ndim != 3 or act.ndim != 2 or pos.shape[0] != act.shape[0]:
+        raise ValueError(
+            f"simulate_batch needs positions (N, 4, 2) and actions (N, 4) with the same N; "
+            f"got {pos.shape} and {act.shape}"
+        )
+    check_actions(act, "actions")
+    check_positions(pos, params)
+    return pos, act
 
 
 def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> ShotResult:
@@ -235,10 +208,19 @@ def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> 
     ordered event log with every ball's state after each event (what
     :func:`billiards.physics.trajectory` needs to draw the paths).
     """
-    pos, cue = _prepare(positions, action, params, batch=False)
-    st, oi, of, ev_t, ev_i, ev_s = core.run_shot(pos[0], cue[0, 0], cue[0, 1], cue[0, 2], cue[0, 3], params.array, True)
-    hits = oi[core.O_HIT1:core.O_HIT3 + 1].astype(bool)
-    score, foul, miss = _outcome(hits)
+    pos = _as_float_array(positions, "positions")
+    act = _as_float_array(action, "action")
+    if pos.shape != (4, 2):
+        raise ValueError(f"positions must have shape (4, 2) (white, yellow, red1, red2 × x, y); got {pos.shape}")
+    if act.shape != (4,):
+        raise ValueError(f"action must have shape (4,) = (theta, p, a, b); got {act.shape}")
+    p = params.array
+    if core.check_positions(pos[None], p, POSITION_TOL)[0] or core.check_actions(act[None])[0]:
+        check_actions(act[None])  # raises with the message
+        check_positions(pos[None], params)
+    st, oi, of, ev_t, ev_i, ev_s = core.run_action(pos, act, p, True)
+    hits = oi[core.O_HIT1:core.O_HIT3 + 1] != 0
+    score, foul, miss = carom_outcome(hits[0], hits[1], hits[2])
     return ShotResult(
         positions=st[:, :2].copy(),
         score=bool(score),
@@ -246,7 +228,7 @@ def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> 
         miss=bool(miss),
         first_contact=int(oi[core.O_FIRST]),
         hits=hits,
-        closest=of[[core.OF_CLOSE2, core.OF_CLOSE3]],
+        closest=of[core.OF_CLOSE2:core.OF_CLOSE3 + 1],
         cushions=int(oi[core.O_CUSHIONS]),
         n_events=int(oi[core.O_NEVENTS]),
         duration=float(of[core.OF_TIME]),
@@ -265,15 +247,15 @@ def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -
     positions (N, 4, 2), actions (N, 4). Bit-identical to N calls of :func:`simulate_shot`.
     The thread count is numba's (``numba.set_num_threads`` or ``NUMBA_NUM_THREADS``).
     """
-    pos, cue = _prepare(positions, actions, params, batch=True)
+    pos, act = _prepare_batch(positions, actions, params)
     n = pos.shape[0]
     out_pos = np.empty((n, 4, 2))
     out_int = np.empty((n, core.N_OUT_INT), dtype=np.int64)
     out_float = np.empty((n, core.N_OUT_FLOAT))
     if n:
-        core.run_batch(pos, cue, params.array, out_pos, out_int, out_float)
-    hits = out_int[:, core.O_HIT1:core.O_HIT3 + 1].astype(bool)
-    score, foul, miss = _outcome(hits)
+        core.run_batch(pos, act, params.array, out_pos, out_int, out_float)
+    hits = out_int[:, core.O_HIT1:core.O_HIT3 + 1] != 0
+    score, foul, miss = carom_outcome(hits[:, 0], hits[:, 1], hits[:, 2])
     return BatchResult(
         positions=out_pos,
         score=score,
@@ -281,7 +263,7 @@ def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -
         miss=miss,
         first_contact=out_int[:, core.O_FIRST],
         hits=hits,
-        closest=out_float[:, [core.OF_CLOSE2, core.OF_CLOSE3]],
+        closest=out_float[:, core.OF_CLOSE2:core.OF_CLOSE3 + 1],
         cushions=out_int[:, core.O_CUSHIONS],
         n_events=out_int[:, core.O_NEVENTS],
         duration=out_float[:, core.OF_TIME],

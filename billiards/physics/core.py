@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from .params import (
-    P_BALL_BALL, P_CUE_END_M, P_CUE_M, P_E_B, P_E_C, P_F_C, P_G, P_H, P_L, P_M,
+    P_BALL_BALL, P_CUE_END_M, P_CUE_M, P_CUE_V_MAX, P_MAX_ENGLISH, P_E_B, P_E_C, P_F_C, P_G, P_H, P_L, P_M,
     P_MAX_EVENTS, P_MIN_DIST, P_R, P_SQUIRT, P_U_R, P_U_S, P_U_SP, P_W,
 )
 
@@ -48,6 +48,7 @@ OF_CLOSE2, OF_CLOSE3, OF_TIME = range(3)
 N_OUT_FLOAT = 3
 # Validation error codes (see api.py for the messages).
 ERR_OK, ERR_NONFINITE, ERR_OFF_TABLE, ERR_OVERLAP = 0, 1, 2, 3
+ERR_ACTION_NONFINITE, ERR_POWER, ERR_TIP = 4, 5, 6
 
 
 # ----------------------------------------------------------------------------- evolve (§2)
@@ -699,10 +700,10 @@ def run_shot(positions, V0, phi, a, b, p, record):
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
-def run_batch(positions, cue, p, out_pos, out_int, out_float):
-    """N shots in parallel over all numba threads; cue rows are (V0, phi, a, b)."""
+def run_batch(positions, actions, p, out_pos, out_int, out_float):
+    """N validated shots in parallel over all numba threads; actions rows (theta, p, a, b)."""
     for n in prange(positions.shape[0]):
-        st, oi, of, _, _, _ = run_shot(positions[n], cue[n, 0], cue[n, 1], cue[n, 2], cue[n, 3], p, False)
+        st, oi, of, _, _, _ = run_action(positions[n], actions[n], p, False)
         for k in range(N_BALLS):
             out_pos[n, k, 0] = st[k, 0]
             out_pos[n, k, 1] = st[k, 1]
@@ -727,3 +728,42 @@ def check_positions(positions, p, tol):
                 if d < 2.0 * R - tol:
                     return ERR_OVERLAP, n, k, j
     return ERR_OK, -1, -1, -1
+
+
+@njit(cache=True, error_model="numpy")
+def check_actions(actions):
+    """Validate (N, 4) actions (theta, p, a, b): (code, row, column); code ERR_OK if fine."""
+    for n in range(actions.shape[0]):
+        for k in range(4):
+            if not math.isfinite(actions[n, k]):
+                return ERR_ACTION_NONFINITE, n, k
+        if not 0.0 <= actions[n, 1] <= 1.0:
+            return ERR_POWER, n, 1
+        for k in (2, 3):
+            if not -1.0 <= actions[n, k] <= 1.0:
+                return ERR_TIP, n, k
+    return ERR_OK, -1, -1
+
+
+@njit(cache=True, error_model="numpy")
+def action_to_cue(theta, power, a, b, p):
+    """The action convention (see api.py): (theta, p, a, b) -> (V0 m/s, phi rad, a, b in R)."""
+    phi = theta % (2.0 * math.pi)
+    scale = p[P_MAX_ENGLISH] / max(_norm(a, b), 1.0)
+    return power * p[P_CUE_V_MAX], phi, a * scale, b * scale
+
+
+@njit(cache=True, error_model="numpy")
+def actions_to_cue(actions, p):
+    out = np.empty_like(actions)
+    for n in range(actions.shape[0]):
+        out[n, 0], out[n, 1], out[n, 2], out[n, 3] = action_to_cue(
+            actions[n, 0], actions[n, 1], actions[n, 2], actions[n, 3], p)
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def run_action(positions, action, p, record):
+    """run_shot for one validated (theta, p, a, b) action."""
+    V0, phi, a, b = action_to_cue(action[0], action[1], action[2], action[3], p)
+    return run_shot(positions, V0, phi, a, b, p, record)

@@ -18,11 +18,14 @@ import numpy as np
 
 
 def carom_outcome(hit_yellow, hit_red1, hit_red2):
-    """(score, foul, miss) from what the white touched; works on scalars and arrays."""
-    hit_yellow = np.asarray(hit_yellow, dtype=bool)
+    """(score, foul, miss) from what the white touched.
+
+    Inputs are NumPy booleans (``np.bool_`` scalars or bool arrays, broadcast together); so
+    are the outputs.
+    """
     foul = hit_yellow
-    score = np.asarray(hit_red1, dtype=bool) & np.asarray(hit_red2, dtype=bool) & ~hit_yellow
-    miss = ~score & ~foul
+    score = hit_red1 & hit_red2 & ~hit_yellow
+    miss = ~(score | foul)
     return score, foul, miss
 
 

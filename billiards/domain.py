@@ -1,0 +1,211 @@
+"""Domain knowledge for Korean 4-ball, in one place: pure NumPy, no torch.
+
+Every formula the environments and transforms use lives here exactly once; the gymnasium env,
+the TorchRL transforms, the baselines and the search code all call these functions. Every
+function is batched over arbitrary leading axes ``...``.
+
+Conventions (see :mod:`billiards.physics`): ball order 0 white (the cue ball), 1 yellow,
+2 red1, 3 red2; ``positions`` is ``(..., 4, 2)`` centres in metres in the table frame (x
+across the width, y along the length); angles are radians, counter-clockwise from +x, the
+same convention as the action's aim ``theta``.
+
+Contents
+--------
+* observation layout: :func:`rest_observation` (28 floats) and the action bounds;
+* the aim constraint: :func:`nearest_red`, :func:`aim_window`, :func:`constrained_theta`;
+* the carom features: :func:`carom_features`;
+* reward shaping: :func:`foul_penalty`, :func:`gentle_bonus`, :func:`near_miss_bonus`,
+  summed by :func:`shaped_reward`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from billiards.physics import DEFAULT_PARAMS, unhit_red_gap
+
+WHITE, YELLOW, RED1, RED2 = 0, 1, 2, 3
+N_BALLS = 4
+BALL_STATE_DIM = 7  # x, y, vx, vy, wx, wy, wz
+OBS_DIM = N_BALLS * BALL_STATE_DIM  # 28
+N_CAROM_FEATURES = 4  # d1, d2, sin(phi), cos(phi)
+ACTION_DIM = 4  # theta, p, a, b
+# Documented bounds of the raw action (theta, p, a, b). theta is in fact accepted as any real
+# (the simulator wraps it mod 2*pi); the bound [0, 2*pi] is what specs and policies see.
+ACTION_LOW = np.array([0.0, 0.0, -1.0, -1.0])
+ACTION_HIGH = np.array([2.0 * math.pi, 1.0, 1.0, 1.0])
+NEAR_MISS_SIGMA = 0.05  # default length scale (m) of the near-miss bonus
+
+
+# ----------------------------------------------------------------------------- observation
+
+
+def rest_observation(positions: np.ndarray) -> np.ndarray:
+    """The paper's 28-float observation of a table at rest, float32.
+
+    ``obs[..., 7*k : 7*k + 7] = (x_k, y_k, vx_k, vy_k, wx_k, wy_k, wz_k)`` for ball k in the
+    ball order. Between shots every ball is at rest, so the velocity and spin slots are 0; they
+    are kept for fidelity with the paper's observation layout.
+    """
+    positions = np.asarray(positions)
+    obs = np.zeros(positions.shape[:-2] + (N_BALLS, BALL_STATE_DIM), dtype=np.float32)
+    obs[..., :2] = positions
+    return obs.reshape(positions.shape[:-2] + (OBS_DIM,))
+
+
+# ----------------------------------------------------------------------------- aim constraint
+
+
+def nearest_red(positions: np.ndarray) -> np.ndarray:
+    """Ball index (2 or 3) of the red whose centre is nearest the white's; ties go to red1 (2).
+
+    positions (..., 4, 2) -> (...,) int64.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    d = np.linalg.norm(positions[..., [RED1, RED2], :] - positions[..., WHITE:WHITE + 1, :], axis=-1)
+    return np.where(d[..., 1] < d[..., 0], RED2, RED1).astype(np.int64)
+
+
+def _take_ball(positions: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """positions[..., index[...], :] for a per-row ball index."""
+    return np.take_along_axis(positions, index[..., None, None], axis=-2)[..., 0, :]
+
+
+def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius) -> tuple[np.ndarray, np.ndarray]:
+    """The cone of aim angles whose straight path makes the white hit the nearest red.
+
+    With ``delta = c_red - c_white`` (nearest red) and ``d = |delta|``:
+
+        theta_target = atan2(delta_y, delta_x)
+        half_width   = asin(min(1, 2R / d))
+
+    A ball of radius R travelling along direction theta touches a resting ball of radius R
+    whose centre lies at distance d iff the perpendicular offset ``d * |sin(theta -
+    theta_target)|`` is below 2R (and the red is ahead), i.e. iff
+    ``|theta - theta_target| < half_width``. The white's path is straight until its first
+    collision (a level cue without squirt launches it along theta and no spin bends it), so
+    every theta strictly inside the window makes the nearest red the first contact, unless
+    another ball blocks the path first or the shot is too weak to get there.
+
+    Returns ``(theta_target, half_width)``, each (...,) float64, theta_target in (-pi, pi].
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    delta = _take_ball(positions, nearest_red(positions)) - positions[..., WHITE, :]
+    d = np.hypot(delta[..., 0], delta[..., 1])
+    theta_target = np.arctan2(delta[..., 1], delta[..., 0])
+    half_width = np.arcsin(np.minimum(1.0, 2.0 * R / d))
+    return theta_target, half_width
+
+
+def constrained_theta(positions: np.ndarray, u: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius) -> np.ndarray:
+    """The aim constraint: ``theta = theta_target + u * half_width`` (see :func:`aim_window`).
+
+    u in [-1, 1] chooses where inside the guaranteed-contact cone to aim (u = 0 is a full-ball
+    hit on the nearest red's centre, u = +-1 a graze on either side); |u| > 1 aims outside it.
+    positions (..., 4, 2), u (...,) -> theta (...,) float64 (not wrapped; the simulator wraps).
+    """
+    theta_target, half_width = aim_window(positions, R)
+    return theta_target + np.asarray(u, dtype=np.float64) * half_width
+
+
+# ----------------------------------------------------------------------------- carom features
+
+
+def carom_features(positions: np.ndarray) -> np.ndarray:
+    """Four carom-geometry features, all measured from the red nearest the white.
+
+    With w the white's centre, n the nearest red's (:func:`nearest_red`) and o the other red's,
+    u1 = n - w and u2 = o - n:
+
+        d1     = |u1|                            white -> nearest red centre distance (m)
+        d2     = |o - w|                         white -> other red centre distance (m)
+        sin_phi = (u1 x u2) / (|u1| |u2|)        u1 x u2 = u1_x u2_y - u1_y u2_x
+        cos_phi = (u1 . u2) / (|u1| |u2|)
+
+    phi in (-pi, pi] is the signed angle that turns the white->nearest-red direction onto the
+    nearest-red->other-red direction, counter-clockwise positive in the table frame: phi = 0
+    when the other red lies straight on beyond the nearest one, |phi| = pi when it lies back
+    towards the white. Returns (..., 4) float64 = (d1, d2, sin_phi, cos_phi). Balls never
+    overlap, so |u1|, |u2| >= 2R > 0.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    near = nearest_red(positions)
+    white = positions[..., WHITE, :]
+    n = _take_ball(positions, near)
+    o = _take_ball(positions, RED1 + RED2 - near)
+    u1, u2 = n - white, o - n
+    d1 = np.hypot(u1[..., 0], u1[..., 1])
+    d2 = np.linalg.norm(o - white, axis=-1)
+    norm = d1 * np.hypot(u2[..., 0], u2[..., 1])
+    sin_phi = (u1[..., 0] * u2[..., 1] - u1[..., 1] * u2[..., 0]) / norm
+    cos_phi = (u1[..., 0] * u2[..., 0] + u1[..., 1] * u2[..., 1]) / norm
+    return np.stack([d1, d2, sin_phi, cos_phi], axis=-1)
+
+
+# ----------------------------------------------------------------------------- reward shaping
+
+
+def foul_penalty(foul: np.ndarray, c: float) -> np.ndarray:
+    """Foul penalty term: ``-c * foul`` (foul in {0, 1})."""
+    return -float(c) * np.asarray(foul, dtype=np.float64)
+
+
+def gentle_bonus(score: np.ndarray, power: np.ndarray, beta: float) -> np.ndarray:
+    """Gentle-shot bonus: ``beta * score * (1 - p)``, p in [0, 1] the shot's power.
+
+    Rewards scoring with little power (a soft carom keeps the balls together for the next shot).
+    """
+    return float(beta) * np.asarray(score, dtype=np.float64) * (1.0 - np.asarray(power, dtype=np.float64))
+
+
+def near_miss_bonus(
+    score: np.ndarray,
+    foul: np.ndarray,
+    hits: np.ndarray,
+    closest: np.ndarray,
+    beta: float,
+    sigma: float = NEAR_MISS_SIGMA,
+) -> np.ndarray:
+    """Near-miss bonus for nearly completing the carom:
+
+        beta * exp(-gap / sigma)   if the white hit exactly one red and the shot is neither
+                                   a score nor a foul,
+        0                          otherwise,
+
+    where gap (m) is the white's closest surface gap to the red it did not touch during the
+    shot (:func:`billiards.physics.unhit_red_gap`; the simulator measures it over the whole
+    shot). The bonus is beta for a hair's-breadth miss and decays with length scale sigma
+    (default 0.05 m). hits (..., 3) = (yellow, red1, red2), closest (..., 2) gaps to red1, red2.
+    """
+    if sigma <= 0:
+        raise ValueError(f"near-miss sigma must be > 0, got {sigma!r}")
+    hits = np.asarray(hits, dtype=bool)
+    one_red = hits[..., 1] ^ hits[..., 2]
+    eligible = one_red & ~np.asarray(score, dtype=bool) & ~np.asarray(foul, dtype=bool)
+    gap = unhit_red_gap(hits, closest)
+    return np.where(eligible, float(beta) * np.exp(-gap / sigma), 0.0)
+
+
+def shaped_reward(
+    score: np.ndarray,
+    foul: np.ndarray,
+    power: np.ndarray,
+    hits: np.ndarray,
+    closest: np.ndarray,
+    foul_c: float = 0.0,
+    gentle_beta: float = 0.0,
+    near_miss_beta: float = 0.0,
+    near_miss_sigma: float = NEAR_MISS_SIGMA,
+) -> np.ndarray:
+    """Total reward: ``score + foul_penalty + gentle_bonus + near_miss_bonus`` (terms with a
+    zero coefficient are skipped). With all coefficients 0 this is the raw carom score."""
+    reward = np.asarray(score, dtype=np.float64).copy()
+    if foul_c:
+        reward += foul_penalty(foul, foul_c)
+    if gentle_beta:
+        reward += gentle_bonus(score, power, gentle_beta)
+    if near_miss_beta:
+        reward += near_miss_bonus(score, foul, hits, closest, near_miss_beta, near_miss_sigma)
+    return reward

@@ -1,0 +1,231 @@
+"""TorchRL environment: B independent innings stepped by one ``simulate_batch`` call.
+
+One env step is one shot in every one of the B innings. The env is *stateless* in TorchRL's
+sense (like ``PendulumEnv``): the table state lives in the tensordict as ``"positions"``
+(float64, exact) and ``"shot"`` (shots played in the inning), both declared in
+``state_spec``. ``step`` simulates from whatever positions the input carries, which is what
+makes exact snapshots and search cheap; ``reset`` draws new racks, or starts from given
+positions.
+
+Keys (B = batch size; every entry has leading dim B):
+
+=================  ===========  ===========================================================
+key                shape dtype  meaning
+=================  ===========  ===========================================================
+action             (4,) f32     (theta, p, a, b); spec Bounded([0,0,-1,-1], [2pi,1,1,1])
+observation        (28,) f32    4 balls x (x, y, vx, vy, wx, wy, wz), ball order; at rest the
+                                velocity/spin slots are 0 (:func:`billiards.domain.rest_observation`)
+positions          (4, 2) f64   exact ball centres (white, yellow, red1, red2); state
+shot               (1,) i64     shots played in the current inning; state
+reward             (1,) f32     the carom score in {0, 1} (transforms may add shaping)
+done/terminated/   (1,) bool    terminated: a miss or foul under ``on_miss="reset"``;
+truncated                       truncated: ``shot == max_shots`` and not terminated
+score/foul/miss    (1,) bool    the shot's carom outcome (exactly one is true after a shot)
+first_contact      (1,) i64     first ball the white touched (1, 2, 3) or -1
+hits               (3,) bool    the white touched (yellow, red1, red2)
+closest            (2,) f32     the white's closest surface gap to red1, red2 (m), 0 if hit
+n_events           (1,) i64     physical events of the shot
+=================  ===========  ===========================================================
+
+After a reset the per-shot entries are "no shot yet": False, first_contact -1, zeros.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from billiards.domain import ACTION_DIM, ACTION_HIGH, ACTION_LOW, OBS_DIM, rest_observation
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams, check_positions, simulate_batch
+
+from ._common import check_inning_options, initial_racks, terminated_truncated, validate_action
+
+INFO_KEYS = ("score", "foul", "miss", "first_contact", "hits", "closest", "n_events")
+
+
+def _bool_spec(shape) -> Categorical:
+    return Categorical(2, shape=shape, dtype=torch.bool)
+
+
+class BilliardsEnv(EnvBase):
+    """Korean 4-ball innings as a batched TorchRL env (one env, ``batch_size=[B]``).
+
+    Args:
+        batch_size: B, the number of innings played side by side (int or ``[B]``).
+        start: ``"random"`` (uniform non-overlapping rack per inning) or ``"canonical"``.
+        on_miss: ``"continue"`` (the inning always runs ``max_shots`` shots from whatever
+            table each shot leaves) or ``"reset"`` (a miss or a foul terminates the inning).
+        max_shots: shot budget of an inning (truncation), default 10.
+        params: simulator parameters.
+        seed: seed of the numpy Generator that draws racks (see :meth:`set_seed`).
+
+    Reset to a given table (``set_state=True`` is TorchRL's explicit form; without it
+    TorchRL 0.14 still honours the state with a FutureWarning)::
+
+        td = env.reset(TensorDict({"positions": pos}, batch_size=[B]), set_state=True)
+
+    Partial resets follow TorchRL: a boolean ``"_reset"`` of shape (B, 1) resets only the
+    marked innings. Bad actions (wrong shape, NaN/inf, p or a, b out of range) raise
+    ``ValueError`` naming ``"action"``.
+    """
+
+    batch_locked = True
+    _supports_set_state = True
+
+    def __init__(
+        self,
+        batch_size: int | Sequence[int] = 1,
+        *,
+        start: str = "random",
+        on_miss: str = "continue",
+        max_shots: int = 10,
+        params: PhysicsParams = DEFAULT_PARAMS,
+        seed: int | None = None,
+    ):
+        if isinstance(batch_size, int):
+            batch_size = [batch_size]
+        batch_size = torch.Size(batch_size)
+        if len(batch_size) != 1 or batch_size[0] < 1:
+            raise ValueError(f"BilliardsEnv needs a 1-D batch_size [B] with B >= 1, got {list(batch_size)}")
+        super().__init__(device="cpu", batch_size=batch_size)
+        self.max_shots = check_inning_options(start, on_miss, max_shots)
+        self.start, self.on_miss, self.params = start, on_miss, params
+        self._make_specs()
+        self._set_seed(seed)
+
+    # ------------------------------------------------------------------ specs
+
+    def _make_specs(self) -> None:
+        B = self.batch_size
+        w, l = self.params.table_width, self.params.table_length
+        pos_high = torch.tensor([w, l], dtype=torch.float64).expand(*B, 4, 2)
+        positions = Bounded(torch.zeros_like(pos_high), pos_high, shape=(*B, 4, 2), dtype=torch.float64)
+        shot = Bounded(0, self.max_shots, shape=(*B, 1), dtype=torch.int64)
+        self.observation_spec = Composite(
+            observation=Unbounded(shape=(*B, OBS_DIM), dtype=torch.float32),
+            positions=positions,
+            shot=shot,
+            score=_bool_spec((*B, 1)),
+            foul=_bool_spec((*B, 1)),
+            miss=_bool_spec((*B, 1)),
+            first_contact=Bounded(-1, 3, shape=(*B, 1), dtype=torch.int64),
+            hits=_bool_spec((*B, 3)),
+            closest=Unbounded(shape=(*B, 2), dtype=torch.float32),
+            n_events=Unbounded(shape=(*B, 1), dtype=torch.int64),
+            shape=B,
+        )
+        self.state_spec = Composite(positions=positions.clone(), shot=shot.clone(), shape=B)
+        self.action_spec = Bounded(
+            torch.as_tensor(ACTION_LOW, dtype=torch.float32).expand(*B, ACTION_DIM),
+            torch.as_tensor(ACTION_HIGH, dtype=torch.float32).expand(*B, ACTION_DIM),
+            shape=(*B, ACTION_DIM),
+            dtype=torch.float32,
+        )
+        self.reward_spec = Unbounded(shape=(*B, 1), dtype=torch.float32)
+        self.full_done_spec = Composite(
+            done=_bool_spec((*B, 1)), terminated=_bool_spec((*B, 1)), truncated=_bool_spec((*B, 1)), shape=B
+        )
+
+    # ------------------------------------------------------------------ seeding
+
+    def _set_seed(self, seed: int | None) -> None:
+        """Racks are drawn from ``numpy.random.default_rng(seed)``; same seed, same racks."""
+        self.rng = np.random.default_rng(seed)
+
+    # ------------------------------------------------------------------ step
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        B = self.batch_size[0]
+        action = validate_action(tensordict.get("action", None), (B, ACTION_DIM))
+        positions = tensordict.get("positions", None)
+        shot = tensordict.get("shot", None)
+        if positions is None or shot is None:
+            raise KeyError('BilliardsEnv.step needs "positions" and "shot" in the input: call env.reset() first')
+        positions = positions.detach().numpy().astype(np.float64, copy=False)
+        shot = shot.detach().numpy().reshape(B) + 1
+        result = simulate_batch(positions, action, self.params)
+        terminated, truncated = terminated_truncated(result.score, shot, self.on_miss, self.max_shots)
+        return self._output(
+            positions=result.positions,
+            shot=shot,
+            reward=result.score.astype(np.float32),
+            terminated=terminated,
+            truncated=truncated,
+            score=result.score,
+            foul=result.foul,
+            miss=result.miss,
+            first_contact=result.first_contact,
+            hits=result.hits,
+            closest=result.closest.astype(np.float32),
+            n_events=result.n_events,
+        )
+
+    def _output(self, *, positions, shot, reward=None, terminated, truncated, **info) -> TensorDictBase:
+        B = self.batch_size[0]
+        col = lambda x: torch.from_numpy(np.ascontiguousarray(x)).reshape(B, -1)  # noqa: E731
+        data = {
+            "observation": torch.from_numpy(rest_observation(positions)),
+            "positions": torch.from_numpy(np.ascontiguousarray(positions, dtype=np.float64)),
+            "shot": col(shot.astype(np.int64)),
+            "done": col(terminated | truncated),
+            "terminated": col(terminated),
+            "truncated": col(truncated),
+        }
+        if reward is not None:
+            data["reward"] = col(reward)
+        data.update({k: col(v) for k, v in info.items()})
+        return TensorDict(data, batch_size=self.batch_size)
+
+    # ------------------------------------------------------------------ reset
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        B = self.batch_size[0]
+        mask = np.ones(B, dtype=bool)
+        if tensordict is not None and "_reset" in tensordict.keys():
+            mask = tensordict.get("_reset").detach().numpy().reshape(B).astype(bool)
+        given = tensordict.get("positions", None) if tensordict is not None else None
+        given = None if given is None else given.detach().numpy().astype(np.float64)
+        if given is not None and given.shape != (B, 4, 2):
+            raise ValueError(f'"positions" must have shape ({B}, 4, 2) (white, yellow, red1, red2 x (x, y)); got {given.shape}')
+
+        positions = given.copy() if given is not None else initial_racks(self.rng, "canonical", B, self.params)
+        if kwargs.get("set_state") and given is not None:
+            check_positions(given[mask], self.params, name="positions")
+        elif mask.any():
+            positions[mask] = initial_racks(self.rng, self.start, int(mask.sum()), self.params)
+
+        no = np.zeros(B, dtype=bool)
+        return self._output(
+            positions=positions,
+            shot=np.zeros(B, dtype=np.int64),
+            terminated=no,
+            truncated=no,
+            score=no,
+            foul=no,
+            miss=no,
+            first_contact=np.full(B, -1, dtype=np.int64),
+            hits=np.zeros((B, 3), dtype=bool),
+            closest=np.zeros((B, 2), dtype=np.float32),
+            n_events=np.zeros(B, dtype=np.int64),
+        )
+
+
+def reset_to(env: EnvBase, positions) -> TensorDictBase:
+    """Start fresh innings from the given table states, exactly: ``positions`` (B, 4, 2).
+
+    Works on a bare :class:`BilliardsEnv` and on a ``TransformedEnv`` around it (the
+    transforms see the reset). Shorthand for ``env.reset(TensorDict(positions=...),
+    set_state=True)``.
+    """
+    positions = torch.as_tensor(np.asarray(positions, dtype=np.float64))
+    if positions.ndim == 2:
+        positions = positions.expand(*env.batch_size, 4, 2).clone()
+    return env.reset(TensorDict({"positions": positions}, batch_size=env.batch_size), set_state=True)
+
+
+__all__ = ["BilliardsEnv", "INFO_KEYS", "reset_to"]
