@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from billiards.physics import DEFAULT_PARAMS, PhysicsParams, canonical_rack, random_racks
+from billiards.physics import (
+    DEFAULT_PARAMS,
+    PhysicsParams,
+    canonical_rack,
+    random_racks,
+)
 
 STARTS = ("random", "canonical")
 ON_MISS = ("continue", "reset")

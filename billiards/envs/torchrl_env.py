@@ -40,10 +40,26 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from billiards.domain import ACTION_DIM, ACTION_HIGH, ACTION_LOW, OBS_DIM, rest_observation
-from billiards.physics import DEFAULT_PARAMS, PhysicsParams, check_positions, simulate_batch
+from billiards.domain import (
+    ACTION_DIM,
+    ACTION_HIGH,
+    ACTION_LOW,
+    OBS_DIM,
+    rest_observation,
+)
+from billiards.physics import (
+    DEFAULT_PARAMS,
+    PhysicsParams,
+    check_positions,
+    simulate_batch,
+)
 
-from ._common import check_inning_options, initial_racks, terminated_truncated, validate_action
+from ._common import (
+    check_inning_options,
+    initial_racks,
+    terminated_truncated,
+    validate_action,
+)
 
 INFO_KEYS = ("score", "foul", "miss", "first_contact", "hits", "closest", "n_events")
 
@@ -167,7 +183,7 @@ class BilliardsEnv(EnvBase):
 
     def _output(self, *, positions, shot, reward=None, terminated, truncated, **info) -> TensorDictBase:
         B = self.batch_size[0]
-        col = lambda x: torch.from_numpy(np.ascontiguousarray(x)).reshape(B, -1)  # noqa: E731
+        col = lambda x: torch.from_numpy(np.ascontiguousarray(x)).reshape(B, -1)
         data = {
             "observation": torch.from_numpy(rest_observation(positions)),
             "positions": torch.from_numpy(np.ascontiguousarray(positions, dtype=np.float64)),
@@ -179,20 +195,22 @@ class BilliardsEnv(EnvBase):
         if reward is not None:
             data["reward"] = col(reward)
         data.update({k: col(v) for k, v in info.items()})
-        return TensorDict(data, batch_size=self.batch_size)
+        return TensorDict(data, batch_size=self.batch_size, device=self.device)
 
     # ------------------------------------------------------------------ reset
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         B = self.batch_size[0]
         mask = np.ones(B, dtype=bool)
-        if tensordict is not None and "_reset" in tensordict.keys():
+        if tensordict is not None and "_reset" in tensordict:
             mask = tensordict.get("_reset").detach().numpy().reshape(B).astype(bool)
         given = tensordict.get("positions", None) if tensordict is not None else None
         given = None if given is None else given.detach().numpy().astype(np.float64)
         if given is not None and given.shape != (B, 4, 2):
             raise ValueError(f'"positions" must have shape ({B}, 4, 2) (white, yellow, red1, red2 x (x, y)); got {given.shape}')
 
+        # Rows outside the mask keep the input's table (TorchRL merges only the masked rows back;
+        # without an input table they hold a placeholder that is never used).
         positions = given.copy() if given is not None else initial_racks(self.rng, "canonical", B, self.params)
         if kwargs.get("set_state") and given is not None:
             check_positions(given[mask], self.params, name="positions")
@@ -228,4 +246,4 @@ def reset_to(env: EnvBase, positions) -> TensorDictBase:
     return env.reset(TensorDict({"positions": positions}, batch_size=env.batch_size), set_state=True)
 
 
-__all__ = ["BilliardsEnv", "INFO_KEYS", "reset_to"]
+__all__ = ["INFO_KEYS", "BilliardsEnv", "reset_to"]

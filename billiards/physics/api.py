@@ -27,6 +27,7 @@ from .params import DEFAULT_PARAMS, PhysicsParams
 from .rules import carom_outcome
 
 TWO_PI = 2.0 * math.pi
+PARALLEL_MIN_BATCH = 64  # smaller batches run on the calling thread (same kernel, same bits)
 POSITION_TOL = 1e-6  # metres a state may sit outside the table or overlap and still be accepted
 BALL_NAMES = ("white", "yellow", "red1", "red2")
 EVENT_KINDS = ("strike", "transition", "ball_ball", "cushion", "stop")
@@ -214,11 +215,11 @@ def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> 
         raise ValueError(f"positions must have shape (4, 2) (white, yellow, red1, red2 × x, y); got {pos.shape}")
     if act.shape != (4,):
         raise ValueError(f"action must have shape (4,) = (theta, p, a, b); got {act.shape}")
-    p = params.array
-    if core.check_positions(pos[None], p, POSITION_TOL)[0] or core.check_actions(act[None])[0]:
-        check_actions(act[None])  # raises with the message
+    ok, (st, oi, of, ev_t, ev_i, ev_s) = core.checked_shot(
+        np.ascontiguousarray(pos), np.ascontiguousarray(act), params.array, POSITION_TOL)
+    if not ok:
+        check_actions(act[None])  # raise with the message
         check_positions(pos[None], params)
-    st, oi, of, ev_t, ev_i, ev_s = core.run_action(pos, act, p, True)
     hits = oi[core.O_HIT1:core.O_HIT3 + 1] != 0
     score, foul, miss = carom_outcome(hits[0], hits[1], hits[2])
     return ShotResult(
@@ -245,15 +246,18 @@ def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -
     """Simulate N independent shots at once, in parallel over numba's threads.
 
     positions (N, 4, 2), actions (N, 4). Bit-identical to N calls of :func:`simulate_shot`.
-    The thread count is numba's (``numba.set_num_threads`` or ``NUMBA_NUM_THREADS``).
+    The thread count is numba's (``numba.set_num_threads`` or ``NUMBA_NUM_THREADS``); batches
+    smaller than ``PARALLEL_MIN_BATCH`` run on the calling thread.
     """
     pos, act = _prepare_batch(positions, actions, params)
     n = pos.shape[0]
     out_pos = np.empty((n, 4, 2))
     out_int = np.empty((n, core.N_OUT_INT), dtype=np.int64)
     out_float = np.empty((n, core.N_OUT_FLOAT))
-    if n:
+    if n >= PARALLEL_MIN_BATCH:
         core.run_batch(pos, act, params.array, out_pos, out_int, out_float)
+    elif n:
+        core.run_batch_serial(pos, act, params.array, out_pos, out_int, out_float)
     hits = out_int[:, core.O_HIT1:core.O_HIT3 + 1] != 0
     score, foul, miss = carom_outcome(hits[:, 0], hits[:, 1], hits[:, 2])
     return BatchResult(

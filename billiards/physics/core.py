@@ -579,9 +579,9 @@ def run_shot(positions, V0, phi, a, b, p, record):
     R = p[P_R]
     max_events = int(p[P_MAX_EVENTS])
     cap = 64 if record else 1
-    ev_time = np.zeros(cap)
-    ev_info = np.zeros((cap, 3), dtype=np.int64)
-    ev_state = np.zeros((cap, N_BALLS, 8))
+    ev_time = np.empty(cap)
+    ev_info = np.empty((cap, 3), dtype=np.int64)
+    ev_state = np.empty((cap, N_BALLS, 8))
     closest = np.empty(2)
     for r in range(2):
         closest[r] = _norm(st[2 + r, 0] - st[0, 0], st[2 + r, 1] - st[0, 1])
@@ -699,16 +699,28 @@ def run_shot(positions, V0, phi, a, b, p, record):
     return st, out_int, out_float, ev_time[:n_rec], ev_info[:n_rec], ev_state[:n_rec]
 
 
+@njit(cache=True, error_model="numpy")
+def _store(n, positions, actions, p, out_pos, out_int, out_float):
+    st, oi, of, _, _, _ = run_action(positions[n], actions[n], p, False)
+    for k in range(N_BALLS):
+        out_pos[n, k, 0] = st[k, 0]
+        out_pos[n, k, 1] = st[k, 1]
+    out_int[n] = oi
+    out_float[n] = of
+
+
 @njit(cache=True, error_model="numpy", parallel=True)
 def run_batch(positions, actions, p, out_pos, out_int, out_float):
     """N validated shots in parallel over all numba threads; actions rows (theta, p, a, b)."""
     for n in prange(positions.shape[0]):
-        st, oi, of, _, _, _ = run_action(positions[n], actions[n], p, False)
-        for k in range(N_BALLS):
-            out_pos[n, k, 0] = st[k, 0]
-            out_pos[n, k, 1] = st[k, 1]
-        out_int[n] = oi
-        out_float[n] = of
+        _store(n, positions, actions, p, out_pos, out_int, out_float)
+
+
+@njit(cache=True, error_model="numpy")
+def run_batch_serial(positions, actions, p, out_pos, out_int, out_float):
+    """run_batch on the calling thread: small batches skip the thread pool's start-up cost."""
+    for n in range(positions.shape[0]):
+        _store(n, positions, actions, p, out_pos, out_int, out_float)
 
 
 @njit(cache=True, error_model="numpy")
@@ -767,3 +779,17 @@ def run_action(positions, action, p, record):
     """run_shot for one validated (theta, p, a, b) action."""
     V0, phi, a, b = action_to_cue(action[0], action[1], action[2], action[3], p)
     return run_shot(positions, V0, phi, a, b, p, record)
+
+
+@njit(cache=True, error_model="numpy")
+def checked_shot(positions, action, p, tol):
+    """Validate one (4, 2) rack and (4,) action, then simulate it with the event log.
+
+    One compiled call for the whole single-shot path. Returns (ok, run_action's result); on
+    invalid input ok is False and nothing is simulated (the caller builds the message).
+    """
+    bad = check_positions(positions.reshape(1, N_BALLS, 2), p, tol)[0] != ERR_OK
+    bad = bad or check_actions(action.reshape(1, 4))[0] != ERR_OK
+    if bad:
+        return False, run_shot(positions, 0.0, 0.0, 0.0, 0.0, p, False)
+    return True, run_action(positions, action, p, True)

@@ -1,0 +1,168 @@
+"""Gymnasium environment: one Korean 4-ball inning, one step per shot.
+
+Registered as ``Billiards4Ball-v0`` when :mod:`billiards.envs` is imported::
+
+    import gymnasium as gym, billiards.envs
+    env = gym.make("Billiards4Ball-v0", start="random", on_miss="continue", max_shots=10)
+
+Same semantics and the same domain functions (:mod:`billiards.domain`) as the TorchRL env
+and its transforms, so ``constrain_aim``, ``extra_features`` and the shaping coefficients
+mean exactly what they mean in :func:`billiards.envs.make_env`.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import gymnasium as gym
+import numpy as np
+
+from billiards import domain
+from billiards.physics import (
+    DEFAULT_PARAMS,
+    PhysicsParams,
+    check_positions,
+    simulate_batch,
+)
+
+from ._common import (
+    check_inning_options,
+    initial_racks,
+    terminated_truncated,
+    validate_action,
+)
+
+
+class Billiards4BallInningEnv(gym.Env):
+    """One inning of Korean 4-ball as a gymnasium env.
+
+    Observation (float32): the 28 floats of :func:`billiards.domain.rest_observation`
+    (4 balls x (x, y, vx, vy, wx, wy, wz) in ball order white, yellow, red1, red2; the velocity
+    and spin slots are 0 at rest), then with ``extra_features`` the 4 carom features
+    (d1, d2, sin phi, cos phi) of :func:`billiards.domain.carom_features` (32 floats).
+
+    Action (float32, 4): (theta, p, a, b) with theta in [0, 2pi] (any real is accepted and
+    wrapped), power p in [0, 1], tip offsets a, b in [-1, 1]. With ``constrain_aim`` the first
+    coordinate is u in [-1, 1] and theta = theta_target + u * asin(min(1, 2R/d))
+    (:func:`billiards.domain.constrained_theta`).
+
+    Reward: the carom score in {0, 1}, plus the shaping terms whose coefficient is non-zero
+    (:func:`billiards.domain.shaped_reward`): ``-foul_penalty * foul``,
+    ``gentle * score * (1 - p)``, ``near_miss * exp(-gap / near_miss_sigma)``.
+
+    Inning: at most ``max_shots`` shots (then ``truncated``); under ``on_miss="reset"`` a miss
+    or a foul ends it (``terminated``); under ``"continue"`` it always runs ``max_shots`` shots
+    from whatever table each shot leaves. ``start`` chooses the rack at reset: ``"random"``
+    (drawn from the env's ``np_random``, so ``reset(seed=s)`` is reproducible) or
+    ``"canonical"``. ``reset(options={"positions": (4, 2) array})`` starts from a given table.
+
+    ``info`` after a step: score, foul, miss, first_contact, hits (yellow, red1, red2),
+    closest (gap to red1, red2 in m), cushions, n_events, shot (shots played), positions
+    (exact float64 table), theta (the aim actually played).
+    """
+
+    metadata: ClassVar[dict] = {"render_modes": ["rgb_array"], "render_fps": 2}
+
+    def __init__(
+        self,
+        start: str = "random",
+        on_miss: str = "continue",
+        max_shots: int = 10,
+        *,
+        constrain_aim: bool = False,
+        extra_features: bool = False,
+        foul_penalty: float = 0.0,
+        gentle: float = 0.0,
+        near_miss: float = 0.0,
+        near_miss_sigma: float = domain.NEAR_MISS_SIGMA,
+        params: PhysicsParams = DEFAULT_PARAMS,
+        render_mode: str | None = None,
+    ):
+        self.max_shots = check_inning_options(start, on_miss, max_shots)
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.start, self.on_miss, self.params, self.render_mode = start, on_miss, params, render_mode
+        self.constrain_aim, self.extra_features = bool(constrain_aim), bool(extra_features)
+        self.shaping = dict(foul_c=foul_penalty, gentle_beta=gentle, near_miss_beta=near_miss, near_miss_sigma=near_miss_sigma)
+
+        low, high = domain.ACTION_LOW.copy(), domain.ACTION_HIGH.copy()
+        if self.constrain_aim:
+            low[0], high[0] = -1.0, 1.0
+        self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+
+        w, l = params.table_width, params.table_length
+        # Velocity/spin slots are 0 between shots; their bounds are a physical envelope: the
+        # fastest cue-ball launch v_max = 2 V0_max / (1 + m/M) and spin 2.5 v_max / R.
+        v_max = 2.0 * params.cue_speed_max / (1.0 + params.ball_mass / params.cue_mass)
+        w_max = 2.5 * v_max / params.ball_radius
+        ball_high = np.array([w, l, v_max, v_max, w_max, w_max, w_max])
+        ball_low = np.concatenate([[0.0, 0.0], -ball_high[2:]])
+        obs_low, obs_high = np.tile(ball_low, domain.N_BALLS), np.tile(ball_high, domain.N_BALLS)
+        if self.extra_features:
+            diag = float(np.hypot(w, l))
+            obs_low = np.concatenate([obs_low, [0.0, 0.0, -1.0, -1.0]])
+            obs_high = np.concatenate([obs_high, [diag, diag, 1.0, 1.0]])
+        self.observation_space = gym.spaces.Box(obs_low.astype(np.float32), obs_high.astype(np.float32), dtype=np.float32)
+
+        self._positions = initial_racks(np.random.default_rng(0), "canonical", 1, params)[0]
+        self._shot = 0
+
+    # ------------------------------------------------------------------ helpers
+
+    def _obs(self) -> np.ndarray:
+        obs = domain.rest_observation(self._positions)
+        if self.extra_features:
+            obs = np.concatenate([obs, domain.carom_features(self._positions).astype(np.float32)])
+        return obs
+
+    @property
+    def positions(self) -> np.ndarray:
+        """The current table, (4, 2) float64 (a copy)."""
+        return self._positions.copy()
+
+    # ------------------------------------------------------------------ gymnasium API
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = options or {}
+        if options.get("positions") is not None:
+            pos = np.asarray(options["positions"], dtype=np.float64)
+            if pos.shape != (4, 2):
+                raise ValueError(f'options["positions"] must have shape (4, 2); got {pos.shape}')
+            check_positions(pos[None], self.params, name="positions")
+            self._positions = pos.copy()
+        else:
+            self._positions = initial_racks(self.np_random, self.start, 1, self.params)[0]
+        self._shot = 0
+        return self._obs(), {"positions": self.positions, "shot": 0}
+
+    def step(self, action):
+        act = validate_action(action, (domain.ACTION_DIM,)).copy()
+        if self.constrain_aim:
+            act[0] = domain.constrained_theta(self._positions, act[0], self.params.ball_radius)
+        res = simulate_batch(self._positions[None], act[None], self.params)
+        self._positions = res.positions[0]
+        self._shot += 1
+        reward = domain.shaped_reward(res.score, res.foul, act[None, 1], res.hits, res.closest, **self.shaping)
+        terminated, truncated = terminated_truncated(res.score, np.array([self._shot]), self.on_miss, self.max_shots)
+        info = {
+            "score": bool(res.score[0]),
+            "foul": bool(res.foul[0]),
+            "miss": bool(res.miss[0]),
+            "first_contact": int(res.first_contact[0]),
+            "hits": res.hits[0].copy(),
+            "closest": res.closest[0].copy(),
+            "cushions": int(res.cushions[0]),
+            "n_events": int(res.n_events[0]),
+            "shot": self._shot,
+            "positions": self.positions,
+            "theta": float(act[0]),
+        }
+        return self._obs(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), info
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        from billiards.render import table_rgb_array
+
+        return table_rgb_array(self._positions, self.params)

@@ -1,0 +1,221 @@
+"""TorchRL transforms for the domain knowledge of the paper, and :func:`make_env`.
+
+The math of every transform is in :mod:`billiards.domain` (shared with the gymnasium env);
+this module only moves tensors in and out of tensordicts.
+
+* :class:`AimConstraint` -- action[..., 0] becomes u in [-1, 1]:
+  ``theta = theta_target + u * asin(min(1, 2R/d))`` (:func:`billiards.domain.constrained_theta`).
+* :class:`CaromFeatures` -- appends (d1, d2, sin phi, cos phi) to ``"observation"``
+  (:func:`billiards.domain.carom_features`), 28 -> 32 floats.
+* :class:`FoulPenalty` -- reward += ``-c * foul``.
+* :class:`GentleShotBonus` -- reward += ``beta * score * (1 - p)``.
+* :class:`NearMissBonus` -- reward += ``beta * exp(-gap / sigma)`` for a miss that hit exactly
+  one red, gap = closest approach to the other red.
+
+The reward transforms only add to ``"reward"``; the raw carom outcome stays in ``"score"``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from torchrl.data import Bounded, Composite, Unbounded
+from torchrl.envs import Compose, Transform, TransformedEnv
+
+from billiards import domain
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+
+from ._common import resolve_paradigm, validate_action
+from .torchrl_env import BilliardsEnv
+
+
+def _np(x: torch.Tensor) -> np.ndarray:
+    return x.detach().cpu().numpy()
+
+
+class AimConstraint(Transform):
+    """First-contact aim constraint (paper §4.1).
+
+    The policy's first action coordinate is ``u in [-1, 1]`` instead of theta. Before the
+    step, with the current table ``"positions"``::
+
+        theta = theta_target + u * half_width,  half_width = asin(min(1, 2R / d))
+
+    where theta_target points from the white's centre at the nearest red's and d is their
+    centre distance (:func:`billiards.domain.aim_window`). Any u strictly inside (-1, 1)
+    makes the nearest red the first ball the white touches, unless another ball blocks the
+    path or the shot is too weak to reach it. The transformed action spec has
+    ``low[0] = -1, high[0] = 1``; p, a and b pass through unchanged. The mapped action sent
+    to the simulator is float64 so theta keeps full precision.
+
+    Args:
+        R: ball radius (m), the simulator's by default.
+    """
+
+    def __init__(self, R: float = DEFAULT_PARAMS.ball_radius):
+        super().__init__()
+        self.R = float(R)
+
+    def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = tensordict.get("action", None)
+        if action is None:
+            if self.missing_tolerance:
+                return tensordict
+            raise KeyError('AimConstraint needs "action" in the input tensordict')
+        u_action = validate_action(_np(action), (*tensordict.batch_size, domain.ACTION_DIM))
+        u_action[..., 0] = domain.constrained_theta(_np(tensordict.get("positions")), u_action[..., 0], self.R)
+        tensordict.set("action", torch.from_numpy(u_action))
+        return tensordict
+
+    def transform_input_spec(self, input_spec: Composite) -> Composite:
+        input_spec = input_spec.clone()
+        spec = input_spec["full_action_spec", "action"]
+        low, high = spec.space.low.clone(), spec.space.high.clone()
+        low[..., 0], high[..., 0] = -1.0, 1.0
+        input_spec["full_action_spec", "action"] = Bounded(low, high, shape=spec.shape, dtype=spec.dtype, device=spec.device)
+        return input_spec
+
+
+class CaromFeatures(Transform):
+    """Appends the four carom features of paper §4.2 to ``"observation"``.
+
+    From the exact ``"positions"`` (:func:`billiards.domain.carom_features`), float32::
+
+        d1 = |n - w|, d2 = |o - w|, sin phi, cos phi,   phi = angle(n - w -> o - n)
+
+    with w the white, n the red nearest the white, o the other red; phi is signed,
+    counter-clockwise positive. The observation grows from 28 to 32 floats
+    (``obs[..., 28:32] = (d1, d2, sin phi, cos phi)``), on reset and on every step.
+    """
+
+    def __init__(self):
+        super().__init__()
+
+    def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
+        obs = next_tensordict.get("observation")
+        feats = domain.carom_features(_np(next_tensordict.get("positions"))).astype(np.float32)
+        next_tensordict.set("observation", torch.cat([obs, torch.from_numpy(feats)], dim=-1))
+        return next_tensordict
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        return self._call(tensordict_reset)
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        spec = observation_spec["observation"]
+        shape = (*spec.shape[:-1], spec.shape[-1] + domain.N_CAROM_FEATURES)
+        observation_spec["observation"] = Unbounded(shape=shape, dtype=spec.dtype, device=spec.device)
+        return observation_spec
+
+
+class _RewardTerm(Transform):
+    """Adds ``term(tensordict_t, tensordict_t+1)`` to ``"reward"`` after each step."""
+
+    def _term(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> np.ndarray:
+        raise NotImplementedError
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        reward = next_tensordict.get("reward")
+        term = torch.from_numpy(np.asarray(self._term(tensordict, next_tensordict), dtype=np.float32))
+        next_tensordict.set("reward", reward + term.reshape(reward.shape))
+        return next_tensordict
+
+
+class FoulPenalty(_RewardTerm):
+    """Reward shaping: ``reward += -c * foul`` (:func:`billiards.domain.foul_penalty`)."""
+
+    def __init__(self, c: float = 1.0):
+        super().__init__()
+        self.c = float(c)
+
+    def _term(self, tensordict, next_tensordict):
+        return domain.foul_penalty(_np(next_tensordict.get("foul")), self.c)
+
+
+class GentleShotBonus(_RewardTerm):
+    """Reward shaping: ``reward += beta * score * (1 - p)``, p = action[..., 1] the shot's
+    power (:func:`billiards.domain.gentle_bonus`)."""
+
+    def __init__(self, beta: float):
+        super().__init__()
+        self.beta = float(beta)
+
+    def _term(self, tensordict, next_tensordict):
+        power = _np(tensordict.get("action"))[..., 1:2]
+        return domain.gentle_bonus(_np(next_tensordict.get("score")), power, self.beta)
+
+
+class NearMissBonus(_RewardTerm):
+    """Reward shaping: ``reward += beta * exp(-gap / sigma)`` when the white hit exactly one
+    red and the shot was neither a score nor a foul; gap = the white's closest surface gap (m)
+    to the red it missed (:func:`billiards.domain.near_miss_bonus`)."""
+
+    def __init__(self, beta: float, sigma: float = domain.NEAR_MISS_SIGMA):
+        super().__init__()
+        if sigma <= 0:
+            raise ValueError(f"sigma must be > 0, got {sigma!r}")
+        self.beta, self.sigma = float(beta), float(sigma)
+
+    def _term(self, tensordict, next_tensordict):
+        get = lambda key: _np(next_tensordict.get(key))
+        bonus = domain.near_miss_bonus(get("score")[..., 0], get("foul")[..., 0], get("hits"), get("closest"), self.beta, self.sigma)
+        return bonus[..., None]
+
+
+def make_env(
+    batch_size: int = 1,
+    *,
+    start: str | None = None,
+    on_miss: str | None = None,
+    paradigm: str | None = None,
+    max_shots: int = 10,
+    constrain_aim: bool = False,
+    extra_features: bool = False,
+    foul_penalty: float = 0.0,
+    gentle: float = 0.0,
+    near_miss: float = 0.0,
+    near_miss_sigma: float = domain.NEAR_MISS_SIGMA,
+    seed: int | None = None,
+    params: PhysicsParams = DEFAULT_PARAMS,
+) -> TransformedEnv:
+    """The environment of every experiment: a :class:`BilliardsEnv` with the chosen layers.
+
+    Args:
+        batch_size: B innings stepped together by one ``simulate_batch`` call per step.
+        start: ``"random"`` (default) or ``"canonical"`` starting rack.
+        on_miss: ``"continue"`` (default; innings always last ``max_shots``) or ``"reset"``
+            (a miss or a foul terminates the inning).
+        paradigm: shorthand for (start, on_miss): ``"random-continue"``, ``"random-reset"``,
+            ``"canonical-continue"`` or ``"canonical-reset"``; explicit start/on_miss must agree.
+        max_shots: shots per inning before truncation (default 10).
+        constrain_aim: add :class:`AimConstraint` (action[0] is u in [-1, 1]).
+        extra_features: add :class:`CaromFeatures` (observation 28 -> 32).
+        foul_penalty: c of :class:`FoulPenalty` (reward -= c * foul); 0 disables it.
+        gentle: beta of :class:`GentleShotBonus` (reward += beta * score * (1 - p)); 0 disables.
+        near_miss: beta of :class:`NearMissBonus`; 0 disables it.
+        near_miss_sigma: its length scale sigma in metres (default 0.05).
+        seed: seed of the rack generator (``env.set_seed`` re-seeds it).
+        params: simulator parameters.
+
+    Returns:
+        ``TransformedEnv(BilliardsEnv(...), Compose(...))`` with batch_size [B], always a
+        TransformedEnv (possibly with no transforms). Policies and losses should use
+        ``env.action_spec_unbatched`` / ``env.observation_spec_unbatched``.
+    """
+    start, on_miss = resolve_paradigm(paradigm, start, on_miss)
+    base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=max_shots, params=params, seed=seed)
+    transforms: list[Transform] = []
+    if constrain_aim:
+        transforms.append(AimConstraint(params.ball_radius))
+    if extra_features:
+        transforms.append(CaromFeatures())
+    if foul_penalty:
+        transforms.append(FoulPenalty(foul_penalty))
+    if gentle:
+        transforms.append(GentleShotBonus(gentle))
+    if near_miss:
+        transforms.append(NearMissBonus(near_miss, near_miss_sigma))
+    return TransformedEnv(base, Compose(*transforms))
+
+
+__all__ = ["AimConstraint", "CaromFeatures", "FoulPenalty", "GentleShotBonus", "NearMissBonus", "make_env"]

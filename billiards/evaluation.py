@@ -1,0 +1,118 @@
+"""The paper's unified evaluation protocol, as one function.
+
+Protocol: continue-on-miss innings of ``max_shots`` shots (default 10), ``n_innings`` of them
+(default 100) played side by side in one batched env (B = n_innings), random starting racks
+drawn from ``seed`` (or the canonical rack), deterministic policy
+(``ExplorationType.DETERMINISTIC``), raw carom score (no shaping). Reported:
+
+* points per inning: mean and std (population std, ddof = 0) over innings, and the best inning;
+* foul innings %: share of innings with at least one foul;
+* foul % per shot and success (score) % per shot, over all ``n_innings * max_shots`` shots.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from billiards.envs import make_env
+
+
+@dataclasses.dataclass
+class EvalResult:
+    """Outcome of :func:`evaluate`. Percentages are in [0, 100]."""
+
+    mean: float  # points per inning
+    std: float  # population std of points per inning
+    best: int  # best inning (points)
+    foul_innings_pct: float  # innings with >= 1 foul
+    foul_per_shot_pct: float
+    success_per_shot_pct: float
+    n_innings: int
+    shots: int  # total shots played = n_innings * max_shots
+    max_shots: int = 10
+    start: str = "random"
+    seed: int = 0
+    points: list[int] = dataclasses.field(default_factory=list)  # per inning
+
+    def to_json(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(dataclasses.asdict(self), indent=2) + "\n")
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> EvalResult:
+        return cls(**json.loads(Path(path).read_text()))
+
+    def summary(self) -> str:
+        return (
+            f"{self.mean:.3f} ± {self.std:.3f} points/inning (best {self.best}), "
+            f"foul innings {self.foul_innings_pct:.1f}%, foul/shot {self.foul_per_shot_pct:.1f}%, "
+            f"success/shot {self.success_per_shot_pct:.1f}% ({self.n_innings} innings x {self.max_shots} shots, "
+            f"{self.start} start, seed {self.seed})"
+        )
+
+
+def summarize(score: np.ndarray, foul: np.ndarray, *, start: str = "random", seed: int = 0) -> EvalResult:
+    """EvalResult from per-shot outcomes ``score``, ``foul`` of shape (n_innings, max_shots)."""
+    score, foul = np.asarray(score, dtype=bool), np.asarray(foul, dtype=bool)
+    points = score.sum(axis=1)
+    return EvalResult(
+        mean=float(points.mean()),
+        std=float(points.std()),
+        best=int(points.max()),
+        foul_innings_pct=100.0 * float(foul.any(axis=1).mean()),
+        foul_per_shot_pct=100.0 * float(foul.mean()),
+        success_per_shot_pct=100.0 * float(score.mean()),
+        n_innings=int(score.shape[0]),
+        shots=int(score.size),
+        max_shots=int(score.shape[1]),
+        start=start,
+        seed=int(seed),
+        points=[int(p) for p in points],
+    )
+
+
+def evaluate(
+    policy,
+    n_innings: int = 100,
+    max_shots: int = 10,
+    start: str = "random",
+    seed: int = 0,
+    *,
+    constrain_aim: bool = False,
+    extra_features: bool = False,
+    env_kwargs: dict | None = None,
+) -> EvalResult:
+    """Evaluate ``policy`` with the unified protocol (see the module docstring).
+
+    Args:
+        policy: a TensorDict module (or any callable td -> td) that writes ``"action"`` in the
+            parameterisation of the env built here (u for the aim when ``constrain_aim``).
+        n_innings: innings, all played at once in one env with batch_size [n_innings].
+        max_shots: shots per inning (continue-on-miss: every inning plays exactly this many).
+        start: ``"random"`` (racks from ``seed``) or ``"canonical"``.
+        seed: seed of the rack generator.
+        constrain_aim, extra_features: the domain-knowledge layers the policy was trained
+            with (they change its action/observation, not the task).
+        env_kwargs: further :func:`billiards.envs.make_env` keyword arguments (e.g. params).
+    """
+    env = make_env(
+        n_innings,
+        start=start,
+        on_miss="continue",
+        max_shots=max_shots,
+        constrain_aim=constrain_aim,
+        extra_features=extra_features,
+        seed=seed,
+        **(env_kwargs or {}),
+    )
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        rollout = env.rollout(max_shots, policy, break_when_any_done=False)
+    score = rollout["next", "score"][..., 0].numpy()
+    foul = rollout["next", "foul"][..., 0].numpy()
+    assert score.shape == (n_innings, max_shots), score.shape
+    return summarize(score, foul, start=start, seed=seed)

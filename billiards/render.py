@@ -1,0 +1,301 @@
+"""Pictures of shots and innings (matplotlib, Agg backend).
+
+API:
+* :func:`render_shot` -- PNG of one shot: table, balls in their colours at the start (faint)
+  and at rest (solid), every ball's path from :func:`billiards.physics.trajectory`, the
+  white's ball contacts (numbered rings) and cushion contacts (triangles), the aim, and the
+  outcome (SCORE / FOUL / MISS) in the title;
+* :func:`play_inning` -- the shots a policy plays in one continue-on-miss inning;
+* :func:`render_inning` -- animated GIF of those shots (Pillow writer);
+* :func:`table_rgb_array` -- an RGB image of a table at rest (gymnasium's ``rgb_array``).
+
+Command line::
+
+    python -m billiards.render shot --out shot.png --seed 0 --policy nearest
+    python -m billiards.render inning --out inning.gif --seed 0 --policy nearest --max-shots 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib import animation
+from matplotlib.patches import Circle, Rectangle
+
+from billiards import domain
+from billiards.physics import (
+    BALL_NAMES,
+    DEFAULT_PARAMS,
+    EVENT_KINDS,
+    PhysicsParams,
+    ShotResult,
+    simulate_shot,
+    trajectory,
+)
+
+BALL_COLORS = ("#f7f7f2", "#f2c400", "#d7261e", "#9c0d2b")  # white, yellow, red1, red2 (darker)
+CLOTH, RAIL, PATH_EDGE = "#1f6e43", "#5a3a1e", "#222222"
+EV_BALL_BALL, EV_CUSHION = EVENT_KINDS.index("ball_ball"), EVENT_KINDS.index("cushion")
+
+
+# ----------------------------------------------------------------------------- drawing blocks
+
+
+def _figure(params: PhysicsParams, scale: float = 2.2, dpi: int = 100):
+    w, l = params.table_width, params.table_length
+    fig = plt.figure(figsize=(scale * (w + 0.3), scale * (l + 0.55)), dpi=dpi)
+    ax = fig.add_axes((0.0, 0.0, 1.0, (l + 0.3) / (l + 0.55)))
+    return fig, ax
+
+
+def draw_table(ax, params: PhysicsParams = DEFAULT_PARAMS) -> None:
+    """Cloth inside the cushion nose lines [0, w] x [0, l], a rail around it and the diamonds."""
+    w, l, rail = params.table_width, params.table_length, 0.12
+    ax.add_patch(Rectangle((-rail, -rail), w + 2 * rail, l + 2 * rail, color=RAIL, zorder=0))
+    ax.add_patch(Rectangle((0, 0), w, l, color=CLOTH, zorder=1))
+    for k in range(1, 4):  # diamonds every w/4 and l/8
+        for x in (-rail / 2, w + rail / 2):
+            ax.plot(x, l * k / 4, "o", ms=2.5, color="#e8e0c8", zorder=2)
+        for y in (-rail / 2, l + rail / 2):
+            ax.plot(w * k / 4, y, "o", ms=2.5, color="#e8e0c8", zorder=2)
+    for k in range(1, 8):
+        for x in (-rail / 2, w + rail / 2):
+            ax.plot(x, l * k / 8, "o", ms=1.5, color="#e8e0c8", zorder=2)
+    ax.set_xlim(-rail - 0.03, w + rail + 0.03)
+    ax.set_ylim(-rail - 0.03, l + rail + 0.03)
+    ax.set_aspect("equal")
+    ax.axis("off")
+
+
+def draw_balls(ax, positions: np.ndarray, params: PhysicsParams = DEFAULT_PARAMS, alpha: float = 1.0, zorder: int = 6):
+    """Circles of the true radius at positions (4, 2); returns the patches (for animation)."""
+    patches = []
+    for k in range(4):
+        c = Circle(positions[k], params.ball_radius, facecolor=BALL_COLORS[k], edgecolor="black", lw=0.6, alpha=alpha, zorder=zorder)
+        ax.add_patch(c)
+        patches.append(c)
+    return patches
+
+
+def outcome_text(result) -> str:
+    """'SCORE' / 'FOUL' / 'MISS' and the white's first contact and cushion count."""
+    label = "SCORE" if result.score else ("FOUL" if result.foul else "MISS")
+    first = BALL_NAMES[result.first_contact] if result.first_contact >= 0 else "none"
+    return f"{label}  first contact: {first}, cushions: {result.cushions}"
+
+
+def _white_contacts(result: ShotResult):
+    """(balls, cushions): the white's ball contacts as (position, other ball) and its cushion
+    contact positions, in order."""
+    balls, cushions = [], []
+    for e in range(result.event_time.size):
+        kind, i, j = result.event_kind[e], result.event_ball[e], result.event_other[e]
+        white_xy = result.event_state[e, 0, :2]
+        if kind == EV_BALL_BALL and 0 in (i, j):
+            balls.append((white_xy, j if i == 0 else i))
+        elif kind == EV_CUSHION and i == 0:
+            cushions.append(white_xy)
+    return balls, cushions
+
+
+def draw_shot(ax, positions, action, params: PhysicsParams = DEFAULT_PARAMS, dt: float = 1 / 120) -> ShotResult:
+    """Draw one simulated shot (raw action theta, p, a, b) on ax; returns the ShotResult."""
+    positions = np.asarray(positions, dtype=np.float64)
+    action = np.asarray(action, dtype=np.float64)
+    result = simulate_shot(positions, action, params)
+    _, xy = trajectory(result, dt, params)
+    draw_table(ax, params)
+    for k in (1, 2, 3, 0):  # the white's path on top
+        ax.plot(xy[:, k, 0], xy[:, k, 1], color=PATH_EDGE, lw=2.2, zorder=3, solid_capstyle="round")
+        ax.plot(xy[:, k, 0], xy[:, k, 1], color=BALL_COLORS[k], lw=1.3, zorder=3, solid_capstyle="round")
+    draw_balls(ax, positions, params, alpha=0.35, zorder=4)
+    draw_balls(ax, result.positions, params, zorder=6)
+    aim = 0.15 * np.array([math.cos(action[0]), math.sin(action[0])])
+    ax.annotate("", positions[0] + aim, positions[0], arrowprops=dict(arrowstyle="->", color="white", lw=1.0), zorder=7)
+    balls, cushions = _white_contacts(result)
+    for n, (p, other) in enumerate(balls, start=1):
+        ax.add_patch(Circle(p, 1.6 * params.ball_radius, fill=False, edgecolor=BALL_COLORS[other], lw=1.5, zorder=8))
+        ax.annotate(str(n), p + 0.07, color="white", fontsize=7, ha="center", va="center", zorder=9)
+    for p in cushions:
+        ax.plot(*p, marker="^", ms=4, color="#ffdd88", markeredgecolor="black", mew=0.4, zorder=8)
+    return result
+
+
+# ----------------------------------------------------------------------------- one shot
+
+
+def render_shot(
+    positions,
+    action,
+    path: str | Path | None = None,
+    *,
+    params: PhysicsParams = DEFAULT_PARAMS,
+    title: str | None = None,
+    dpi: int = 100,
+) -> ShotResult:
+    """Draw one shot from ``positions`` (4, 2) with the raw ``action`` (theta, p, a, b).
+
+    Saves a PNG to ``path`` if given. Returns the simulated :class:`ShotResult`.
+    """
+    fig, ax = _figure(params, dpi=dpi)
+    result = draw_shot(ax, positions, action, params)
+    theta, p, a, b = np.asarray(action, dtype=np.float64)
+    text = outcome_text(result) + f"\ntheta={math.degrees(theta) % 360:.1f}°  p={p:.2f}  a={a:+.2f}  b={b:+.2f}"
+    fig.text(0.5, 0.995, (title + "\n" if title else "") + text, ha="center", va="top", fontsize=7)
+    if path is not None:
+        fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return result
+
+
+def table_rgb_array(positions, params: PhysicsParams = DEFAULT_PARAMS, dpi: int = 60) -> np.ndarray:
+    """An (H, W, 3) uint8 image of the table with the balls at ``positions``."""
+    fig, ax = _figure(params, dpi=dpi)
+    draw_table(ax, params)
+    draw_balls(ax, np.asarray(positions, dtype=np.float64), params)
+    fig.canvas.draw()
+    image = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+    plt.close(fig)
+    return image
+
+
+# ----------------------------------------------------------------------------- innings
+
+
+def play_inning(
+    policy,
+    *,
+    start: str = "random",
+    seed: int = 0,
+    max_shots: int = 10,
+    constrain_aim: bool = False,
+    extra_features: bool = False,
+    positions=None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Play one continue-on-miss inning with ``policy`` (deterministic) in a B = 1 env.
+
+    Returns the shots as (positions (4, 2) before the shot, raw action (theta, p, a, b)); with
+    ``constrain_aim`` the policy's u is mapped to the theta that was played.
+    """
+    import torch
+    from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
+
+    from billiards.envs import make_env, reset_to
+
+    env = make_env(1, start=start, on_miss="continue", max_shots=max_shots, constrain_aim=constrain_aim,
+                   extra_features=extra_features, seed=seed)
+    td = reset_to(env, positions) if positions is not None else env.reset()
+    shots = []
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        for _ in range(max_shots):
+            td = policy(td)
+            pos = td["positions"][0].numpy().copy()
+            act = td["action"][0].numpy().astype(np.float64)
+            if constrain_aim:
+                act[0] = domain.constrained_theta(pos, act[0], env.base_env.params.ball_radius)
+            shots.append((pos, act))
+            td = step_mdp(env.step(td))
+    return shots
+
+
+def render_inning(
+    shots: Sequence[tuple[np.ndarray, np.ndarray]],
+    path: str | Path,
+    *,
+    params: PhysicsParams = DEFAULT_PARAMS,
+    fps: int = 15,
+    speed: float = 2.0,
+    pause: float = 0.6,
+    dpi: int = 50,
+    title: str = "",
+) -> int:
+    """Animated GIF of a sequence of shots (positions, raw action); returns the frame count.
+
+    ``speed`` is simulated seconds per wall-clock second; each shot holds ``pause`` seconds on
+    its final table. Trails show the paths of the current shot.
+    """
+    frames = []  # (shot index, xy (4, 2), trail xy (t, 4, 2), caption)
+    points = 0
+    for n, (pos, act) in enumerate(shots):
+        result = simulate_shot(pos, act, params)
+        times, xy = trajectory(result, 1 / 240, params)
+        grid = np.arange(0.0, result.duration + 1e-12, speed / fps)
+        xy_grid = np.empty((grid.size, 4, 2))
+        for k in range(4):
+            for c in range(2):
+                xy_grid[:, k, c] = np.interp(grid, times, xy[:, k, c])
+        xy_grid[-1] = result.positions
+        points += int(result.score)
+        caption = f"{title}shot {n + 1}/{len(shots)}: {outcome_text(result).split('  ')[0]}  points {points}"
+        pending = f"{title}shot {n + 1}/{len(shots)}  points {points - int(result.score)}"
+        for t in range(len(grid)):
+            frames.append((xy_grid[t], xy_grid[: t + 1], pending))
+        frames += [(xy_grid[-1], xy_grid, caption)] * max(1, int(pause * fps))
+
+    fig, ax = _figure(params, dpi=dpi)
+    draw_table(ax, params)
+    trails = [ax.plot([], [], color=BALL_COLORS[k], lw=1.0, alpha=0.8, zorder=3)[0] for k in range(4)]
+    balls = draw_balls(ax, shots[0][0], params)
+    text = fig.text(0.5, 0.99, "", ha="center", va="top", fontsize=8)
+
+    def update(i):
+        xy, trail, caption = frames[i]
+        for k in range(4):
+            balls[k].center = tuple(xy[k])
+            trails[k].set_data(trail[:, k, 0], trail[:, k, 1])
+        text.set_text(caption)
+        return [*balls, *trails, text]
+
+    anim = animation.FuncAnimation(fig, update, frames=len(frames), blit=False)
+    anim.save(str(path), writer=animation.PillowWriter(fps=fps), dpi=dpi)
+    plt.close(fig)
+    return len(frames)
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def _policy(name: str, seed: int, constrain_aim: bool):
+    from billiards.baselines import make_policy
+
+    return make_policy(name, constrain_aim=constrain_aim, seed=seed)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m billiards.render", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="what", required=True)
+    for name, help_ in [("shot", "PNG of the first shot of an inning"), ("inning", "animated GIF of an inning")]:
+        p = sub.add_parser(name, help=help_)
+        p.add_argument("--out", required=True, help="output file (.png for shot, .gif for inning)")
+        p.add_argument("--seed", type=int, default=0, help="rack seed (and the random policy's seed)")
+        p.add_argument("--policy", choices=["nearest", "random"], default="nearest")
+        p.add_argument("--start", choices=["random", "canonical"], default="random")
+        p.add_argument("--constrain-aim", action="store_true", help="play the policy through the aim constraint")
+        p.add_argument("--dpi", type=int, default=100 if name == "shot" else 50)
+        if name == "inning":
+            p.add_argument("--max-shots", type=int, default=10)
+            p.add_argument("--fps", type=int, default=15)
+            p.add_argument("--speed", type=float, default=2.0, help="simulated seconds per second of GIF")
+    args = parser.parse_args(argv)
+    policy = _policy(args.policy, args.seed, args.constrain_aim)
+    n_shots = 1 if args.what == "shot" else args.max_shots
+    shots = play_inning(policy, start=args.start, seed=args.seed, max_shots=n_shots, constrain_aim=args.constrain_aim)
+    if args.what == "shot":
+        pos, act = shots[0]
+        result = render_shot(pos, act, args.out, title=f"{args.policy} policy, {args.start} rack, seed {args.seed}", dpi=args.dpi)
+        print(f"{args.out}: {outcome_text(result)}")
+    else:
+        n = render_inning(shots, args.out, fps=args.fps, speed=args.speed, dpi=args.dpi, title=f"{args.policy}: ")
+        print(f"{args.out}: {len(shots)} shots, {n} frames")
+
+
+if __name__ == "__main__":
+    main()

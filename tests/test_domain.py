@@ -1,0 +1,136 @@
+"""billiards.domain: hand-computed values of every formula."""
+
+import math
+
+import numpy as np
+import pytest
+
+from billiards import domain
+from billiards.physics import DEFAULT_PARAMS
+
+R = DEFAULT_PARAMS.ball_radius
+
+
+def rack(white, yellow, red1, red2):
+    return np.array([white, yellow, red1, red2], dtype=np.float64)
+
+
+# A hand-built rack: white (0.3, 0.3); red1 0.4 m straight up the table; red2 at (0.7, 0.7),
+# i.e. a quarter turn clockwise from the white->red1 direction.
+HAND = rack((0.3, 0.3), (1.1, 2.5), (0.3, 0.7), (0.7, 0.7))
+
+
+def test_rest_observation_layout():
+    obs = domain.rest_observation(HAND)
+    assert obs.shape == (28,) and obs.dtype == np.float32
+    per_ball = obs.reshape(4, 7)
+    np.testing.assert_array_equal(per_ball[:, :2], HAND.astype(np.float32))
+    np.testing.assert_array_equal(per_ball[:, 2:], 0.0)
+    assert domain.rest_observation(np.stack([HAND] * 3)).shape == (3, 28)
+
+
+def test_nearest_red_and_ties():
+    assert domain.nearest_red(HAND) == 2
+    swapped = HAND[[0, 1, 3, 2]]
+    assert domain.nearest_red(swapped) == 3
+    tie = rack((0.7, 1.0), (0.2, 0.2), (0.7, 1.5), (0.7, 0.5))  # both 0.5 m away
+    assert domain.nearest_red(tie) == 2
+    np.testing.assert_array_equal(domain.nearest_red(np.stack([HAND, swapped])), [2, 3])
+
+
+def test_aim_window_hand_values():
+    theta, half = domain.aim_window(HAND, R)
+    assert theta == pytest.approx(math.pi / 2)
+    assert half == pytest.approx(math.asin(2 * R / 0.4))
+    # red along -x at d = 0.25: theta = pi, half = asin(2R/0.25)
+    left = rack((0.9, 1.0), (0.2, 2.6), (0.65, 1.0), (1.2, 2.5))
+    theta, half = domain.aim_window(left, R)
+    assert abs(theta) == pytest.approx(math.pi)
+    assert half == pytest.approx(math.asin(2 * R / 0.25))
+    # touching balls: 2R/d = 1, half-width pi/2
+    touching = rack((0.5, 0.5), (1.2, 2.6), (0.5 + 2 * R, 0.5), (1.0, 2.0))
+    assert domain.aim_window(touching, R)[1] == pytest.approx(math.pi / 2)
+
+
+def test_constrained_theta_is_target_plus_u_halfwidth():
+    batch = np.stack([HAND, HAND[[0, 1, 3, 2]]])
+    u = np.array([-0.5, 0.75])
+    theta, half = domain.aim_window(batch, R)
+    np.testing.assert_allclose(domain.constrained_theta(batch, u, R), theta + u * half)
+    assert domain.constrained_theta(HAND, 0.0, R) == pytest.approx(math.pi / 2)
+    assert domain.constrained_theta(HAND, 1.0, R) == pytest.approx(math.pi / 2 + math.asin(2 * R / 0.4))
+
+
+def test_carom_features_hand_values():
+    d1, d2, s, c = domain.carom_features(HAND)
+    assert d1 == pytest.approx(0.4)
+    assert d2 == pytest.approx(math.hypot(0.4, 0.4))
+    # white->red1 is +y, red1->red2 is +x: a clockwise quarter turn, phi = -pi/2
+    assert s == pytest.approx(-1.0) and c == pytest.approx(0.0, abs=1e-12)
+    # mirror: red2 at (-0.1 + 0.3...) left of red1 -> counter-clockwise, phi = +pi/2
+    mirror = rack((0.3, 0.3), (1.1, 2.5), (0.3, 0.7), (0.1, 0.7))
+    assert tuple(domain.carom_features(mirror)[2:]) == pytest.approx((1.0, 0.0), abs=1e-12)
+    # the nearest red is red2 here, so d1/d2 and the angle are measured from it
+    far = rack((0.5, 0.5), (1.2, 2.6), (0.5, 2.0), (0.8, 0.9))  # red2 at 0.5 m, red1 at 1.5 m
+    d1, d2, s, c = domain.carom_features(far)
+    u1, u2 = np.array([0.3, 0.4]), np.array([-0.3, 1.1])
+    phi = math.atan2(u1[0] * u2[1] - u1[1] * u2[0], u1 @ u2)
+    assert (d1, d2) == pytest.approx((0.5, 1.5))
+    assert (s, c) == pytest.approx((math.sin(phi), math.cos(phi)))
+    # straight on: phi = 0; straight back: phi = pi
+    line = rack((0.5, 0.5), (1.2, 2.6), (0.5, 1.0), (0.5, 1.8))
+    assert tuple(domain.carom_features(line)[2:]) == pytest.approx((0.0, 1.0))
+    back = rack((0.5, 1.0), (1.2, 2.6), (0.5, 1.5), (0.5, 0.2))
+    assert tuple(domain.carom_features(back)) == pytest.approx((0.5, 0.8, 0.0, -1.0))
+
+
+def test_carom_features_batched_shapes():
+    rng = np.random.default_rng(0)
+    from billiards.physics import random_racks
+
+    racks = random_racks(rng, 6).reshape(2, 3, 4, 2)
+    feats = domain.carom_features(racks)
+    assert feats.shape == (2, 3, 4)
+    for idx in np.ndindex(2, 3):
+        np.testing.assert_allclose(feats[idx], domain.carom_features(racks[idx]))
+    np.testing.assert_allclose(feats[..., 2] ** 2 + feats[..., 3] ** 2, 1.0)
+
+
+def test_foul_penalty_formula():
+    foul = np.array([True, False, True])
+    np.testing.assert_array_equal(domain.foul_penalty(foul, 1.5), [-1.5, 0.0, -1.5])
+
+
+def test_gentle_bonus_formula():
+    score = np.array([True, True, False])
+    power = np.array([0.25, 1.0, 0.1])
+    np.testing.assert_allclose(domain.gentle_bonus(score, power, 0.4), [0.4 * 0.75, 0.0, 0.0])
+
+
+def test_near_miss_bonus_formula():
+    #            yellow red1  red2
+    hits = np.array([
+        [False, True, False],   # hit red1 only, missed red2 by 0.02 m -> eligible
+        [False, False, True],   # hit red2 only, missed red1 by 0.10 m -> eligible
+        [False, True, True],    # score -> 0
+        [True, True, False],    # foul -> 0
+        [False, False, False],  # no red -> 0
+    ])
+    closest = np.array([[0.0, 0.02], [0.10, 0.0], [0.0, 0.0], [0.0, 0.001], [0.01, 0.03]])
+    score = hits[:, 1] & hits[:, 2] & ~hits[:, 0]
+    foul = hits[:, 0]
+    bonus = domain.near_miss_bonus(score, foul, hits, closest, beta=0.3, sigma=0.05)
+    np.testing.assert_allclose(bonus, [0.3 * math.exp(-0.02 / 0.05), 0.3 * math.exp(-0.10 / 0.05), 0, 0, 0])
+    with pytest.raises(ValueError):
+        domain.near_miss_bonus(score, foul, hits, closest, beta=1.0, sigma=0.0)
+
+
+def test_shaped_reward_sums_the_terms():
+    score = np.array([True, False, False])
+    foul = np.array([False, True, False])
+    hits = np.array([[False, True, True], [True, False, False], [False, True, False]])
+    closest = np.array([[0, 0], [0.2, 0.3], [0, 0.04]])
+    power = np.array([0.2, 0.9, 0.5])
+    reward = domain.shaped_reward(score, foul, power, hits, closest, foul_c=1.0, gentle_beta=0.5, near_miss_beta=0.2)
+    np.testing.assert_allclose(reward, [1 + 0.5 * 0.8, -1.0, 0.2 * math.exp(-0.04 / 0.05)])
+    np.testing.assert_array_equal(domain.shaped_reward(score, foul, power, hits, closest), score.astype(float))

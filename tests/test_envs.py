@@ -1,0 +1,470 @@
+"""Gymnasium and TorchRL environments, transforms, evaluation protocol and baselines."""
+
+import math
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from gymnasium.utils.env_checker import check_env
+from tensordict import TensorDict
+from torchrl.envs.utils import check_env_specs, step_mdp
+
+from billiards import domain
+from billiards.baselines import make_policy, nearest_red_policy, random_policy
+from billiards.envs import (
+    GYM_ID,
+    AimConstraint,
+    Billiards4BallInningEnv,
+    BilliardsEnv,
+    CaromFeatures,
+    FoulPenalty,
+    GentleShotBonus,
+    NearMissBonus,
+    make_env,
+    reset_to,
+)
+from billiards.evaluation import EvalResult, evaluate, summarize
+from billiards.physics import (
+    DEFAULT_PARAMS,
+    canonical_rack,
+    random_racks,
+    simulate_batch,
+)
+
+R = DEFAULT_PARAMS.ball_radius
+ALL_LAYERS = dict(constrain_aim=True, extra_features=True, foul_penalty=1.0, gentle=0.5, near_miss=0.5)
+
+
+def random_actions(env, n_steps, seed=0):
+    """n_steps batched actions drawn uniformly from env's action spec."""
+    gen = torch.Generator().manual_seed(seed)
+    spec = env.action_spec
+    low, high = spec.space.low, spec.space.high
+    return [low + (high - low) * torch.rand(spec.shape, generator=gen) for _ in range(n_steps)]
+
+
+def play(env, actions, td=None):
+    """Step env through the given actions (auto-resetting finished innings); returns the
+    stacked transitions (B, T) as a TensorDict."""
+    td = env.reset() if td is None else td
+    out = []
+    for action in actions:
+        td["action"] = action
+        full, td = env.step_and_maybe_reset(td)
+        out.append(full)
+    return torch.stack(out, dim=1)
+
+
+def clear_racks(rng, n, margin=1e-3):
+    """n random racks on which nothing can block the white's straight path to the nearest red
+    and no cushion lies in the way: the yellow and the other red are farther than 4R from the
+    white->nearest-red segment, and the nearest red is at least 3R from every cushion."""
+    w, l = DEFAULT_PARAMS.table_width, DEFAULT_PARAMS.table_length
+    out = []
+    while len(out) < n:
+        pos = random_racks(rng, 1)[0]
+        near = int(domain.nearest_red(pos))
+        a, b = pos[0], pos[near]
+        ok = all(3 * R + margin <= c <= lim - 3 * R - margin for c, lim in zip(b, (w, l)))
+        for k in (1, 5 - near):
+            t = np.clip((pos[k] - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+            ok &= np.linalg.norm(pos[k] - (a + t * (b - a))) > 4 * R + margin
+        if ok:
+            out.append(pos)
+    return np.array(out)
+
+
+# ----------------------------------------------------------------------------- gymnasium
+
+
+def test_gym_registered_and_check_env_passes():
+    for kwargs in [{}, dict(ALL_LAYERS, on_miss="reset", render_mode="rgb_array")]:
+        env = gym.make(GYM_ID, **kwargs)
+        assert isinstance(env.unwrapped, Billiards4BallInningEnv)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # advice about the asymmetric action box
+            check_env(env.unwrapped)
+        obs, _ = env.reset(seed=3)
+        assert obs.shape == ((32,) if kwargs else (28,)) and obs.dtype == np.float32
+        assert env.observation_space.contains(obs)
+
+
+def test_gym_observation_and_info():
+    env = Billiards4BallInningEnv(extra_features=True)
+    obs, info = env.reset(seed=0)
+    pos = info["positions"]
+    np.testing.assert_array_equal(obs[:28], domain.rest_observation(pos))
+    np.testing.assert_allclose(obs[28:], domain.carom_features(pos), rtol=1e-6)
+    obs, reward, terminated, truncated, info = env.step(np.array([1.0, 0.7, 0.0, 0.0], dtype=np.float32))
+    assert reward == float(info["score"])
+    assert not terminated and not truncated  # continue-on-miss, 1 of 10 shots
+    assert sum([info["score"], info["foul"], info["miss"]]) == 1
+    assert info["shot"] == 1 and info["n_events"] > 0 and info["hits"].shape == (3,)
+    np.testing.assert_array_equal(obs[:28], domain.rest_observation(info["positions"]))
+
+
+def test_gym_bad_actions_name_the_key_and_shape():
+    env = Billiards4BallInningEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r'"action".*\(4,\)'):
+        env.step(np.array([np.nan, 0.5, 0.0, 0.0]))
+    with pytest.raises(ValueError, match=r'"action" must have shape \(4,\).*got shape \(3,\)'):
+        env.step(np.array([1.0, 0.5, 0.0]))
+    with pytest.raises(ValueError, match="action"):
+        env.step(np.array([1.0, 1.5, 0.0, 0.0]))  # p outside [0, 1]
+
+
+@pytest.mark.parametrize("on_miss", ["continue", "reset"])
+def test_gym_inning_lengths(on_miss):
+    env = Billiards4BallInningEnv(on_miss=on_miss, max_shots=4)
+    rng = np.random.default_rng(0)
+    for episode in range(6):
+        env.reset(seed=episode)
+        scores = []
+        for shot in range(1, 5):
+            action = env.action_space.sample() if episode % 2 else np.array([rng.uniform(0, 6.28), 0.5, 0, 0])
+            _, _, terminated, truncated, info = env.step(action)
+            scores.append(info["score"])
+            assert info["shot"] == shot
+            if terminated or truncated:
+                break
+        if on_miss == "continue":
+            assert len(scores) == 4 and truncated and not terminated
+        else:
+            # ends at the first miss/foul, or by truncation after 4 scoring shots
+            assert terminated == (not scores[-1]) and all(scores[:-1])
+            assert truncated == (len(scores) == 4 and scores[-1])
+
+
+def test_gym_same_seed_same_inning_and_reset_to_positions():
+    def inning(seed):
+        env = Billiards4BallInningEnv(max_shots=5)
+        obs, _ = env.reset(seed=seed)
+        env.action_space.seed(seed)
+        trace = [obs]
+        for _ in range(5):
+            trace.append(env.step(env.action_space.sample())[0])
+        return np.array(trace)
+
+    np.testing.assert_array_equal(inning(7), inning(7))
+    assert not np.array_equal(inning(7), inning(8))
+    env = Billiards4BallInningEnv(start="canonical")
+    np.testing.assert_array_equal(env.reset(seed=1)[1]["positions"], canonical_rack())
+    pos = random_racks(np.random.default_rng(2), 1)[0]
+    _, info = env.reset(options={"positions": pos})
+    np.testing.assert_array_equal(info["positions"], pos)
+
+
+def test_gym_shaping_and_constraint_match_domain():
+    rng = np.random.default_rng(1)
+    env = Billiards4BallInningEnv(**ALL_LAYERS)
+    for n in range(30):
+        env.reset(seed=n)
+        pos = env.positions
+        action = np.array([rng.uniform(-1, 1), rng.uniform(0.2, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)])
+        _, reward, _, _, info = env.step(action)
+        theta = domain.constrained_theta(pos, action[0], R)
+        assert info["theta"] == theta
+        ref = simulate_batch(pos[None], np.r_[theta, action[1:]][None])
+        np.testing.assert_array_equal(info["positions"], ref.positions[0])
+        gap = (info["closest"][1] if info["hits"][1] else info["closest"][0])
+        one_red = info["hits"][1] != info["hits"][2]
+        expected = (
+            info["score"]
+            - 1.0 * info["foul"]
+            + 0.5 * info["score"] * (1 - action[1])
+            + (0.5 * math.exp(-gap / 0.05) if one_red and info["miss"] else 0.0)
+        )
+        assert reward == pytest.approx(expected)
+
+
+# ----------------------------------------------------------------------------- TorchRL specs
+
+
+@pytest.mark.parametrize(
+    "layers",
+    [
+        {},
+        dict(constrain_aim=True),
+        dict(extra_features=True),
+        dict(foul_penalty=1.0),
+        dict(gentle=0.5),
+        dict(near_miss=0.5),
+        ALL_LAYERS,
+        dict(ALL_LAYERS, paradigm="canonical-reset"),
+    ],
+)
+def test_check_env_specs(layers):
+    env = make_env(4, seed=0, **layers)
+    check_env_specs(env, seed=0)
+    assert env.action_spec_unbatched.shape == (4,)
+    expected_low = [-1.0 if layers.get("constrain_aim") else 0.0, 0.0, -1.0, -1.0]
+    np.testing.assert_array_equal(env.action_spec_unbatched.space.low.numpy(), expected_low)
+    expected_high = [1.0 if layers.get("constrain_aim") else np.float32(2 * math.pi), 1.0, 1.0, 1.0]
+    np.testing.assert_array_equal(env.action_spec_unbatched.space.high.numpy(), np.float32(expected_high))
+    assert env.observation_spec["observation"].shape == (4, 32 if layers.get("extra_features") else 28)
+
+
+def test_bare_env_specs_and_keys():
+    env = BilliardsEnv(3, seed=0)
+    check_env_specs(env, seed=0)
+    td = env.reset()
+    assert td["positions"].dtype == torch.float64 and td["positions"].shape == (3, 4, 2)
+    np.testing.assert_array_equal(td["observation"].numpy(), domain.rest_observation(td["positions"].numpy()))
+    td["action"] = env.action_spec.rand()
+    nxt = env.step(td)["next"]
+    for key, shape in [("reward", (3, 1)), ("done", (3, 1)), ("terminated", (3, 1)), ("truncated", (3, 1)),
+                       ("score", (3, 1)), ("foul", (3, 1)), ("miss", (3, 1)), ("first_contact", (3, 1)),
+                       ("hits", (3, 3)), ("closest", (3, 2)), ("shot", (3, 1)), ("n_events", (3, 1))]:
+        assert nxt[key].shape == shape, key
+    assert (nxt["score"] | nxt["foul"] | nxt["miss"]).all()
+    assert (nxt["score"].int() + nxt["foul"].int() + nxt["miss"].int() == 1).all()
+    np.testing.assert_array_equal(nxt["reward"].numpy(), nxt["score"].float().numpy())
+
+
+def test_step_is_exactly_simulate_batch_and_reset_to_is_exact():
+    pos = random_racks(np.random.default_rng(11), 5)
+    env = BilliardsEnv(5, seed=0)
+    td = reset_to(env, pos)
+    np.testing.assert_array_equal(td["positions"].numpy(), pos)  # bit-exact float64
+    assert (td["shot"] == 0).all()
+    actions = torch.tensor([[0.3, 0.8, 0.1, -0.2]] * 5, dtype=torch.float64)
+    td["action"] = actions
+    nxt = env.step(td)["next"]
+    ref = simulate_batch(pos, actions.numpy())
+    np.testing.assert_array_equal(nxt["positions"].numpy(), ref.positions)
+    np.testing.assert_array_equal(nxt["hits"].numpy(), ref.hits)
+    np.testing.assert_array_equal(nxt["first_contact"][:, 0].numpy(), ref.first_contact)
+    # TorchRL's implicit form (state in the reset tensordict) starts from the same table
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        td2 = env.reset(TensorDict({"positions": torch.from_numpy(pos)}, batch_size=[5]))
+    np.testing.assert_array_equal(td2["positions"].numpy(), pos)
+    with pytest.raises(ValueError, match="positions"):
+        bad = pos.copy()
+        bad[0, 1] = bad[0, 0]  # yellow on top of the white
+        reset_to(env, bad)
+
+
+def test_bad_actions_raise_naming_action_and_shape():
+    for env in [make_env(4, seed=0), make_env(4, seed=0, constrain_aim=True)]:
+        td = env.reset()
+        action = env.action_spec.rand()
+        action[2, 1] = float("nan")
+        td["action"] = action
+        with pytest.raises(ValueError, match=r'"action".*\(4, 4\)'):
+            env.step(td)
+        td["action"] = torch.zeros(4, 3)
+        with pytest.raises(ValueError, match=r'"action" must have shape \(4, 4\).*got shape \(4, 3\)'):
+            env.step(td)
+
+
+# ----------------------------------------------------------------------------- transforms
+
+
+def test_aim_constraint_first_contact_is_nearest_red_for_every_u():
+    racks = clear_racks(np.random.default_rng(0), 12)
+    u_grid = np.linspace(-0.99, 0.99, 23)
+    n = len(racks) * len(u_grid)
+    env = make_env(n, seed=0, constrain_aim=True)
+    td = reset_to(env, np.repeat(racks, len(u_grid), axis=0))
+    rng = np.random.default_rng(1)
+    action = np.column_stack([np.tile(u_grid, len(racks)), rng.uniform(0.4, 1.0, n), rng.uniform(-1, 1, (n, 2))])
+    td["action"] = torch.tensor(action, dtype=torch.float32)
+    nxt = env.step(td)["next"]
+    expected = np.repeat(domain.nearest_red(racks), len(u_grid))
+    np.testing.assert_array_equal(nxt["first_contact"][:, 0].numpy(), expected)
+    # the same shots on the bare env with theta from the domain function: identical tables
+    bare = BilliardsEnv(n, seed=0)
+    td_bare = reset_to(bare, np.repeat(racks, len(u_grid), axis=0))
+    theta = domain.constrained_theta(td_bare["positions"].numpy(), action[:, 0].astype(np.float32), R)
+    td_bare["action"] = torch.tensor(np.column_stack([theta, action[:, 1:].astype(np.float32)]))
+    np.testing.assert_array_equal(bare.step(td_bare)["next", "positions"].numpy(), nxt["positions"].numpy())
+
+
+def test_carom_features_in_observation():
+    hand = np.array([[0.3, 0.3], [1.1, 2.5], [0.3, 0.7], [0.7, 0.7]])
+    env = make_env(2, seed=0, extra_features=True)
+    td = reset_to(env, np.stack([hand, hand[[0, 1, 3, 2]]]))
+    expected = [0.4, math.hypot(0.4, 0.4), -1.0, 0.0]
+    np.testing.assert_allclose(td["observation"][:, 28:].numpy(), [expected, expected], atol=1e-6)
+    np.testing.assert_array_equal(td["observation"][:, :28].numpy(), domain.rest_observation(td["positions"].numpy()))
+    td["action"] = env.action_spec.rand()
+    nxt = env.step(td)["next"]
+    feats = domain.carom_features(nxt["positions"].numpy()).astype(np.float32)
+    np.testing.assert_array_equal(nxt["observation"][:, 28:].numpy(), feats)
+    # also after auto-resets inside a rollout
+    roll = env.rollout(12, break_when_any_done=False)
+    np.testing.assert_array_equal(
+        roll["observation"][..., 28:].numpy(), domain.carom_features(roll["positions"].numpy()).astype(np.float32)
+    )
+
+
+@pytest.mark.parametrize(
+    "transform_kwargs",
+    [dict(foul_penalty=1.5), dict(gentle=0.7), dict(near_miss=0.6, near_miss_sigma=0.04), dict(foul_penalty=1.0, gentle=0.5, near_miss=0.5)],
+)
+def test_shaping_terms_equal_their_formulas(transform_kwargs):
+    B, T = 256, 3
+    env = make_env(B, seed=5, constrain_aim=True, **transform_kwargs)  # constrained aim: plenty of scores and near misses
+    data = play(env, random_actions(env, T, seed=2))
+    nxt = data["next"]
+    score, foul, miss = (nxt[k][..., 0].numpy() for k in ("score", "foul", "miss"))
+    hits, closest = nxt["hits"].numpy(), nxt["closest"].numpy().astype(np.float64)
+    power = data["action"][..., 1].numpy().astype(np.float64)
+    assert score.any() and foul.any()
+    one_red = hits[..., 1] ^ hits[..., 2]
+    assert (one_red & miss).any()
+    gap = np.where(hits[..., 1], closest[..., 1], closest[..., 0])
+    c = transform_kwargs.get("foul_penalty", 0.0)
+    beta_g = transform_kwargs.get("gentle", 0.0)
+    beta_n, sigma = transform_kwargs.get("near_miss", 0.0), transform_kwargs.get("near_miss_sigma", 0.05)
+    expected = score - c * foul + beta_g * score * (1 - power) + np.where(one_red & miss, beta_n * np.exp(-gap / sigma), 0.0)
+    np.testing.assert_allclose(nxt["reward"][..., 0].numpy(), expected, rtol=1e-5, atol=1e-6)
+    # the raw outcome is untouched: "score" is still the carom score
+    bare = play(make_env(B, seed=5, constrain_aim=True), random_actions(env, T, seed=2))
+    np.testing.assert_array_equal(bare["next", "score"].numpy(), nxt["score"].numpy())
+    np.testing.assert_array_equal(bare["next", "reward"][..., 0].numpy(), score.astype(np.float32))
+
+
+def test_transform_classes_compose_by_hand():
+    from torchrl.envs import Compose, TransformedEnv
+
+    env = TransformedEnv(BilliardsEnv(4, seed=0), Compose(AimConstraint(), CaromFeatures(), FoulPenalty(1.0),
+                                                         GentleShotBonus(0.5), NearMissBonus(0.5, 0.05)))
+    check_env_specs(env, seed=0)
+    assert env.observation_spec["observation"].shape == (4, 32)
+
+
+# ----------------------------------------------------------------------------- paradigms
+
+
+@pytest.mark.parametrize("start", ["random", "canonical"])
+def test_continue_on_miss_runs_full_innings_then_resets(start):
+    M, B = 3, 16
+    env = make_env(B, start=start, on_miss="continue", max_shots=M, seed=0)
+    data = play(env, random_actions(env, 2 * M + 1, seed=0))
+    shot = data["next", "shot"][..., 0].numpy()
+    np.testing.assert_array_equal(shot, np.tile([1, 2, 3, 1, 2, 3, 1], (B, 1)))
+    assert not data["next", "terminated"].any()
+    np.testing.assert_array_equal(data["next", "truncated"][..., 0].numpy(), np.tile(shot == M, 1))
+    np.testing.assert_array_equal(data["next", "done"].numpy(), data["next", "truncated"].numpy())
+    pos, nxt_pos = data["positions"].numpy(), data["next", "positions"].numpy()
+    for t in range(2 * M):
+        if (t + 1) % M:  # inside an inning the next shot starts where the last one left the table
+            np.testing.assert_array_equal(pos[:, t + 1], nxt_pos[:, t])
+        else:  # a new inning starts from a new rack
+            if start == "canonical":
+                np.testing.assert_array_equal(pos[:, t + 1], np.broadcast_to(canonical_rack(), (B, 4, 2)))
+            else:
+                assert not np.array_equal(pos[:, t + 1], nxt_pos[:, t])
+                assert len({pos[b, t + 1].tobytes() for b in range(B)}) == B
+    if start == "canonical":
+        np.testing.assert_array_equal(pos[:, 0], np.broadcast_to(canonical_rack(), (B, 4, 2)))
+
+
+@pytest.mark.parametrize("start", ["random", "canonical"])
+def test_reset_on_miss_ends_innings_at_first_miss_or_foul(start):
+    M, B, T = 2, 256, 6
+    env = make_env(B, start=start, on_miss="reset", max_shots=M, seed=0, constrain_aim=True)
+    data = play(env, random_actions(env, T, seed=1))
+    score = data["next", "score"][..., 0].numpy()
+    shot = data["next", "shot"][..., 0].numpy()
+    term, trunc = data["next", "terminated"][..., 0].numpy(), data["next", "truncated"][..., 0].numpy()
+    np.testing.assert_array_equal(term, ~score)
+    np.testing.assert_array_equal(trunc, score & (shot == M))
+    assert score.any() and (~score).any() and trunc.any()
+    pos, nxt_pos = data["positions"].numpy(), data["next", "positions"].numpy()
+    done = term | trunc
+    for b in range(B):
+        for t in range(T - 1):
+            if done[b, t]:
+                assert shot[b, t + 1] == 1
+                if start == "canonical":
+                    np.testing.assert_array_equal(pos[b, t + 1], canonical_rack())
+                else:
+                    assert not np.array_equal(pos[b, t + 1], nxt_pos[b, t])
+            else:
+                assert shot[b, t + 1] == shot[b, t] + 1
+                np.testing.assert_array_equal(pos[b, t + 1], nxt_pos[b, t])
+
+
+def test_partial_reset_only_touches_marked_innings():
+    env = make_env(3, seed=1)
+    td = env.reset()
+    td["action"] = env.action_spec.rand()
+    nxt = step_mdp(env.step(td))
+    before = nxt["positions"].clone()
+    nxt["done"] = torch.tensor([[True], [False], [False]])
+    after = env.maybe_reset(nxt)
+    changed = (after["positions"] != before).flatten(1).any(1)
+    np.testing.assert_array_equal(changed.numpy(), [True, False, False])
+    np.testing.assert_array_equal(after["shot"][:, 0].numpy(), [0, 1, 1])
+
+
+def test_same_seed_same_innings():
+    def run(seed):
+        env = make_env(8, seed=seed, max_shots=4, **ALL_LAYERS)
+        return env.rollout(10, random_policy(env.action_spec_unbatched, seed=3), break_when_any_done=False)
+
+    a, b, c = run(0), run(0), run(1)
+    for key in [("next", "positions"), ("next", "reward"), ("next", "observation"), "action"]:
+        np.testing.assert_array_equal(a[key].numpy(), b[key].numpy())
+    assert not np.array_equal(a["positions"].numpy(), c["positions"].numpy())
+    env = make_env(8, seed=0)
+    first = env.reset()["positions"].clone()
+    env.set_seed(0)
+    np.testing.assert_array_equal(env.reset()["positions"].numpy(), first.numpy())
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+
+def test_summarize_statistics():
+    score = np.array([[1, 1, 0], [0, 0, 0], [1, 0, 1], [1, 1, 1]], dtype=bool)
+    foul = np.array([[0, 0, 1], [0, 0, 0], [0, 1, 0], [0, 0, 0]], dtype=bool)
+    res = summarize(score, foul)
+    assert res.mean == pytest.approx(1.75) and res.std == pytest.approx(np.std([2, 0, 2, 3]))
+    assert res.best == 3 and res.points == [2, 0, 2, 3]
+    assert res.foul_innings_pct == pytest.approx(50.0)
+    assert res.foul_per_shot_pct == pytest.approx(100 * 2 / 12)
+    assert res.success_per_shot_pct == pytest.approx(100 * 7 / 12)
+    assert res.n_innings == 4 and res.shots == 12 and res.max_shots == 3
+
+
+def test_evaluate_protocol_and_json(tmp_path):
+    res = evaluate(nearest_red_policy(), n_innings=16, max_shots=5, seed=3)
+    assert res.n_innings == 16 and res.shots == 80 and len(res.points) == 16
+    assert res.mean == pytest.approx(np.mean(res.points)) and 0 <= res.best <= 5
+    # the protocol by hand: continue-on-miss innings with the same racks and policy
+    env = make_env(16, on_miss="continue", max_shots=5, seed=3)
+    td = env.reset()
+    points = np.zeros(16, dtype=int)
+    for _ in range(5):
+        td = step_mdp(env.step(nearest_red_policy()(td)))
+        points += td["score"][:, 0].numpy()
+    assert res.points == points.tolist()
+    assert evaluate(nearest_red_policy(), n_innings=16, max_shots=5, seed=3) == res
+    res.to_json(tmp_path / "r.json")
+    assert EvalResult.from_json(tmp_path / "r.json") == res
+    canon = evaluate(nearest_red_policy(), n_innings=4, max_shots=3, start="canonical")
+    assert len(set(canon.points)) == 1  # identical racks, deterministic policy
+
+
+def test_baseline_policies():
+    env = make_env(5, seed=0)
+    td = env.reset()
+    act = nearest_red_policy()(td.clone())["action"]
+    theta, _ = domain.aim_window(td["positions"].numpy(), R)
+    np.testing.assert_allclose(act[:, 0].numpy(), np.mod(theta, 2 * math.pi), rtol=1e-6)
+    np.testing.assert_array_equal(act[:, 1:].numpy(), np.tile([0.5, 0.0, 0.0], (5, 1)))
+    assert env.action_spec.is_in(act)
+    constrained = make_policy("nearest", constrain_aim=True)(td.clone())["action"]
+    np.testing.assert_array_equal(constrained[:, 0].numpy(), 0.0)
+    rand = make_policy("random", seed=0)(td.clone())["action"]
+    assert env.action_spec.is_in(rand)
+    np.testing.assert_array_equal(rand.numpy(), make_policy("random", seed=0)(td.clone())["action"].numpy())
+    with pytest.raises(ValueError):
+        make_policy("oracle")

@@ -1,0 +1,57 @@
+"""Pictures: shot PNG, inning GIF, rgb_array, command line."""
+
+import numpy as np
+from PIL import Image
+
+from billiards import render
+from billiards.baselines import nearest_red_policy
+from billiards.envs import Billiards4BallInningEnv
+from billiards.physics import canonical_rack, simulate_shot
+
+# canonical rack, white shot at red1 (straight along -x) with some power: hits red1 first
+ACTION = np.array([np.pi, 0.6, 0.0, 0.0])
+
+
+def test_render_shot_png(tmp_path):
+    path = tmp_path / "shot.png"
+    result = render.render_shot(canonical_rack(), ACTION, path, title="test")
+    ref = simulate_shot(canonical_rack(), ACTION)
+    np.testing.assert_array_equal(result.positions, ref.positions)
+    assert result.first_contact == 2
+    image = np.asarray(Image.open(path).convert("RGB"))
+    assert image.shape[0] > image.shape[1] > 200  # portrait table
+    # the cloth, the white ball and a red are all in the picture
+    colours = {tuple(int(v) for v in c) for c in image.reshape(-1, 3)[::7]}
+    for hex_colour in (render.CLOTH, render.BALL_COLORS[2]):
+        rgb = tuple(int(hex_colour[i:i + 2], 16) for i in (1, 3, 5))
+        assert any(sum(abs(a - b) for a, b in zip(rgb, c)) < 30 for c in colours), hex_colour
+    assert "first contact: red1" in render.outcome_text(result)
+
+
+def test_table_rgb_array_and_gym_render():
+    image = render.table_rgb_array(canonical_rack())
+    assert image.dtype == np.uint8 and image.ndim == 3 and image.shape[2] == 3
+    env = Billiards4BallInningEnv(render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == image.shape
+    assert not np.array_equal(frame, image)  # a random rack, not the canonical one
+
+
+def test_play_and_render_inning_gif(tmp_path):
+    shots = render.play_inning(nearest_red_policy(), seed=1, max_shots=2)
+    assert len(shots) == 2
+    pos0, act0 = shots[0]
+    # the second shot starts where the first left the table
+    np.testing.assert_array_equal(shots[1][0], simulate_shot(pos0, act0).positions)
+    path = tmp_path / "inning.gif"
+    n_frames = render.render_inning(shots, path, fps=8, speed=4.0, pause=0.25, dpi=30)
+    gif = Image.open(path)
+    assert gif.format == "GIF" and 2 < gif.n_frames <= n_frames
+
+
+def test_command_line(tmp_path, capsys):
+    out = tmp_path / "cli.png"
+    render.main(["shot", "--out", str(out), "--seed", "0", "--policy", "nearest", "--dpi", "40"])
+    assert out.stat().st_size > 1000
+    assert str(out) in capsys.readouterr().out
