@@ -1,0 +1,83 @@
+"""Search actors: TensorDict modules that a TorchRL collector runs in place of a policy.
+
+They read the exact table state ``"positions"`` (float64) from the TensorDict, search with the
+simulator as verifier, and write the chosen raw action ``"action"`` (theta, p, a, b) as float64
+so the environment plays exactly the shot that was verified. Use them on a bare
+:class:`billiards.envs.BilliardsEnv` (raw actions); the proposers apply their own aim
+constraint and features.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+
+from .lookahead import H2Config, h2_search
+from .puct import PUCTConfig, puct_search
+
+
+class SearchActor(TensorDictModuleBase):
+    """Base class: ``positions`` in; ``action``, ``search_value``, ``search_r1`` out."""
+
+    in_keys = ["positions"]
+    out_keys = ["action", "search_value", "search_r1"]
+
+    def __init__(self, proposer, cfg, seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
+        super().__init__()
+        self.proposer, self.cfg, self.params = proposer, cfg, params
+        self.reseed(seed)
+
+    def reseed(self, seed: int) -> None:
+        """Restart the candidate stream: the same seed replays the same decisions."""
+        self.rng = np.random.default_rng(seed)
+        self.n_sims = 0
+        self.n_decisions = 0
+
+    def search(self, positions: np.ndarray):
+        raise NotImplementedError
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        positions = tensordict.get("positions").detach().cpu().numpy().astype(np.float64, copy=False)
+        batch = positions.shape[:-2]
+        result = self.search(positions.reshape(-1, 4, 2))
+        self.n_sims += result.n_sims
+        self.n_decisions += int(np.prod(batch))
+        tensordict.set("action", torch.from_numpy(result.actions.reshape(*batch, 4)))
+        tensordict.set("search_value", torch.from_numpy(result.value.reshape(*batch, 1)))
+        tensordict.set("search_r1", torch.from_numpy(result.r1.reshape(*batch, 1)))
+        return tensordict
+
+
+class LookaheadActor(SearchActor):
+    """Greedy depth-2 K-expansion lookahead (:func:`billiards.search.lookahead.h2_search`)."""
+
+    def __init__(self, proposer, cfg: H2Config = H2Config(), seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
+        super().__init__(proposer, cfg, seed, params)
+
+    def search(self, positions):
+        return h2_search(positions, self.proposer, self.cfg, self.rng, self.params)
+
+
+class PUCTActor(SearchActor):
+    """PUCT with progressive widening over the proposer's samples (:mod:`billiards.search.puct`)."""
+
+    def __init__(self, proposer, cfg: PUCTConfig = PUCTConfig(), seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
+        super().__init__(proposer, cfg, seed, params)
+
+    def search(self, positions):
+        return puct_search(positions, self.proposer, self.cfg, self.rng, self.params)
+
+
+def make_search_collector(env, actor: SearchActor, frames_per_batch: int, total_frames: int):
+    """The search collector: a TorchRL ``Collector`` running ``actor`` in place of the policy."""
+    from torchrl.collectors import Collector
+
+    return Collector(env, actor, frames_per_batch=frames_per_batch, total_frames=total_frames, trust_policy=True,
+                     auto_register_policy_transforms=False)
+
+
+__all__ = ["LookaheadActor", "PUCTActor", "SearchActor", "make_search_collector"]

@@ -1,0 +1,116 @@
+"""Search configuration schema (``conf/search.yaml``), registered in Hydra's ConfigStore.
+
+Typed, closed nodes: an unknown key, a wrong type or an enum value outside its set fails while
+Hydra composes; :func:`validate` checks the rest (budget split, sizes) before anything runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+from hydra.core.config_store import ConfigStore
+from hydra.experimental.callback import Callback
+
+
+SEARCH_KINDS = ("h2", "puct")
+PROPOSER_KINDS = ("geometric", "policy")
+PROTOCOLS = ("p1", "p3")
+
+
+@dataclass
+class ProposerConfig:
+    """``geometric`` needs no training; ``policy`` loads an ensemble of training checkpoints
+    (paths relative to the repository root, or absolute)."""
+
+    name: str = "geometric"
+    kind: str = "geometric"  # geometric | policy
+    checkpoints: List[str] = field(default_factory=list)
+    power_low: float = 0.15
+    power_high: float = 0.9
+    command: Optional[str] = None  # how the checkpoints were trained (documentation)
+
+
+@dataclass
+class SearchConfig:
+    """h2: ``budget`` = k1 + m1 * k2 simulations per decision, k2 derived. puct: ``budget``
+    simulations per decision with progressive widening (pw_c, pw_alpha) over ``pool`` samples."""
+
+    kind: str = "h2"  # h2 | puct
+    budget: int = 400
+    k1: int = 200
+    m1: int = 10
+    gamma: float = 0.99
+    foul_penalty: float = 1.0
+    c_puct: float = 1.0
+    pw_c: float = 1.0
+    pw_alpha: float = 0.5
+    pool: int = 16
+    max_depth: int = 8
+
+
+@dataclass
+class ProtocolConfig:
+    """p1: ``n_innings`` random-start innings of ``shots`` shots. p3: ``seeds`` canonical-start
+    chains capped at ``cap`` shots."""
+
+    name: str = "p3"  # p1 | p3
+    n_innings: int = 100
+    shots: int = 100
+    seeds: int = 10
+    cap: int = 10000
+
+
+@dataclass
+class Config:
+    proposer: ProposerConfig = field(default_factory=ProposerConfig)
+    search: SearchConfig = field(default_factory=SearchConfig)
+    protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
+    seed: int = 0
+    threads: Optional[int] = None  # numba threads for simulate_batch (default: all cores)
+    progress: bool = True
+    picture: bool = True
+
+
+def validate(cfg) -> None:
+    """Checks a type cannot express; raises ValueError with the offending key."""
+    s, p = cfg.search, cfg.protocol
+    for key, value, allowed in (("search.kind", s.kind, SEARCH_KINDS), ("proposer.kind", cfg.proposer.kind, PROPOSER_KINDS),
+                                ("protocol.name", p.name, PROTOCOLS)):
+        if value not in allowed:
+            raise ValueError(f"{key} must be one of {', '.join(allowed)}; got {value!r}")
+    if s.budget < 1:
+        raise ValueError(f"search.budget must be >= 1, got {s.budget}")
+    if s.kind == "h2":
+        from .lookahead import H2Config
+
+        H2Config.from_budget(s.budget, s.k1, s.m1, gamma=s.gamma, foul_penalty=s.foul_penalty)
+    for key in ("n_innings", "shots", "seeds", "cap"):
+        if getattr(p, key) < 1:
+            raise ValueError(f"protocol.{key} must be >= 1, got {getattr(p, key)}")
+    if cfg.proposer.kind == "policy" and not cfg.proposer.checkpoints:
+        raise ValueError(f"proposer {cfg.proposer.name!r} is a policy ensemble but lists no checkpoints")
+    if cfg.threads is not None and cfg.threads < 1:
+        raise ValueError(f"threads must be >= 1, got {cfg.threads}")
+
+
+def register() -> None:
+    cs = ConfigStore.instance()
+    cs.store(name="search_schema", node=Config)
+    cs.store(group="proposer", name="proposer_schema", node=ProposerConfig)
+    cs.store(group="search", name="search_schema", node=SearchConfig)
+    cs.store(group="protocol", name="protocol_schema", node=ProtocolConfig)
+
+
+class ValidateSearchConfig(Callback):
+    """Hydra callback (``hydra.callbacks`` in conf/search.yaml): validates before Hydra creates
+    the run directory, so a bad command line fails at once and writes nothing."""
+
+    def on_run_start(self, config, **kwargs) -> None:
+        try:
+            validate(config)
+        except ValueError as err:
+            raise SystemExit(f"Error: {err}") from None
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        self.on_run_start(config)

@@ -1,0 +1,76 @@
+"""``python search.py``: build the proposer and the search actor from a config, run a protocol,
+write ``results.json`` (and a picture of the longest chain's last shots) into the run dir."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import numba
+from omegaconf import OmegaConf
+
+from .actors import LookaheadActor, PUCTActor, SearchActor
+from .config import validate
+from .lookahead import H2Config
+from .proposers import GeometricProposer
+from .protocols import ProtocolResult, run_p1, run_p3
+from .puct import PUCTConfig
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS_FILE = "results.json"
+
+
+def make_proposer(cfg):
+    """The proposer a ``proposer`` config node describes."""
+    if cfg.kind == "geometric":
+        return GeometricProposer(power_low=cfg.power_low, power_high=cfg.power_high)
+    from billiards.rl.policy import load_policy_proposer
+
+    paths = [p if Path(p).is_absolute() else str(ROOT / p) for p in cfg.checkpoints]
+    return load_policy_proposer(paths, name=cfg.name)
+
+
+def make_actor(cfg, proposer) -> SearchActor:
+    s = cfg.search
+    if s.kind == "h2":
+        h2 = H2Config.from_budget(s.budget, s.k1, s.m1, gamma=s.gamma, foul_penalty=s.foul_penalty)
+        return LookaheadActor(proposer, h2, seed=cfg.seed)
+    puct = PUCTConfig(budget=s.budget, c_puct=s.c_puct, pw_c=s.pw_c, pw_alpha=s.pw_alpha, pool=s.pool,
+                      max_depth=s.max_depth, gamma=s.gamma, foul_penalty=s.foul_penalty)
+    return PUCTActor(proposer, puct, seed=cfg.seed)
+
+
+def run(cfg, out_dir: str | Path) -> ProtocolResult:
+    validate(cfg)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if cfg.threads is not None:
+        numba.set_num_threads(cfg.threads)
+    actor = make_actor(cfg, make_proposer(cfg.proposer))
+    proto = cfg.protocol.name
+    if proto == "p1":
+        result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, progress=cfg.progress)
+    else:
+        seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
+        picture = out_dir / "longest_chain.png" if cfg.picture else None
+        result = run_p3(actor, seeds, cfg.protocol.cap, progress=cfg.progress, picture=picture)
+    summary = json.loads(result.to_json())
+    summary.update(
+        proposer=cfg.proposer.name,
+        search=cfg.search.kind,
+        config=OmegaConf.to_container(cfg, resolve=True),
+        commit=_commit(),
+    )
+    (out_dir / RESULTS_FILE).write_text(json.dumps(summary, indent=2) + "\n")
+    print(f"{proto} {summary['search']} proposer={cfg.proposer.name}: mean {result.mean:.2f} ± {result.std:.2f}, "
+          f"max {result.max:.0f}, {result.ms_per_decision:.1f} ms/shot, {result.sims_per_decision:.0f} sims/shot -> {out_dir}")
+    return result
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"

@@ -1,0 +1,140 @@
+"""Search: the lookahead's choice, budgets counted at the simulator, determinism, exact replay."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import billiards.search.lookahead as lookahead_mod
+import billiards.search.puct as puct_mod
+from billiards.physics import random_racks, simulate_batch
+from billiards.search import GeometricProposer, H2Config, LookaheadActor, PUCTActor, PUCTConfig, h2_search, verifier_reward
+from billiards.search.protocols import run_chain, run_p1
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+class Recording:
+    """Wraps a proposer and keeps every batch of candidates it emitted."""
+
+    def __init__(self, inner):
+        self.inner, self.calls, self.name = inner, [], "recording"
+
+    def propose(self, positions, k, rng):
+        out = self.inner.propose(positions, k, rng)
+        self.calls.append((positions.copy(), out.copy()))
+        return out
+
+
+@pytest.fixture
+def count_sims(monkeypatch):
+    """Counts the shots that reach the simulator from the search modules."""
+    counter = {"shots": 0}
+
+    def counting(positions, actions, params=None):
+        counter["shots"] += len(actions)
+        return simulate_batch(positions, actions) if params is None else simulate_batch(positions, actions, params)
+
+    monkeypatch.setattr(lookahead_mod, "simulate_batch", counting)
+    monkeypatch.setattr(puct_mod, "simulate_batch", counting)
+    return counter
+
+
+def test_lookahead_choice_maximises_r1_plus_gamma_max_r2():
+    racks = random_racks(np.random.default_rng(0), 6)
+    cfg = H2Config(k1=40, m1=5, k2=8, gamma=0.99)
+    prop = Recording(GeometricProposer())
+    res = h2_search(racks, prop, cfg, np.random.default_rng(1))
+    (pos1, a1), (pos2, a2) = prop.calls
+    r1 = verifier_reward(simulate_batch(np.repeat(pos1, cfg.k1, 0), a1.reshape(-1, 4))).reshape(6, cfg.k1)
+    after1 = simulate_batch(np.repeat(pos1, cfg.k1, 0), a1.reshape(-1, 4)).positions.reshape(6, cfg.k1, 4, 2)
+    r2 = verifier_reward(simulate_batch(np.repeat(pos2, cfg.k2, 0), a2.reshape(-1, 4))).reshape(6, cfg.m1, cfg.k2)
+    for s in range(6):
+        # the expanded candidates are the top m1 by r1, in proposer order among ties
+        top = np.argsort(-r1[s], kind="stable")[: cfg.m1]
+        np.testing.assert_array_equal(pos2[s * cfg.m1:(s + 1) * cfg.m1], after1[s, top])
+        values = r1[s, top] + cfg.gamma * r2[s].max(axis=1)
+        chosen = [k for k in top if np.array_equal(a1[s, k], res.actions[s])]
+        assert chosen, "the executed action is one of the simulated candidates"
+        assert res.value[s] == pytest.approx(values.max())
+        assert r1[s, chosen[0]] + cfg.gamma * r2[s][list(top).index(chosen[0])].max() == pytest.approx(values.max())
+
+
+def test_one_candidate_without_expansion_plays_the_proposer_action():
+    racks = random_racks(np.random.default_rng(2), 5)
+    prop = GeometricProposer()
+    res = h2_search(racks, prop, H2Config(k1=1, m1=0, k2=0), np.random.default_rng(3))
+    expected = prop.propose(racks, 1, np.random.default_rng(3))[:, 0]
+    np.testing.assert_array_equal(res.actions, expected)
+    assert res.n_sims == 5
+
+
+def test_actors_use_exactly_the_configured_number_of_simulations(count_sims):
+    from tensordict import TensorDict
+    import torch
+
+    racks = random_racks(np.random.default_rng(4), 3)
+    td = TensorDict({"positions": torch.from_numpy(racks)}, batch_size=[3])
+    cfg = H2Config.from_budget(400, 200, 10)
+    LookaheadActor(GeometricProposer(), cfg)(td.clone())
+    assert count_sims["shots"] == 3 * 400 == 3 * cfg.sims_per_decision
+    count_sims["shots"] = 0
+    actor = PUCTActor(GeometricProposer(), PUCTConfig(budget=60))
+    actor(td.clone())
+    assert count_sims["shots"] == 3 * 60 == actor.n_sims
+
+
+def test_a_fixed_seed_gives_the_same_chain():
+    actor = LookaheadActor(GeometricProposer(), H2Config(k1=30, m1=3, k2=10))
+    n1, h1 = run_chain(actor, seed=5, cap=25)
+    n2, h2 = run_chain(actor, seed=5, cap=25)
+    assert n1 == n2 and len(h1) == len(h2)
+    for (p1, a1, s1), (p2, a2, s2) in zip(h1, h2):
+        np.testing.assert_array_equal(p1, p2)
+        np.testing.assert_array_equal(a1, a2)
+        assert s1 == s2
+    _, h3 = run_chain(actor, seed=6, cap=25)
+    assert not np.array_equal(h1[0][1], h3[0][1])
+
+
+def test_search_collector_plays_exactly_the_verified_shot():
+    actor = LookaheadActor(GeometricProposer(), H2Config(k1=60, m1=4, k2=10))
+    res = run_p1(actor, n_innings=6, shots=4, seed=0, progress=False)
+    assert len(res.values) == 6 and res.sims_per_decision == 100
+    # the predicted immediate reward of every executed shot came true in the environment
+    assert res.extra["mispredicted_shots"] == 0
+    assert res.extra["success_per_shot"] > 0.5
+
+
+def run_search(*args, cwd=ROOT):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run([sys.executable, "search.py", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+
+
+def test_search_entry_point_writes_results(tmp_path):
+    out = tmp_path / "run"
+    proc = run_search("protocol=p3", "protocol.seeds=2", "protocol.cap=4", "search.k1=40", "search.m1=4",
+                      "search.budget=80", "progress=false", f"hydra.run.dir={out}")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    data = json.loads((out / "results.json").read_text())
+    assert data["protocol"] == "p3" and data["search"] == "h2" and data["proposer"] == "geometric"
+    assert len(data["values"]) == 2 and data["sims_per_decision"] == 80
+    assert (out / "longest_chain.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("override, message", [
+    ("search.kind=bfs", "search.kind must be one of h2, puct"),
+    ("search.k1=175", "not a non-negative multiple of m1"),
+    ("protocol=p9", "protocol"),
+    ("search.budgett=3", "budgett"),
+])
+def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, override, message):
+    out = tmp_path / "never"
+    proc = run_search(override, f"hydra.run.dir={out}")
+    assert proc.returncode != 0
+    assert message in proc.stderr + proc.stdout
+    assert not out.exists()
