@@ -403,3 +403,25 @@ def test_bad_params_raise():
         PhysicsParams(ball_ball="sticky")
     with pytest.raises(ValueError, match="table_width"):
         PhysicsParams(table_width=float("nan"))
+
+
+def test_a_ball_pressed_into_a_cushion_bounces_instead_of_escaping():
+    # the white sits 0.5 µm inside the x = 0 nose line (accepted: within POSITION_TOL) and is
+    # shot into it: it must collide at once, not pass through the rail
+    rack = np.array([[R - 5e-7, 1.0], [0.7, 2.5], [1.2, 2.6], [0.4, 2.7]])
+    res = simulate_shot(rack, [math.pi + 0.3, 0.5, 0.0, 0.0])
+    first = res.events()[1]
+    assert first[1:] == ("cushion", 0, 0) and first[0] == 0.0
+    assert res.positions[0, 0] >= R - 1e-6
+
+
+def test_chains_of_shots_stay_on_the_table():
+    """Each table is the previous shot's result (as in an inning), so balls come to rest
+    against cushions and each other; every state must remain a valid input."""
+    rng = np.random.default_rng(11)
+    racks = random_racks(rng, 300)
+    for _ in range(40):
+        acts = np.column_stack([rng.uniform(0, 2 * np.pi, 300), rng.uniform(0, 1, 300),
+                                rng.uniform(-1, 1, 300), rng.uniform(-1, 1, 300)])
+        racks = simulate_batch(racks, acts).positions  # raises if a state left the table
+    assert (racks >= R - 1e-6).all()

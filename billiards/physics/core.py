@@ -366,7 +366,12 @@ def min_separation(st, poly, lab, i, j, T):
 
 @njit(cache=True, error_model="numpy")
 def cushion_time(st, poly, lab, i, p, T):
-    """Earliest time in (EPS, T] at which ball i reaches a cushion (§3.3): (time, cushion)."""
+    """Earliest time in (EPS, T] at which ball i reaches a cushion (§3.3): (time, cushion).
+
+    A ball already touching or pressed into a cushion (by up to the make-kiss spacers of an
+    earlier collision) and moving into it collides now (time 0), as overlapping balls do;
+    the quadratic alone would let it pass through the rail.
+    """
     if lab[i] <= SPINNING:
         return INF, -1
     R = p[P_R]
@@ -377,6 +382,9 @@ def cushion_time(st, poly, lab, i, p, T):
             a, b, c = ax, bx, st[i, 0] - (R if w == 0 else p[P_W] - R)
         else:
             a, b, c = ay, by, st[i, 1] - (R if w == 2 else p[P_L] - R)
+        inward = -1.0 if w % 2 == 0 else 1.0  # sign of the velocity component into the cushion
+        if c * inward >= 0.0 and b * inward > 0.0:
+            return 0.0, w
         if abs(a) < EPS:
             if abs(b) < EPS:
                 continue
