@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -39,6 +40,15 @@ def run_pooltool(racks: np.ndarray, actions: np.ndarray, repeat: int = 1) -> dic
         subprocess.run(cmd, check=True)
         with np.load(out, allow_pickle=False) as data:
             return {k: data[k] for k in data.files if k != "error"}
+
+
+def write_json(path: Path | None, summary: dict) -> None:
+    """Write a benchmark's summary (which names its command and commit) to path, if given."""
+    if path is None:
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(summary, indent=2) + "\n")
+    print("wrote", path)
 
 
 def git_commit() -> str:

@@ -13,7 +13,6 @@ in a fresh subprocess. Every timing is the best of --repeat runs.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -25,7 +24,7 @@ import numba
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _shots import ROOT, git_commit, random_shots, run_pooltool  # noqa: E402
+from _shots import ROOT, git_commit, write_json, random_shots, run_pooltool  # noqa: E402
 
 from billiards.physics import DEFAULT_PARAMS, simulate_batch, simulate_shot  # noqa: E402
 from billiards.physics import core  # noqa: E402
@@ -112,9 +111,7 @@ def main(argv=None) -> None:
         summary = {"command": " ".join(["python", "benchmarks/bench_simulator.py"] + (argv or sys.argv[1:])),
                    "commit": git_commit(), "n": args.n, "batch_n": args.batch_n, "seed": args.seed,
                    "cpu_count": os.cpu_count(), **fig}
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(summary, indent=2) + "\n")
-        print("wrote", args.out)
+        write_json(args.out, summary)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,6 @@ and classifies every disagreement by the first place the two event histories par
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -19,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _shots import git_commit, random_shots, run_pooltool  # noqa: E402
+from _shots import git_commit, write_json, random_shots, run_pooltool  # noqa: E402
 
 from billiards.physics import simulate_batch, simulate_shot  # noqa: E402
 
@@ -84,10 +83,7 @@ def main(argv=None) -> None:
     print("final-position error quantiles (m):", summary["position_error_quantiles_m"])
     for k, v in classes.items():
         print(f"  disagreement: {k}: {len(v)} shots, e.g. {v[:5]}")
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(summary, indent=2) + "\n")
-        print("wrote", args.out)
+    write_json(args.out, summary)
 
 
 if __name__ == "__main__":

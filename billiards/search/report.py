@@ -1,0 +1,68 @@
+"""Table 6 from search runs: ``results.json`` files written by ``search.py``.
+
+Rows are proposers; columns are P1 h=2 and PUCT (mean points per 100-shot inning) and P3 h=2
+and PUCT (mean chain length, longest in brackets), with the paper's figures beside ours.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+PAPER_TABLE6 = {
+    "base": {"p1_h2": 99.80, "p1_puct": 67.93, "p3_h2": (1383, 2634), "p3_puct": (85.7, 404)},
+    "gentle": {"p1_h2": 99.71, "p1_puct": 79.11, "p3_h2": (955, 1750), "p3_puct": (32.4, 157)},
+    "near_miss": {"p1_h2": 99.83, "p1_puct": 81.85, "p3_h2": (2052, 9392), "p3_puct": (77.4, 345)},
+    "both": {"p1_h2": 99.77, "p1_puct": 62.84, "p3_h2": (1194, 3272), "p3_puct": (50.4, 191)},
+}
+COLUMNS = [("p1", "h2"), ("p1", "puct"), ("p3", "h2"), ("p3", "puct")]
+
+
+def find_results(dirs) -> list[dict]:
+    found = []
+    for d in dirs:
+        d = Path(d)
+        files = [d] if d.is_file() else sorted(d.rglob("*.json"))
+        for f in files:
+            data = json.loads(f.read_text())
+            if {"protocol", "search", "proposer"} <= data.keys():
+                data["_path"] = str(f)
+                found.append(data)
+    return found
+
+
+def _cell(res: dict | None, protocol: str) -> str:
+    if res is None:
+        return "—"
+    if protocol == "p1":
+        return f"{res['mean']:.2f}"
+    capped = res.get("extra", {}).get("cap")
+    tail = f", cap {capped}" if capped and capped != 10000 else ""
+    return f"{res['mean']:.1f} ({res['max']:.0f}{tail})"
+
+
+def _paper(name: str, protocol: str, kind: str) -> str:
+    row = PAPER_TABLE6.get(name)
+    if row is None:
+        return "—"
+    v = row[f"{protocol}_{kind}"]
+    return f"{v:.2f}" if protocol == "p1" else f"{v[0]:g} ({v[1]})"
+
+
+def table6_markdown(results: list[dict]) -> str:
+    """The Table 6 layout; the last run found wins where a cell has several."""
+    cells: dict[tuple[str, str, str], dict] = {}
+    for r in results:
+        cells[(r["proposer"], r["protocol"], r["search"])] = r
+    names = sorted({k[0] for k in cells}, key=lambda n: (n not in PAPER_TABLE6, list(PAPER_TABLE6).index(n) if n in PAPER_TABLE6 else 0, n))
+    lines = [
+        "Table 6: proposers at 400 simulations per shot. P1: points per 100-shot random-start inning (100 innings); "
+        "P3: canonical-start chain length before the first miss or foul, mean (longest). Ours | paper.",
+        "",
+        "| proposer | P1 h=2 | P1 PUCT | P3 h=2 mean (max) | P3 PUCT mean (max) |",
+        "|---|---|---|---|---|",
+    ]
+    for name in names:
+        row = [f"{_cell(cells.get((name, p, k)), p)} \\| {_paper(name, p, k)}" for p, k in COLUMNS]
+        lines.append(f"| {name} | " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
