@@ -18,6 +18,7 @@ clamped silently.
 from __future__ import annotations
 
 import math
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -35,25 +36,55 @@ CUSHION_NAMES = ("x=0", "x=w", "y=0", "y=l")
 MOTION_LABELS = ("stationary", "spinning", "sliding", "rolling")
 
 
-class ShotResult(NamedTuple):
-    """One simulated shot (see :func:`simulate_shot`)."""
+class ShotResult:
+    """One simulated shot (see :func:`simulate_shot`).
 
-    positions: np.ndarray  # (4, 2) centres at rest
-    score: bool  # the white hit both reds and never the yellow
-    foul: bool  # the white hit the yellow
-    miss: bool  # neither score nor foul
-    first_contact: int  # first ball the white hit (1, 2, 3) or -1
-    hits: np.ndarray  # (3,) bool: the white touched yellow, red1, red2
-    closest: np.ndarray  # (2,) closest surface gap (m) of the white to red1, red2; 0 if hit
-    cushions: int  # cushion contacts of the white
-    n_events: int  # physical events (strike excluded)
-    duration: float  # simulated seconds until every ball rests
-    truncated: bool  # stopped by params.max_events
-    event_time: np.ndarray  # (E,) event times, event 0 is the strike at t = 0
-    event_kind: np.ndarray  # (E,) index into EVENT_KINDS
-    event_ball: np.ndarray  # (E,) the ball the event concerns
-    event_other: np.ndarray  # (E,) other ball (ball_ball), cushion id (cushion), new label (transition)
-    event_state: np.ndarray  # (E, 4, 8) every ball's x, y, vx, vy, wx, wy, wz, label after the event
+    Fields are read-only attributes, each computed from the kernel's raw output the first time
+    it is read (so a caller pays only for what it uses):
+
+    * ``positions`` (4, 2) centres at rest;
+    * ``score``, ``foul``, ``miss``: the carom outcome (:mod:`billiards.physics.rules`);
+    * ``first_contact``: the first ball the white hit (1, 2, 3), or -1;
+    * ``hits`` (3,) bool: the white touched yellow, red1, red2;
+    * ``closest`` (2,): the white's closest surface gap to red1, red2 (m; 0 if hit);
+    * ``cushions``: cushion contacts of the white; ``n_events``: physical events (strike
+      excluded); ``duration``: simulated seconds until every ball rests; ``truncated``:
+      stopped by ``params.max_events``;
+    * the event log: ``event_time`` (E,) (event 0 is the strike at t = 0), ``event_kind`` (E,)
+      index into EVENT_KINDS, ``event_ball`` (E,), ``event_other`` (E,) (other ball for
+      ball_ball, cushion id for cushion, new motion label for transition), ``event_state``
+      (E, 4, 8) every ball's x, y, vx, vy, wx, wy, wz, label after the event.
+    """
+
+    def __init__(self, st, out_int, out_float, ev_time, ev_info, ev_state):
+        self._st, self._oi, self._of = st, out_int, out_float
+        self.event_time, self.event_state, self._ev_info = ev_time, ev_state, ev_info
+
+    @cached_property
+    def positions(self) -> np.ndarray:
+        return self._st[:, :2].copy()
+
+    @cached_property
+    def hits(self) -> np.ndarray:
+        return self._oi[core.O_HIT1:core.O_HIT3 + 1] != 0
+
+    @cached_property
+    def _outcome(self):
+        h = self.hits
+        return tuple(bool(x) for x in carom_outcome(h[0], h[1], h[2]))
+
+    score = property(lambda self: self._outcome[0], doc="the white hit both reds and never the yellow")
+    foul = property(lambda self: self._outcome[1], doc="the white hit the yellow")
+    miss = property(lambda self: self._outcome[2], doc="neither score nor foul")
+    first_contact = property(lambda self: int(self._oi[core.O_FIRST]))
+    cushions = property(lambda self: int(self._oi[core.O_CUSHIONS]))
+    n_events = property(lambda self: int(self._oi[core.O_NEVENTS]))
+    truncated = property(lambda self: bool(self._oi[core.O_TRUNC]))
+    duration = property(lambda self: float(self._of[core.OF_TIME]))
+    closest = property(lambda self: self._of[core.OF_CLOSE2:core.OF_CLOSE3 + 1])
+    event_kind = property(lambda self: self._ev_info[:, 0])
+    event_ball = property(lambda self: self._ev_info[:, 1])
+    event_other = property(lambda self: self._ev_info[:, 2])
 
     def events(self) -> list[tuple[float, str, int, int]]:
         """The ordered event log as (time, kind, ball, other) tuples."""
@@ -61,6 +92,10 @@ class ShotResult(NamedTuple):
             (float(t), EVENT_KINDS[k], int(i), int(j))
             for t, k, i, j in zip(self.event_time, self.event_kind, self.event_ball, self.event_other)
         ]
+
+    def __repr__(self) -> str:
+        outcome = "score" if self.score else "foul" if self.foul else "miss"
+        return f"ShotResult({outcome}, first_contact={self.first_contact}, n_events={self.n_events}, duration={self.duration:.3f} s)"
 
 
 class BatchResult(NamedTuple):
@@ -215,31 +250,11 @@ def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> 
         raise ValueError(f"positions must have shape (4, 2) (white, yellow, red1, red2 × x, y); got {pos.shape}")
     if act.shape != (4,):
         raise ValueError(f"action must have shape (4,) = (theta, p, a, b); got {act.shape}")
-    ok, (st, oi, of, ev_t, ev_i, ev_s) = core.checked_shot(
-        np.ascontiguousarray(pos), np.ascontiguousarray(act), params.array, POSITION_TOL)
+    ok, raw = core.checked_shot(np.ascontiguousarray(pos), np.ascontiguousarray(act), params.array, POSITION_TOL)
     if not ok:
         check_actions(act[None])  # raise with the message
         check_positions(pos[None], params)
-    hits = oi[core.O_HIT1:core.O_HIT3 + 1] != 0
-    score, foul, miss = carom_outcome(hits[0], hits[1], hits[2])
-    return ShotResult(
-        positions=st[:, :2].copy(),
-        score=bool(score),
-        foul=bool(foul),
-        miss=bool(miss),
-        first_contact=int(oi[core.O_FIRST]),
-        hits=hits,
-        closest=of[core.OF_CLOSE2:core.OF_CLOSE3 + 1],
-        cushions=int(oi[core.O_CUSHIONS]),
-        n_events=int(oi[core.O_NEVENTS]),
-        duration=float(of[core.OF_TIME]),
-        truncated=bool(oi[core.O_TRUNC]),
-        event_time=ev_t,
-        event_kind=ev_i[:, 0],
-        event_ball=ev_i[:, 1],
-        event_other=ev_i[:, 2],
-        event_state=ev_s,
-    )
+    return ShotResult(*raw)
 
 
 def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -> BatchResult:
