@@ -1,0 +1,273 @@
+"""Aggregate training runs into the paper's tables: ``python -m billiards.report DIR...``.
+
+Every directory under the given ones that holds a finished run (``config.yaml`` and
+``eval.json`` written by ``train.py``) is read; runs are grouped by the paper table their
+experiment preset names (``table`` in the config), then by the table's variant (algorithm
+for Table 1, training paradigm for Table 2, domain knowledge for Table 4, reward shaping for
+Table 5), and aggregated over seeds:
+
+* mean ± std: the mean over seeds of each run's mean points per inning, and the std over
+  seeds (population std, ddof = 0);
+* max: the best single inning over all seeds' evaluation innings;
+* foul and success percentages: means over seeds.
+
+The paper's figures are printed beside ours for runs whose preset names a table. Runs without
+a table are grouped by the settings that differ between them. The markdown goes to stdout and
+to ``--out`` (default: ``DIR/report.md`` for one DIR, else ``./report.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+# The paper's figures (shared/paper.md). Keys are our variant names.
+PAPER = {
+    "table1": {
+        "title": "Table 1: algorithm comparison on the plain sparse task (paper: 5 seeds, 400k steps)",
+        "rows": {
+            "td3": {"mean": 0.460, "std": 0.114, "max": 4, "foul_inn": 84},
+            "sac": {"mean": 0.418, "std": 0.038, "max": 4, "foul_inn": 90},
+            "ppo": {"mean": 0.170, "std": 0.040, "max": 3, "foul_inn": 70},
+        },
+        "labels": {"td3": "TD3", "sac": "SAC", "ppo": "PPO"},
+        "columns": ["mean", "max", "foul_inn"],
+    },
+    "table2": {
+        "title": "Table 2: training paradigms, SAC, unified eval (paper: 3 seeds, 400k steps)",
+        "rows": {
+            "canonical_reset": {"mean": 0.073, "std": 0.045, "canonical": 1.00, "foul_sh": 9.3, "succ_sh": 0.7},
+            "canonical_continue": {"mean": 0.353, "std": 0.101, "canonical": 1.33, "foul_sh": 20.4, "succ_sh": 3.5},
+            "random_reset": {"mean": 0.407, "std": 0.046, "canonical": 0.67, "foul_sh": 18.6, "succ_sh": 4.1},
+            "random_continue": {"mean": 0.453, "std": 0.012, "canonical": 0.67, "foul_sh": 20.3, "succ_sh": 4.5},
+        },
+        "labels": {
+            "canonical_reset": "canonical, reset", "canonical_continue": "canonical, continue",
+            "random_reset": "random, reset", "random_continue": "random, continue",
+        },
+        "columns": ["mean", "canonical", "foul_sh", "succ_sh"],
+    },
+    "table4": {
+        "title": "Table 4: domain knowledge on the SAC baseline (paper: 3 seeds, 1M steps)",
+        "rows": {
+            "plain": {"mean": 0.487, "std": 0.097, "max": 4, "foul_sh": 20.5, "succ_sh": 4.9},
+            "aim": {"mean": 2.570, "std": 0.128, "max": 6, "foul_sh": 15.4, "succ_sh": 25.7},
+            "aim_features": {"mean": 6.460, "std": 0.123, "max": 10, "foul_sh": 11.1, "succ_sh": 64.6},
+        },
+        "labels": {"plain": "plain SAC", "aim": "+ aim constraint", "aim_features": "+ extra feat."},
+        "columns": ["mean", "max", "foul_sh", "succ_sh"],
+    },
+    "table5": {
+        "title": "Table 5: reward shaping on the constraint+extra base (paper: 3 seeds, 1M steps)",
+        "rows": {
+            "none": {"mean": 6.460, "std": 0.123, "foul_sh": 11.1, "succ_sh": 64.6},
+            "foul_penalty": {"mean": 5.553, "std": 0.162, "foul_sh": 6.0, "succ_sh": 55.5},
+            "gentle": {"mean": 5.213, "std": 0.442, "foul_sh": 3.3, "succ_sh": 52.1},
+            "near_miss": {"mean": 5.583, "std": 0.370, "foul_sh": 5.0, "succ_sh": 55.8},
+            "both": {"mean": 5.520, "std": 0.365, "foul_sh": 5.0, "succ_sh": 55.2},
+        },
+        "labels": {
+            "none": "constraint+extra", "foul_penalty": "+ foul penalty (base)", "gentle": "+ foul penalty + gentle",
+            "near_miss": "+ foul penalty + near-miss", "both": "+ foul penalty + both",
+        },
+        "columns": ["mean", "foul_sh", "succ_sh"],
+    },
+}
+
+COLUMN_TITLES = {
+    "mean": "mean ± std",
+    "max": "max",
+    "foul_inn": "foul/inn (%)",
+    "foul_sh": "foul/sh (%)",
+    "succ_sh": "succ/sh (%)",
+    "canonical": "canonical mean",
+}
+GENERIC_COLUMNS = ["mean", "max", "foul_inn", "foul_sh", "succ_sh"]
+
+
+@dataclass
+class Run:
+    path: Path
+    config: dict
+    eval: dict  # primary (first eval start)
+    extra_evals: dict  # start -> eval dict (e.g. canonical)
+    summary: dict = field(default_factory=dict)
+
+    @property
+    def table(self) -> str | None:
+        return self.config.get("table")
+
+    def variant(self) -> str:
+        c, env = self.config, self.config.get("env", {})
+        table = self.table
+        if table == "table1":
+            return c["algo"]["name"]
+        if table == "table2":
+            return env["paradigm"]
+        if table == "table4":
+            return {(False, False): "plain", (True, False): "aim", (True, True): "aim_features"}.get(
+                (bool(env.get("constrain_aim")), bool(env.get("extra_features"))), "features_only")
+        if table == "table5":
+            return c["shaping"]["name"]
+        return generic_label(c)
+
+
+def generic_label(c: dict) -> str:
+    env = c.get("env", {})
+    knowledge = "+".join(k for k, on in (("aim", env.get("constrain_aim")), ("features", env.get("extra_features"))) if on) or "plain"
+    return f"{c['algo']['name']}, {env.get('paradigm')}, {knowledge}, shaping={c.get('shaping', {}).get('name', 'none')}"
+
+
+def find_runs(dirs: list[Path]) -> tuple[list[Run], list[Path]]:
+    """Finished runs under dirs, and run dirs without an eval.json (unfinished)."""
+    runs, unfinished = [], []
+    seen = set()
+    for d in dirs:
+        if not d.exists():
+            raise SystemExit(f"Error: {d} does not exist")
+        for cfg_path in sorted(d.rglob("config.yaml")):
+            run_dir = cfg_path.parent
+            if run_dir.name.startswith(".hydra") or run_dir in seen:
+                continue
+            seen.add(run_dir)
+            eval_path = run_dir / "eval.json"
+            if not eval_path.is_file():
+                if (run_dir / "metrics.csv").exists() or (run_dir / "checkpoint.pt").exists():
+                    unfinished.append(run_dir)
+                continue
+            config = yaml.safe_load(cfg_path.read_text())
+            extra = {}
+            for p in run_dir.glob("eval_*.json"):
+                extra[p.stem[len("eval_"):]] = json.loads(p.read_text())
+            summary_path = run_dir / "summary.json"
+            summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+            runs.append(Run(run_dir, config, json.loads(eval_path.read_text()), extra, summary))
+    return runs, unfinished
+
+
+def aggregate(runs: list[Run]) -> dict:
+    means = np.array([r.eval["mean"] for r in runs])
+    canonical = [r.extra_evals["canonical"]["mean"] for r in runs if "canonical" in r.extra_evals]
+    if not canonical:
+        canonical = [r.eval["mean"] for r in runs if r.eval.get("start") == "canonical"]
+    seconds = [r.summary["train_seconds"] for r in runs if "train_seconds" in r.summary]
+    cpu = [r.summary["cpu_seconds"] for r in runs if "cpu_seconds" in r.summary]
+    frames = sorted({int(r.summary.get("frames", r.config["budget"]["total_steps"])) for r in runs})
+    return {
+        "n": len(runs),
+        "mean": float(means.mean()),
+        "std": float(means.std()),
+        "max": int(max(r.eval["best"] for r in runs)),
+        "foul_inn": float(np.mean([r.eval["foul_innings_pct"] for r in runs])),
+        "foul_sh": float(np.mean([r.eval["foul_per_shot_pct"] for r in runs])),
+        "succ_sh": float(np.mean([r.eval["success_per_shot_pct"] for r in runs])),
+        "canonical": float(np.mean(canonical)) if canonical else None,
+        "seeds": sorted(r.config.get("seed") for r in runs),
+        "frames": frames,
+        "minutes": float(np.mean(seconds)) / 60 if seconds else None,
+        "cpu_minutes": float(np.mean(cpu)) / 60 if cpu else None,
+    }
+
+
+def _fmt(col: str, row: dict | None) -> str:
+    if row is None or row.get(col) is None:
+        return "–"
+    if col == "mean":
+        return f"{row['mean']:.3f} ± {row['std']:.3f}" if row.get("std") is not None else f"{row['mean']:.3f}"
+    if col == "max":
+        return str(int(row["max"]))
+    if col == "canonical":
+        return f"{row['canonical']:.2f}"
+    return f"{row[col]:.1f}"
+
+
+def _steps(frames: list[int]) -> str:
+    def k(n: int) -> str:
+        return f"{n / 1e6:g}M" if n >= 1_000_000 else f"{n / 1e3:g}k" if n >= 1000 else str(n)
+
+    return "/".join(k(f) for f in frames)
+
+
+def render_table(table: str | None, groups: dict[str, list[Run]]) -> str:
+    spec = PAPER.get(table or "")
+    lines = []
+    if spec:
+        columns, order = spec["columns"], list(spec["rows"])
+        order += sorted(v for v in groups if v not in order)
+        lines.append(f"### {spec['title']}")
+        lines.append("")
+        header = ["variant", "seeds", "steps", "wall min", "CPU min"]
+        for c in columns:
+            header += [f"{COLUMN_TITLES[c]} (ours)", "(paper)"]
+    else:
+        columns, order = GENERIC_COLUMNS, sorted(groups)
+        lines.append(f"### {table or 'Runs without a paper table'}")
+        lines.append("")
+        header = ["variant", "seeds", "steps", "wall min", "CPU min"] + [COLUMN_TITLES[c] for c in columns]
+    lines.append("| " + " | ".join(header) + " |")
+    lines.append("|" + "---|" * len(header))
+    for variant in order:
+        if variant not in groups:
+            continue
+        agg = aggregate(groups[variant])
+        label = spec["labels"].get(variant, variant) if spec else variant
+        minutes = [f"{agg[k]:.1f}" if agg[k] is not None else "–" for k in ("minutes", "cpu_minutes")]
+        cells = [label, str(agg["n"]), _steps(agg["frames"]), *minutes]
+        for c in columns:
+            cells.append(_fmt(c, agg))
+            if spec:
+                cells.append(_fmt(c, spec["rows"].get(variant)))
+        lines.append("| " + " | ".join(cells) + " |")
+    missing = [spec["labels"][v] for v in spec["rows"] if v not in groups] if spec else []
+    if missing:
+        lines.append("")
+        lines.append(f"No runs yet for: {', '.join(missing)}.")
+    lines.append("")
+    return "\n".join(lines)
+
+
+def report(dirs: list[Path]) -> str:
+    runs, unfinished = find_runs(dirs)
+    if not runs:
+        raise SystemExit(f"Error: no finished runs (config.yaml + eval.json) under {', '.join(map(str, dirs))}")
+    by_table: dict[str | None, dict[str, list[Run]]] = defaultdict(lambda: defaultdict(list))
+    for run in runs:
+        by_table[run.table][run.variant()].append(run)
+    parts = [
+        "## Training results",
+        "",
+        "mean ± std: points per inning, mean and population std over seeds of each seed's "
+        "evaluation mean (unified protocol: continue-on-miss, max_shots 10, deterministic policy); "
+        "max: best inning over all seeds; foul/inn: innings with a foul; foul/sh, succ/sh: per shot. "
+        "wall min, CPU min: training wall-clock and process CPU minutes per seed (evaluations included).",
+        "",
+    ]
+    for table in sorted(by_table, key=lambda t: (t is None, t or "")):
+        parts.append(render_table(table, by_table[table]))
+    if unfinished:
+        parts.append(f"Unfinished runs (no eval.json), skipped: {', '.join(str(p) for p in unfinished)}")
+        parts.append("")
+    return "\n".join(parts)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m billiards.report", description=__doc__.split("\n\n")[0])
+    parser.add_argument("dirs", nargs="+", type=Path, help="run or sweep directories (searched recursively)")
+    parser.add_argument("--out", type=Path, default=None, help="markdown file (default DIR/report.md or ./report.md)")
+    args = parser.parse_args(argv)
+    text = report(args.dirs)
+    out = args.out or (args.dirs[0] / "report.md" if len(args.dirs) == 1 else Path("report.md"))
+    out.write_text(text)
+    sys.stdout.write(text)
+    print(f"\n(written to {out})", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,326 @@
+"""Actors, critics, TorchRL losses and optimizers for SAC, TD3 and PPO.
+
+Action convention. Every policy here first produces ``"action_norm"`` in [-1, 1]^4 and a
+fixed affine layer (:class:`ScaleAction`) maps it onto the env's bounds as ``"action"``
+(``[0, 2pi] x [0, 1] x [-1, 1]^2``, or ``[-1, 1]`` for the aim offset under the aim
+constraint). Losses, critics and the replay buffer work on ``"action_norm"``: the critics see
+well-scaled inputs, and TD3's exploration and target-smoothing noise (absolute numbers in
+TorchRL) mean a fraction of each coordinate's half-range, as in stable-baselines3. The full
+policy (``agent.policy``) writes ``"action"``, so it plugs straight into the env, the
+collector and :func:`billiards.evaluation.evaluate`.
+
+Specs. Built from ``env.action_spec_unbatched`` (shape (4,)), never the batched spec: a
+batched (B, 4) spec silently gives SAC a target entropy of -4B instead of -4.
+"""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictModuleBase, TensorDictSequential
+from torch import nn
+from torchrl.data import Bounded
+from torchrl.modules import MLP, AdditiveGaussianModule, ProbabilisticActor, TanhModule, TanhNormal, ValueOperator
+from torchrl.objectives import ClipPPOLoss, SACLoss, SoftUpdate, TD3Loss, ValueEstimators
+
+ACTION_NORM = "action_norm"
+
+
+class ScaleAction(TensorDictModuleBase):
+    """``action = mid + half * action_norm`` (float32), mapping [-1, 1] onto the env's bounds."""
+
+    def __init__(self, low: torch.Tensor, high: torch.Tensor):
+        super().__init__()
+        self.in_keys, self.out_keys = [ACTION_NORM], ["action"]
+        self.register_buffer("mid", ((high + low) / 2).float())
+        self.register_buffer("half_range", ((high - low) / 2).float())
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict.set("action", self.mid + self.half_range * tensordict.get(ACTION_NORM))
+        return tensordict
+
+
+class UniformAction(TensorDictModuleBase):
+    """``action_norm ~ U[-1, 1]^dim`` (torch's global RNG): the off-policy warm-up policy."""
+
+    def __init__(self, dim: int):
+        super().__init__()
+        self.dim = dim
+        self.in_keys, self.out_keys = ["observation"], [ACTION_NORM]
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        shape = (*tensordict.batch_size, self.dim)
+        tensordict.set(ACTION_NORM, torch.rand(shape) * 2 - 1)
+        return tensordict
+
+
+class Switch(TensorDictModuleBase):
+    """Runs ``warmup`` while ``self.warm`` is True, then ``main`` (same output keys)."""
+
+    def __init__(self, warmup: nn.Module, main: nn.Module, warm: bool):
+        super().__init__()
+        self.warmup, self.main, self.warm = warmup, main, warm
+        self.in_keys, self.out_keys = list(main.in_keys), list(main.out_keys)
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        return (self.warmup if self.warm else self.main)(tensordict)
+
+
+def normalized_spec(action_spec) -> Bounded:
+    """[-1, 1] box of the unbatched action spec's shape; rejects batched specs."""
+    if action_spec.shape != torch.Size([4]):
+        raise ValueError(f"expected the unbatched (4,) action spec (env.action_spec_unbatched), got shape {tuple(action_spec.shape)}")
+    return Bounded(-torch.ones(action_spec.shape), torch.ones(action_spec.shape), shape=action_spec.shape, dtype=torch.float32)
+
+
+def mlp(in_features: int, out_features: int, hidden: list[int]) -> MLP:
+    return MLP(in_features=in_features, out_features=out_features, num_cells=list(hidden), activation_class=nn.ReLU)
+
+
+def gaussian_actor(obs_dim: int, norm_spec: Bounded, hidden: list[int], return_log_prob: bool) -> ProbabilisticActor:
+    """Tanh-squashed Gaussian policy on [-1, 1]^4 writing ``"action_norm"``."""
+    act_dim = norm_spec.shape[-1]
+    net = nn.Sequential(mlp(obs_dim, 2 * act_dim, hidden), NormalParamExtractor(scale_mapping="biased_softplus_1.0", scale_lb=1e-4))
+    return ProbabilisticActor(
+        TensorDictModule(net, in_keys=["observation"], out_keys=["loc", "scale"]),
+        in_keys=["loc", "scale"],
+        out_keys=[ACTION_NORM],
+        spec=norm_spec,
+        distribution_class=TanhNormal,
+        distribution_kwargs={"low": norm_spec.space.low, "high": norm_spec.space.high},
+        return_log_prob=return_log_prob,
+    )
+
+
+def q_critic(obs_dim: int, act_dim: int, hidden: list[int]) -> ValueOperator:
+    return ValueOperator(mlp(obs_dim + act_dim, 1, hidden), in_keys=["observation", ACTION_NORM], out_keys=["state_action_value"])
+
+
+def _params(module_params) -> list[torch.Tensor]:
+    return list(module_params.flatten_keys().values())
+
+
+class OffPolicyAgent(nn.Module):
+    """Common part of SAC and TD3: a loss module (actor, critics, targets), one optimizer and
+    a soft target update. ``policy`` (deterministic at eval) and ``explore`` (collection,
+    warm-up switch) both write ``"action"``."""
+
+    metric_names: tuple[str, ...] = ()
+    replay_keys = ("observation", ACTION_NORM, ("next", "observation"), ("next", "reward"), ("next", "done"), ("next", "terminated"))
+
+    def state_dict_extra(self) -> dict:
+        return {"optimizer": self.optimizer.state_dict(), "n_updates": self.n_updates}
+
+    def load_state_dict_extra(self, state: dict) -> None:
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.n_updates = int(state["n_updates"])
+
+    def set_warmup(self, warm: bool) -> None:
+        self.explore[0].warm = warm
+
+    def compile(self, **kwargs) -> None:
+        """torch.compile the gradient step (the counter and the branching stay eager)."""
+        self._step = torch.compile(self._step, **kwargs)
+
+
+class SACAgent(OffPolicyAgent):
+    metric_names = ("loss_actor", "loss_qvalue", "loss_alpha", "alpha", "entropy")
+
+    def __init__(self, cfg, obs_dim: int, action_spec):
+        super().__init__()
+        norm = normalized_spec(action_spec)
+        act_dim = norm.shape[-1]
+        self.actor = gaussian_actor(obs_dim, norm, cfg.hidden_sizes, return_log_prob=False)
+        self.critic = q_critic(obs_dim, act_dim, cfg.hidden_sizes)
+        self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
+        self.policy = TensorDictSequential(self.actor, self.scale)
+        self.explore = TensorDictSequential(Switch(UniformAction(act_dim), self.actor, warm=True), self.scale)
+        self.loss = SACLoss(
+            self.actor,
+            self.critic,
+            num_qvalue_nets=2,
+            loss_function="l2",
+            alpha_init=cfg.alpha_init,
+            action_spec=norm,
+            target_entropy="auto" if cfg.target_entropy is None else cfg.target_entropy,
+        )
+        self.loss.set_keys(action=ACTION_NORM)
+        self.loss.make_value_estimator(ValueEstimators.TD0, gamma=cfg.gamma)
+        _ = self.loss.target_entropy  # a lazily created buffer: create it now so state_dicts always match
+        self.target_update = SoftUpdate(self.loss, tau=cfg.tau)
+        self.optimizer = torch.optim.Adam(
+            [
+                {"params": _params(self.loss.actor_network_params)},
+                {"params": _params(self.loss.qvalue_network_params)},
+                {"params": [self.loss.log_alpha]},
+            ],
+            lr=cfg.lr,
+        )
+        self.n_updates = 0
+
+    def _step(self, batch: TensorDictBase) -> TensorDictBase:
+        out = self.loss(batch)
+        (out["loss_actor"] + out["loss_qvalue"] + out["loss_alpha"]).backward()
+        self.optimizer.step()
+        self.optimizer.zero_grad(set_to_none=True)
+        self.target_update.step()
+        return out.detach()
+
+    def update(self, batch: TensorDictBase) -> TensorDictBase:
+        out = self._step(batch)
+        self.n_updates += 1
+        return out
+
+
+class TD3Agent(OffPolicyAgent):
+    metric_names = ("loss_actor", "loss_qvalue")
+
+    def __init__(self, cfg, obs_dim: int, action_spec):
+        super().__init__()
+        norm = normalized_spec(action_spec)
+        act_dim = norm.shape[-1]
+        self.actor = TensorDictSequential(
+            TensorDictModule(mlp(obs_dim, act_dim, cfg.hidden_sizes), in_keys=["observation"], out_keys=["param"]),
+            TanhModule(in_keys=["param"], out_keys=[ACTION_NORM], spec=norm),
+        )
+        self.critic = q_critic(obs_dim, act_dim, cfg.hidden_sizes)
+        self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
+        self.policy = TensorDictSequential(self.actor, self.scale)
+        noisy = TensorDictSequential(
+            self.actor,
+            AdditiveGaussianModule(spec=norm, sigma_init=1.0, sigma_end=1.0, std=cfg.exploration_noise, action_key=ACTION_NORM),
+        )
+        self.explore = TensorDictSequential(Switch(UniformAction(act_dim), noisy, warm=True), self.scale)
+        self.loss = TD3Loss(
+            self.actor,
+            self.critic,
+            action_spec=norm,
+            num_qvalue_nets=2,
+            policy_noise=cfg.policy_noise,
+            noise_clip=cfg.noise_clip,
+            loss_function="l2",
+        )
+        self.loss.set_keys(action=ACTION_NORM)
+        self.loss.make_value_estimator(ValueEstimators.TD0, gamma=cfg.gamma)
+        self.target_update = SoftUpdate(self.loss, tau=cfg.tau)
+        self.q_optimizer = torch.optim.Adam(_params(self.loss.qvalue_network_params), lr=cfg.lr)
+        self.actor_optimizer = torch.optim.Adam(_params(self.loss.actor_network_params), lr=cfg.lr)
+        self.policy_delay = cfg.policy_delay
+        self.n_updates = 0
+        self._last_actor_loss = torch.zeros(())
+
+    def _critic_step(self, batch: TensorDictBase) -> torch.Tensor:
+        q_loss, _ = self.loss.value_loss(batch)
+        q_loss.backward()
+        self.q_optimizer.step()
+        self.q_optimizer.zero_grad(set_to_none=True)
+        return q_loss.detach()
+
+    def _actor_step(self, batch: TensorDictBase) -> torch.Tensor:
+        actor_loss, _ = self.loss.actor_loss(batch)
+        actor_loss.backward()
+        self.actor_optimizer.step()
+        self.actor_optimizer.zero_grad(set_to_none=True)
+        self.target_update.step()
+        return actor_loss.detach()
+
+    def update(self, batch: TensorDictBase) -> dict[str, torch.Tensor]:
+        q_loss = self._critic_step(batch)
+        self.n_updates += 1
+        if self.n_updates % self.policy_delay == 0:
+            self._last_actor_loss = self._actor_step(batch)
+        return {"loss_qvalue": q_loss, "loss_actor": self._last_actor_loss}
+
+    def compile(self, **kwargs) -> None:
+        self._critic_step = torch.compile(self._critic_step, **kwargs)
+        self._actor_step = torch.compile(self._actor_step, **kwargs)
+
+    def state_dict_extra(self) -> dict:
+        return {
+            "q_optimizer": self.q_optimizer.state_dict(),
+            "actor_optimizer": self.actor_optimizer.state_dict(),
+            "n_updates": self.n_updates,
+        }
+
+    def load_state_dict_extra(self, state: dict) -> None:
+        self.q_optimizer.load_state_dict(state["q_optimizer"])
+        self.actor_optimizer.load_state_dict(state["actor_optimizer"])
+        self.n_updates = int(state["n_updates"])
+
+
+class PPOAgent(nn.Module):
+    """Clipped PPO with GAE on a tanh-Gaussian policy (``"action_norm"`` log-probabilities)."""
+
+    metric_names = ("loss_objective", "loss_critic", "loss_entropy", "entropy", "kl_approx", "clip_fraction")
+
+    def __init__(self, cfg, obs_dim: int, action_spec):
+        super().__init__()
+        norm = normalized_spec(action_spec)
+        self.actor = gaussian_actor(obs_dim, norm, cfg.hidden_sizes, return_log_prob=True)
+        self.critic = ValueOperator(mlp(obs_dim, 1, cfg.hidden_sizes), in_keys=["observation"])
+        self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
+        self.policy = TensorDictSequential(self.actor, self.scale)
+        self.explore = self.policy
+        self.loss = ClipPPOLoss(
+            self.actor,
+            self.critic,
+            clip_epsilon=cfg.clip_epsilon,
+            entropy_bonus=cfg.entropy_coeff > 0,
+            entropy_coeff=cfg.entropy_coeff if cfg.entropy_coeff > 0 else None,
+            critic_coeff=cfg.critic_coeff,
+            loss_critic_type="l2",
+            normalize_advantage=cfg.normalize_advantage,
+        )
+        self.loss.set_keys(action=ACTION_NORM, sample_log_prob=self.actor.log_prob_keys[0])
+        self.loss.make_value_estimator(ValueEstimators.GAE, gamma=cfg.gamma, lmbda=cfg.gae_lambda, average_gae=False)
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=cfg.lr)
+        self.max_grad_norm = cfg.max_grad_norm
+        self.n_updates = 0
+
+    @torch.no_grad()
+    def advantage(self, data: TensorDictBase) -> TensorDictBase:
+        return self.loss.value_estimator(data)
+
+    def _step(self, batch: TensorDictBase) -> TensorDictBase:
+        out = self.loss(batch)
+        loss = out["loss_objective"] + out["loss_critic"]
+        if "loss_entropy" in out.keys():
+            loss = loss + out["loss_entropy"]
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.loss.parameters(), self.max_grad_norm)
+        self.optimizer.step()
+        self.optimizer.zero_grad(set_to_none=True)
+        return out.detach()
+
+    def update(self, batch: TensorDictBase) -> TensorDictBase:
+        out = self._step(batch)
+        self.n_updates += 1
+        return out
+
+    def compile(self, **kwargs) -> None:
+        self._step = torch.compile(self._step, **kwargs)
+
+    def set_warmup(self, warm: bool) -> None:  # on-policy: no warm-up phase
+        pass
+
+    def state_dict_extra(self) -> dict:
+        return {"optimizer": self.optimizer.state_dict(), "n_updates": self.n_updates}
+
+    def load_state_dict_extra(self, state: dict) -> None:
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.n_updates = int(state["n_updates"])
+
+
+AGENTS = {"sac": SACAgent, "td3": TD3Agent, "ppo": PPOAgent}
+
+
+def make_agent(algo_cfg, obs_dim: int, action_spec) -> nn.Module:
+    """The agent of ``algo_cfg.name`` for an env with ``obs_dim`` observations and the
+    unbatched action spec ``action_spec`` (``env.action_spec_unbatched``)."""
+    return AGENTS[algo_cfg.name](algo_cfg, obs_dim, action_spec)
+
+
+def metrics_of(out, names) -> dict[str, float]:
+    """Floats of the named loss outputs (a TensorDict or a dict of tensors)."""
+    keys = out.keys()
+    return {k: float(out[k]) for k in names if k in keys}

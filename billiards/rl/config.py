@@ -1,0 +1,381 @@
+"""The training configuration schema: dataclasses registered in Hydra's ConfigStore.
+
+``conf/config.yaml`` starts its defaults list with ``schema`` (the :class:`Config` below) and
+every group option (``conf/algo/sac.yaml`` ...) starts with its own ``*_schema`` entry, so
+Hydra merges every YAML file and every command-line override into these typed, closed
+(struct) nodes:
+
+* an unknown key (``algo.lrr=1``, ``foo=1``) or a key of another algorithm
+  (``algo=sac algo.clip_epsilon=0.1``) is rejected while composing;
+* a wrongly typed value (``budget.total_steps=abc``) or a value outside an enum
+  (``env.paradigm=sideways``, ``logger.mode=maybe``) is rejected while composing;
+* an unknown group option (``algo=dqn``) is rejected by Hydra with the list of options;
+* everything else a type cannot express (negative budgets, ``frames_per_batch`` not a
+  multiple of ``num_envs`` ...) is checked by :func:`validate`, which the Hydra callback
+  :class:`ValidateConfig` runs *before* Hydra creates a run or sweep directory, for every job
+  of a multirun. A bad command line therefore fails in about a second and writes nothing.
+
+This module imports neither torch nor the simulator, so the checks stay fast.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, List, Optional
+
+from hydra.core.config_store import ConfigStore
+from hydra.experimental.callback import Callback
+from omegaconf import MISSING, DictConfig, OmegaConf
+
+CHECKPOINT_FILE = "checkpoint.pt"
+CONFIG_FILE = "config.yaml"  # the resolved training config, written into the run dir at start
+EVAL_FILE = "eval.json"
+EVAL_HISTORY_FILE = "eval_history.jsonl"
+METRICS_FILE = "metrics.csv"
+
+
+class Paradigm(str, enum.Enum):
+    """The paper's four training paradigms: starting rack x miss handling (Table 2)."""
+
+    canonical_reset = "canonical_reset"
+    canonical_continue = "canonical_continue"
+    random_reset = "random_reset"
+    random_continue = "random_continue"
+
+
+class Start(str, enum.Enum):
+    random = "random"
+    canonical = "canonical"
+
+
+class LoggerBackend(str, enum.Enum):
+    wandb = "wandb"
+    csv = "csv"
+    none = "none"
+
+
+class WandbMode(str, enum.Enum):
+    offline = "offline"
+    online = "online"
+    disabled = "disabled"
+
+
+# ----------------------------------------------------------------------------- algorithms
+
+
+@dataclass
+class OffPolicyConfig:
+    """Shared by SAC and TD3. ``utd`` is the update-to-data ratio: gradient updates per
+    collected env frame (one frame = one shot of one of the ``env.num_envs`` innings)."""
+
+    name: str = MISSING
+    hidden_sizes: List[int] = field(default_factory=lambda: [256, 256])
+    batch_size: int = 256
+    utd: float = 0.125
+    lr: float = 3e-4
+    gamma: float = 0.99
+    tau: float = 0.005  # soft target update rate
+    buffer_size: int = 1_000_000
+    frames_per_batch: int = 0  # env frames per collector iteration; 0 = env.num_envs (one step of every inning)
+
+
+@dataclass
+class SACConfig(OffPolicyConfig):
+    name: str = "sac"
+    alpha_init: float = 1.0
+    target_entropy: Optional[float] = None  # None = "auto" = -dim(action)
+
+
+@dataclass
+class TD3Config(OffPolicyConfig):
+    name: str = "td3"
+    exploration_noise: float = 0.1  # std of the Gaussian added to the action while collecting (fraction of the half-range)
+    policy_noise: float = 0.2  # target policy smoothing noise
+    noise_clip: float = 0.5
+    policy_delay: int = 2  # one actor and target update per policy_delay critic updates
+
+
+@dataclass
+class PPOConfig:
+    name: str = "ppo"
+    hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
+    lr: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_epsilon: float = 0.2
+    frames_per_batch: int = 2048  # on-policy rollout length (all envs together)
+    epochs: int = 10
+    minibatch_size: int = 64
+    entropy_coeff: float = 0.0
+    critic_coeff: float = 0.5
+    max_grad_norm: float = 0.5
+    normalize_advantage: bool = True
+
+
+# ----------------------------------------------------------------------------- the rest
+
+
+@dataclass
+class EnvConfig:
+    """The training environment (:func:`billiards.envs.make_env`)."""
+
+    paradigm: Paradigm = Paradigm.random_continue
+    constrain_aim: bool = False  # AimConstraint: action[0] is an offset inside the first-contact cone
+    extra_features: bool = False  # CaromFeatures: observation 28 -> 32
+    max_shots: int = 10  # shots per training inning
+    num_envs: int = 32  # B innings stepped together by one batched env
+
+
+@dataclass
+class ShapingConfig:
+    """Reward shaping added to the carom score while training (evaluation never shapes)."""
+
+    name: str = "none"
+    foul_penalty: float = 0.0  # reward -= foul_penalty * foul
+    gentle: float = 0.0  # reward += gentle * score * (1 - p)
+    near_miss: float = 0.0  # reward += near_miss * exp(-gap / near_miss_sigma) for a one-red miss
+    near_miss_sigma: float = 0.05
+
+
+@dataclass
+class LoggerConfig:
+    backend: LoggerBackend = LoggerBackend.csv
+    csv: bool = True  # metrics.csv in the run dir (always on for the wandb backend)
+    project: str = "billiards"
+    entity: Optional[str] = None
+    group: Optional[str] = None
+    mode: WandbMode = WandbMode.offline  # never asks for a login unless set to online
+
+
+@dataclass
+class BudgetConfig:
+    """How long to train and how often to evaluate, log and checkpoint. All counts are env
+    frames (shots), the paper's "steps"."""
+
+    name: str = MISSING
+    total_steps: int = MISSING
+    init_random_steps: int = 5_000  # uniformly random actions before the policy acts (off-policy only)
+    eval_every: int = 50_000  # periodic evaluation (0 = only the final one)
+    eval_innings: int = 20  # innings of a periodic evaluation
+    final_eval_innings: int = 100  # innings of the final evaluation (the paper's protocol: 100)
+    checkpoint_every: int = 50_000  # 0 = only at the end
+    log_every: int = 5_000
+    kill_after_checkpoint: int = 0  # debug: SIGKILL the run right after writing its n-th checkpoint (0 = never)
+
+
+@dataclass
+class EvalConfig:
+    """The unified evaluation protocol (:func:`billiards.evaluation.evaluate`): continue-on-miss,
+    deterministic policy, innings of ``max_shots`` shots, from every start in ``starts``
+    (the first one is the primary metric)."""
+
+    starts: List[Start] = field(default_factory=lambda: [Start.random])
+    max_shots: int = 10
+    seed: int = 0  # eval racks are the same for every run and every evaluation
+
+
+@dataclass
+class CheckpointConfig:
+    save_buffer: bool = True  # include the replay buffer (what makes a resume match an uninterrupted run most closely)
+
+
+@dataclass
+class Config:
+    algo: Any = MISSING  # SACConfig | TD3Config | PPOConfig, chosen by the algo group
+    env: EnvConfig = field(default_factory=EnvConfig)
+    shaping: ShapingConfig = field(default_factory=ShapingConfig)
+    logger: LoggerConfig = field(default_factory=LoggerConfig)
+    budget: BudgetConfig = MISSING
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    seed: int = 0
+    threads: int = 1  # torch (intra-op) and numba threads of this run; 1 when jobs run in parallel
+    compile: bool = False  # torch.compile the update step (slow to start; see the README)
+    progress: bool = True  # tqdm progress bar on stderr
+    table: Optional[str] = None  # the paper table an experiment preset reproduces (for the report)
+    paper_steps: int = 1_000_000  # the paper's budget for the table (budget=paper trains this long)
+    resume: Optional[str] = None  # a run dir to continue from its last checkpoint
+
+
+def register_configs() -> None:
+    cs = ConfigStore.instance()
+    # Outside the option groups, so `algo=...` lists only sac, td3, ppo.
+    cs.store(name="schema", node=Config)
+    cs.store(group="schema/algo", name="sac", node=SACConfig)
+    cs.store(group="schema/algo", name="td3", node=TD3Config)
+    cs.store(group="schema/algo", name="ppo", node=PPOConfig)
+    cs.store(group="schema", name="budget", node=BudgetConfig)
+
+
+# ----------------------------------------------------------------------------- resolvers
+
+
+def _or(value: Any, default: str) -> str:
+    """``${billiards.or:${resume},outputs/...}``: the value unless it is null or empty."""
+    return str(value) if value else default
+
+
+def _output_subdir(resume: Optional[str]) -> str:
+    """hydra.output_subdir: a resume keeps the original ``.hydra`` and records its own beside it."""
+    return ".hydra_resume" if resume else ".hydra"
+
+
+def register_resolvers() -> None:
+    OmegaConf.register_new_resolver("billiards.or", _or, replace=True)
+    OmegaConf.register_new_resolver("billiards.output_subdir", _output_subdir, replace=True)
+
+
+register_configs()
+register_resolvers()
+
+
+# ----------------------------------------------------------------------------- validation
+
+
+class ConfigError(ValueError):
+    """An invalid training configuration; the message names the key and what is allowed."""
+
+
+def _errors(cfg: DictConfig) -> list[str]:
+    errs: list[str] = []
+
+    def need(ok: bool, msg: str) -> None:
+        if not ok:
+            errs.append(msg)
+
+    def positive(path: str, value, strict: bool = True) -> None:
+        ok = value > 0 if strict else value >= 0
+        need(ok and math.isfinite(value), f"{path} must be {'> 0' if strict else '>= 0'}, got {value!r}")
+
+    b, a, e = cfg.budget, cfg.algo, cfg.env
+    positive("budget.total_steps", b.total_steps)
+    for key in ("init_random_steps", "eval_every", "checkpoint_every", "kill_after_checkpoint"):
+        positive(f"budget.{key}", b[key], strict=False)
+    for key in ("eval_innings", "final_eval_innings", "log_every"):
+        positive(f"budget.{key}", b[key])
+    positive("env.num_envs", e.num_envs)
+    positive("env.max_shots", e.max_shots)
+    positive("eval.max_shots", cfg.eval.max_shots)
+    need(len(cfg.eval.starts) > 0, "eval.starts must list at least one start (random, canonical)")
+    positive("threads", cfg.threads)
+    positive("paper_steps", cfg.paper_steps)
+    for key in ("foul_penalty", "gentle", "near_miss"):
+        positive(f"shaping.{key}", cfg.shaping[key], strict=False)
+    positive("shaping.near_miss_sigma", cfg.shaping.near_miss_sigma)
+
+    need(len(a.hidden_sizes) > 0 and all(h > 0 for h in a.hidden_sizes),
+         f"algo.hidden_sizes must be a non-empty list of positive widths, got {list(a.hidden_sizes)}")
+    positive("algo.lr", a.lr)
+    need(0.0 < a.gamma <= 1.0, f"algo.gamma must lie in (0, 1], got {a.gamma!r}")
+    if a.name in ("sac", "td3"):
+        positive("algo.batch_size", a.batch_size)
+        positive("algo.utd", a.utd)
+        positive("algo.buffer_size", a.buffer_size)
+        need(0.0 < a.tau <= 1.0, f"algo.tau must lie in (0, 1], got {a.tau!r}")
+        positive("algo.frames_per_batch", a.frames_per_batch, strict=False)
+        fpb = a.frames_per_batch or e.num_envs
+        need(e.num_envs <= 0 or fpb % e.num_envs == 0,
+             f"algo.frames_per_batch ({fpb}) must be a multiple of env.num_envs ({e.num_envs})")
+        if a.name == "sac":
+            positive("algo.alpha_init", a.alpha_init)
+        else:
+            positive("algo.exploration_noise", a.exploration_noise, strict=False)
+            positive("algo.policy_noise", a.policy_noise, strict=False)
+            positive("algo.noise_clip", a.noise_clip, strict=False)
+            positive("algo.policy_delay", a.policy_delay)
+    elif a.name == "ppo":
+        positive("algo.frames_per_batch", a.frames_per_batch)
+        need(e.num_envs <= 0 or a.frames_per_batch % e.num_envs == 0,
+             f"algo.frames_per_batch ({a.frames_per_batch}) must be a multiple of env.num_envs ({e.num_envs})")
+        positive("algo.epochs", a.epochs)
+        positive("algo.minibatch_size", a.minibatch_size)
+        need(a.minibatch_size <= a.frames_per_batch,
+             f"algo.minibatch_size ({a.minibatch_size}) must not exceed algo.frames_per_batch ({a.frames_per_batch})")
+        need(0.0 < a.clip_epsilon < 1.0, f"algo.clip_epsilon must lie in (0, 1), got {a.clip_epsilon!r}")
+        need(0.0 <= a.gae_lambda <= 1.0, f"algo.gae_lambda must lie in [0, 1], got {a.gae_lambda!r}")
+        positive("algo.max_grad_norm", a.max_grad_norm)
+    else:
+        errs.append(f"algo.name must be one of sac, td3, ppo, got {a.name!r}")
+    if cfg.resume:
+        run_dir = Path(cfg.resume)
+        if not run_dir.is_dir():
+            errs.append(f"resume={cfg.resume!r}: no such run directory")
+        elif not (run_dir / CHECKPOINT_FILE).is_file():
+            errs.append(
+                f"resume={cfg.resume!r}: the run directory has no {CHECKPOINT_FILE} "
+                f"(a run writes its first checkpoint after budget.checkpoint_every steps); start a new run instead"
+            )
+        elif (run_dir / CHECKPOINT_FILE).stat().st_size == 0:
+            errs.append(f"resume={cfg.resume!r}: {run_dir / CHECKPOINT_FILE} is empty (corrupt); start a new run instead")
+    return errs
+
+
+def validate(cfg: DictConfig) -> None:
+    """Raise :class:`ConfigError` listing every problem of a composed training config."""
+    errs = _errors(cfg)
+    if errs:
+        raise ConfigError("invalid training config:\n  - " + "\n  - ".join(errs))
+
+
+def _job_configs(config: DictConfig) -> list[DictConfig]:
+    """Every job config a multirun of ``config`` would launch (what Hydra's basic sweeper
+    composes, including ``hydra.sweeper.params`` of experiment presets)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    loader = GlobalHydra.instance().config_loader()
+    arguments = [f"{k}={v}" for k, v in (config.hydra.sweeper.get("params") or {}).items()]
+    arguments += list(config.hydra.overrides.task)
+    overrides = OverridesParser.create(config_loader=loader).parse_overrides(arguments)
+    batches = BasicSweeper.split_arguments(overrides, None)
+    return [loader.load_sweep_config(config, list(job)) for batch in batches for job in batch]
+
+
+class ValidateConfig(Callback):
+    """Hydra callback (``hydra.callbacks`` in conf/config.yaml): validates the training config
+    before Hydra creates any directory. For a multirun it composes and validates every job
+    first, so one bad job aborts the whole sweep before anything is written.
+
+    Hydra turns exceptions raised by callbacks into warnings, so a failure exits the process
+    (``SystemExit``, status 1) with the message on stderr.
+    """
+
+    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        try:
+            validate(config)
+        except Exception as err:  # Hydra would only warn and go on
+            raise SystemExit(f"Error: {err}") from None
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        if config.hydra.sweeper._target_ != "hydra._internal.core_plugins.basic_sweeper.BasicSweeper":
+            return  # another sweeper composes its own jobs; each job still validates in the task
+        errs = []
+        try:
+            jobs = _job_configs(config)
+        except Exception as err:  # Hydra would only warn and go on
+            raise SystemExit(f"Error: {err}") from None
+        for job in jobs:
+            try:
+                validate(job)
+            except Exception as err:
+                errs.append(f"job {list(job.hydra.overrides.task)}: {err}")
+        if errs:
+            raise SystemExit("Error: " + "\n".join(errs))
+
+
+def env_paradigm(paradigm: Paradigm | str) -> str:
+    """The env factory's spelling of a paradigm: ``random_continue`` -> ``random-continue``."""
+    value = paradigm.value if isinstance(paradigm, Paradigm) else str(paradigm)
+    return value.replace("_", "-")
+
+
+def wandb_env_defaults() -> None:
+    """wandb must never prompt: silent, no login, offline unless a run asks for online."""
+    os.environ.setdefault("WANDB_SILENT", "true")
+    os.environ.setdefault("WANDB_CONSOLE", "off")
+    os.environ.setdefault("WANDB_DISABLE_GIT", "true")

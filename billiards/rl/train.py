@@ -1,0 +1,468 @@
+"""The training loop behind ``train.py``: SAC / TD3 (off-policy, replay) and PPO (on-policy).
+
+One env frame is one shot of one of the ``env.num_envs`` innings played side by side, the
+paper's "step". Off-policy: a TorchRL :class:`~torchrl.collectors.Collector` steps the
+batched env with the exploration policy (uniform random actions for
+``budget.init_random_steps`` frames), every frame goes into a replay buffer
+(:class:`~torchrl.data.LazyTensorStorage`, uniform sampling), and after the warm-up
+``algo.utd`` gradient updates are made per collected frame. PPO: rollouts of
+``algo.frames_per_batch`` frames, GAE, ``algo.epochs`` passes of minibatches.
+
+Along the way: a metric row every ``budget.log_every`` frames (metrics.csv, wandb), an
+evaluation with the unified protocol every ``budget.eval_every`` frames
+(eval_history.jsonl), a checkpoint every ``budget.checkpoint_every`` frames; at the end the
+final evaluation (eval.json, eval_<start>.json for further starts), summary.json and a last
+checkpoint. ``resume=<run dir>`` rebuilds everything from the checkpoint and goes on.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import random
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tqdm import tqdm
+
+from .config import (
+    CONFIG_FILE,
+    EVAL_FILE,
+    EVAL_HISTORY_FILE,
+    Config,
+    ConfigError,
+    env_paradigm,
+    validate,
+)
+from .checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from .metrics import MetricLogger, atomic_write_text, eval_row
+
+log = logging.getLogger(__name__)
+
+# Keys taken from the command line when resuming (everything else comes from the checkpoint).
+RUNTIME_KEYS = ("threads", "progress", "compile", "budget.kill_after_checkpoint")
+
+
+# ----------------------------------------------------------------------------- setup helpers
+
+
+def set_threads(n: int) -> None:
+    """torch intra-op threads and numba's (the simulator's) threads for this process."""
+    torch.set_num_threads(n)
+    import numba
+
+    numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+def env_kwargs(cfg) -> dict[str, Any]:
+    """make_env keyword arguments of the training env (shaping included)."""
+    return dict(
+        paradigm=env_paradigm(cfg.env.paradigm),
+        max_shots=cfg.env.max_shots,
+        constrain_aim=cfg.env.constrain_aim,
+        extra_features=cfg.env.extra_features,
+        foul_penalty=cfg.shaping.foul_penalty,
+        gentle=cfg.shaping.gentle,
+        near_miss=cfg.shaping.near_miss,
+        near_miss_sigma=cfg.shaping.near_miss_sigma,
+    )
+
+
+def make_train_env(cfg, seed: int):
+    from billiards.envs import make_env
+
+    return make_env(cfg.env.num_envs, seed=seed, **env_kwargs(cfg))
+
+
+def rack_rng(env) -> np.random.Generator:
+    """The numpy Generator the training env draws its racks from."""
+    return env.base_env.rng
+
+
+def evaluate_policy(cfg, policy, n_innings: int, start: str):
+    from billiards.evaluation import evaluate
+
+    return evaluate(
+        policy,
+        n_innings=n_innings,
+        max_shots=cfg.eval.max_shots,
+        start=start,
+        seed=cfg.eval.seed,
+        constrain_aim=cfg.env.constrain_aim,
+        extra_features=cfg.env.extra_features,
+    )
+
+
+def eval_starts(cfg) -> list[str]:
+    """cfg.eval.starts as plain strings (the first is the primary metric)."""
+    return [getattr(s, "value", str(s)) for s in cfg.eval.starts]
+
+
+def _plain(cfg) -> dict:
+    return OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+
+
+def _typed(container: dict) -> DictConfig:
+    """A saved (plain) config merged back into the schema, so enums and types are checked."""
+    schema = OmegaConf.structured(Config)
+    return OmegaConf.merge(schema, container)
+
+
+def resume_config(saved: dict, current: DictConfig) -> DictConfig:
+    """The checkpoint's config, with RUNTIME_KEYS from the command line. Warns about other
+    command-line overrides, which a resume ignores."""
+    cfg = _typed(saved)
+    for key in RUNTIME_KEYS:
+        OmegaConf.update(cfg, key, OmegaConf.select(current, key), merge=False)
+    cfg.resume = current.resume
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        overrides = list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else []
+    except ValueError:
+        overrides = []
+    ignored = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") not in RUNTIME_KEYS + ("resume",)]
+    if ignored:
+        log.warning("resume: the run keeps its checkpointed config; ignoring overrides %s", ignored)
+    return cfg
+
+
+# ----------------------------------------------------------------------------- the trainer
+
+
+class Trainer:
+    """One training run in ``run_dir``; :meth:`run` trains to the budget and returns the final
+    mean points per inning of the primary evaluation start."""
+
+    def __init__(self, cfg: DictConfig, run_dir: Path):
+        self.run_dir = Path(run_dir)
+        ckpt = None
+        if cfg.resume:
+            ckpt = load_checkpoint(cfg.resume)
+            if Path(cfg.resume).resolve() != self.run_dir.resolve():
+                log.info("resume: continuing %s (this invocation's own dir is %s)", cfg.resume, self.run_dir)
+                self.run_dir = Path(cfg.resume)
+            cfg = resume_config(ckpt["config"], cfg)
+        validate(cfg)
+        self.cfg = cfg
+        self.algo = cfg.algo.name
+        self.off_policy = self.algo in ("sac", "td3")
+        set_threads(cfg.threads)
+        seed_everything(cfg.seed)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        if ckpt is None:
+            atomic_write_text(self.run_dir / CONFIG_FILE, OmegaConf.to_yaml(_plain(cfg)))
+
+        from billiards.rl.agents import make_agent
+
+        self.env = make_train_env(cfg, seed=cfg.seed)
+        obs_dim = self.env.observation_spec_unbatched["observation"].shape[-1]
+        self.agent = make_agent(cfg.algo, obs_dim, self.env.action_spec_unbatched)
+        if cfg.compile:
+            self.agent.compile()
+
+        b = cfg.budget
+        self.frames = 0
+        self.owed = 0.0  # fractional gradient updates carried over (off-policy)
+        self.train_seconds = 0.0  # wall-clock and CPU (process) seconds of earlier processes of this run
+        self.cpu_seconds = 0.0
+        self.next_log = b.log_every
+        self.next_eval = b.eval_every or math.inf
+        self.next_ckpt = b.checkpoint_every or math.inf
+        self.n_ckpt = 0
+        self.eval_history: list[dict] = []
+        self.latest_eval: float | None = None
+        self.rb = self._make_buffer() if self.off_policy else None
+        wandb_id = None
+        if ckpt is not None:
+            wandb_id = self._restore(ckpt)
+        self.logger = MetricLogger(cfg, self.run_dir, self.agent.metric_names,
+                                   resume_step=self.frames if ckpt is not None else None, wandb_id=wandb_id)
+        if ckpt is not None:  # the history file reads as one run, like metrics.csv
+            self._write_eval_history()
+        self._window_reset()
+
+    # -------------------------------------------------------------- buffer and state
+
+    def _make_buffer(self):
+        from torchrl.data import LazyTensorStorage, RandomSampler, ReplayBuffer
+
+        capacity = min(self.cfg.algo.buffer_size, self.cfg.budget.total_steps)
+        return ReplayBuffer(storage=LazyTensorStorage(capacity), sampler=RandomSampler(),
+                            batch_size=self.cfg.algo.batch_size)
+
+    def _state(self) -> dict[str, Any]:
+        buffer = None
+        if self.rb is not None and self.cfg.checkpoint.save_buffer and len(self.rb):
+            buffer = {"data": self.rb.storage[: len(self.rb)].clone(), "writer": self.rb.writer.state_dict()}
+        return {
+            "config": _plain(self.cfg),
+            "agent": self.agent.state_dict(),
+            "agent_extra": self.agent.state_dict_extra(),
+            "buffer": buffer,
+            "counters": {
+                "frames": self.frames,
+                "owed": self.owed,
+                "train_seconds": self._times()[0],
+                "cpu_seconds": self._times()[1],
+                "next_log": self.next_log,
+                "next_eval": self.next_eval,
+                "next_ckpt": self.next_ckpt,
+            },
+            "eval_history": self.eval_history,
+            "rng": {
+                "torch": torch.get_rng_state(),
+                "numpy": np.random.get_state(),
+                "python": random.getstate(),
+                "env": rack_rng(self.env).bit_generator.state,
+            },
+            "wandb_id": self.logger.wandb_id,
+        }
+
+    def _restore(self, ckpt: dict[str, Any]) -> str | None:
+        try:
+            self.agent.load_state_dict(ckpt["agent"])
+            self.agent.load_state_dict_extra(ckpt["agent_extra"])
+        except (RuntimeError, KeyError, ValueError) as err:
+            raise CheckpointError(f"cannot resume: the checkpoint's networks do not fit this config ({err})") from None
+        c = ckpt["counters"]
+        self.frames, self.owed = int(c["frames"]), float(c["owed"])
+        self.train_seconds, self.cpu_seconds = float(c["train_seconds"]), float(c["cpu_seconds"])
+        self.next_log, self.next_eval, self.next_ckpt = c["next_log"], c["next_eval"], c["next_ckpt"]
+        self.eval_history = list(ckpt.get("eval_history") or [])
+        if self.eval_history:
+            self.latest_eval = self.eval_history[-1]["eval_mean"]
+        buffer = ckpt.get("buffer")
+        if self.rb is not None and buffer is not None:
+            self.rb.extend(buffer["data"])
+            self.rb.writer.load_state_dict(buffer["writer"])
+        elif self.rb is not None:
+            log.warning("resume: the checkpoint has no replay buffer (checkpoint.save_buffer=false); refilling from scratch")
+        rng = ckpt["rng"]
+        torch.set_rng_state(rng["torch"])
+        np.random.set_state(rng["numpy"])
+        random.setstate(rng["python"])
+        rack_rng(self.env).bit_generator.state = rng["env"]
+        log.info("resumed from %s at %d frames, %d updates", self.run_dir, self.frames, self.agent.n_updates)
+        return ckpt.get("wandb_id")
+
+    def _checkpoint(self) -> None:
+        save_checkpoint(self.run_dir, self._state())
+        self.n_ckpt += 1
+        kill = self.cfg.budget.kill_after_checkpoint
+        if kill and self.n_ckpt >= kill:
+            log.warning("budget.kill_after_checkpoint=%d: killing the run (SIGKILL) after checkpoint %d", kill, self.n_ckpt)
+            self.logger.close()
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    def _write_eval_history(self) -> None:
+        text = "".join(json.dumps(e) + "\n" for e in self.eval_history)
+        atomic_write_text(self.run_dir / EVAL_HISTORY_FILE, text)
+
+    # -------------------------------------------------------------- bookkeeping
+
+    def _times(self) -> tuple[float, float]:
+        """Training wall-clock and CPU seconds so far, over all processes of this run."""
+        return (self.train_seconds + time.perf_counter() - self._t0,
+                self.cpu_seconds + time.process_time() - self._c0)
+
+    def _window_reset(self) -> None:
+        self._w_frames, self._w_updates, self._w_t = 0, self.agent.n_updates, time.perf_counter()
+        self._w_reward = self._w_score = self._w_foul = 0.0
+        self._w_metrics: Any = None
+
+    def _window_add(self, data) -> None:
+        nxt = data.get("next")
+        self._w_frames += data.numel()
+        self._w_reward += float(nxt.get("reward").sum())
+        self._w_score += float(nxt.get("score").sum())
+        self._w_foul += float(nxt.get("foul").sum())
+
+    def _log_row(self) -> dict[str, Any]:
+        dt = max(time.perf_counter() - self._w_t, 1e-9)
+        n = max(self._w_frames, 1)
+        wall, cpu = self._times()
+        row = {
+            "step": self.frames,
+            "updates": self.agent.n_updates,
+            "wall_time": round(wall, 3),
+            "cpu_time": round(cpu, 3),
+            "fps": round(self._w_frames / dt, 1),
+            "ups": round((self.agent.n_updates - self._w_updates) / dt, 2),
+            "train_reward": self._w_reward / n,
+            "train_score_pct": 100.0 * self._w_score / n,
+            "train_foul_pct": 100.0 * self._w_foul / n,
+        }
+        if self._w_metrics is not None:
+            from billiards.rl.agents import metrics_of
+
+            row.update(metrics_of(self._w_metrics, self.agent.metric_names))
+        return row
+
+    def _periodic(self, bar) -> None:
+        b = self.cfg.budget
+        if self.frames >= self.next_log:
+            self.logger.log(self._log_row())
+            self._window_reset()
+            self.next_log = (self.frames // b.log_every + 1) * b.log_every
+        done = self.frames >= b.total_steps  # the final evaluation and checkpoint follow
+        if self.frames >= self.next_eval and not done:
+            result = evaluate_policy(self.cfg, self.agent.policy, b.eval_innings, eval_starts(self.cfg)[0])
+            self._record_eval(result, final=False)
+            self.next_eval = (self.frames // b.eval_every + 1) * b.eval_every
+        if self.frames >= self.next_ckpt and not done:
+            self.next_ckpt = (self.frames // b.checkpoint_every + 1) * b.checkpoint_every
+            self._checkpoint()
+        postfix = {"ups": f"{(self.agent.n_updates - self._w_updates) / max(time.perf_counter() - self._w_t, 1e-9):.0f}"}
+        if self.latest_eval is not None:
+            postfix["eval"] = f"{self.latest_eval:.2f}"
+        bar.set_postfix(postfix, refresh=False)
+
+    def _record_eval(self, result, final: bool) -> None:
+        wall, cpu = self._times()
+        entry = {
+            "step": self.frames,
+            "updates": self.agent.n_updates,
+            "wall_time": round(wall, 3),
+            "cpu_time": round(cpu, 3),
+            "final": final,
+            "start": result.start,
+            "n_innings": result.n_innings,
+            **{k: v for k, v in eval_row(result).items()},
+        }
+        self.eval_history.append(entry)
+        self._write_eval_history()
+        self.latest_eval = result.mean
+        self.logger.log({k: entry[k] for k in ("step", "updates", "wall_time", "cpu_time")} | eval_row(result))
+        log.info("eval @ %d frames: %s", self.frames, result.summary())
+
+    # -------------------------------------------------------------- loops
+
+    def _collector(self, policy, frames_per_batch: int):
+        from torchrl.collectors import Collector
+
+        remaining = self.cfg.budget.total_steps - self.frames
+        total = math.ceil(remaining / frames_per_batch) * frames_per_batch
+        return Collector(self.env, policy, frames_per_batch=frames_per_batch, total_frames=total,
+                         trust_policy=True, auto_register_policy_transforms=False)
+
+    def _off_policy(self, bar) -> None:
+        a, b = self.cfg.algo, self.cfg.budget
+        fpb = a.frames_per_batch or self.cfg.env.num_envs
+        self.agent.set_warmup(self.frames < b.init_random_steps)
+        collector = self._collector(self.agent.explore, fpb)
+        keys = self.agent.replay_keys
+        try:
+            for data in collector:
+                n = data.numel()
+                self.frames += n
+                self.rb.extend(data.reshape(-1).select(*keys))
+                self._window_add(data)
+                if self.frames >= b.init_random_steps:
+                    self.owed += a.utd * n
+                    k = int(self.owed)
+                    self.owed -= k
+                    for _ in range(k):
+                        self._w_metrics = self.agent.update(self.rb.sample())
+                self.agent.set_warmup(self.frames < b.init_random_steps)
+                bar.update(n)
+                self._periodic(bar)
+        finally:
+            collector.shutdown()
+
+    def _ppo(self, bar) -> None:
+        a = self.cfg.algo
+        collector = self._collector(self.agent.explore, a.frames_per_batch)
+        try:
+            for data in collector:
+                n = data.numel()
+                self.frames += n
+                self._window_add(data)
+                for _ in range(a.epochs):
+                    flat = self.agent.advantage(data).reshape(-1)
+                    perm = torch.randperm(n)
+                    for i in range(0, n - a.minibatch_size + 1, a.minibatch_size):
+                        self._w_metrics = self.agent.update(flat[perm[i:i + a.minibatch_size]])
+                bar.update(n)
+                self._periodic(bar)
+        finally:
+            collector.shutdown()
+
+    def run(self) -> float:
+        cfg, b = self.cfg, self.cfg.budget
+        self._t0, self._c0 = time.perf_counter(), time.process_time()
+        interactive = sys.stderr.isatty()
+        with tqdm(total=b.total_steps, initial=self.frames, unit="shot", unit_scale=True, dynamic_ncols=True,
+                  mininterval=1.0 if interactive else 30.0, disable=not cfg.progress, file=sys.stderr,
+                  desc=f"{self.algo} {self.run_dir.name}", smoothing=0.05) as bar:
+            if self.frames < b.total_steps:
+                (self._off_policy if self.off_policy else self._ppo)(bar)
+            results = self._final_eval()
+            save_checkpoint(self.run_dir, self._state())
+        self.logger.close()
+        return results[0].mean
+
+    def _final_eval(self):
+        cfg = self.cfg
+        if self._w_frames:
+            self.logger.log(self._log_row())
+        results = []
+        for i, start in enumerate(eval_starts(cfg)):
+            result = evaluate_policy(cfg, self.agent.policy, cfg.budget.final_eval_innings, start)
+            self._record_eval(result, final=True)
+            results.append(result)
+            name = EVAL_FILE if i == 0 else f"eval_{start}.json"
+            result.to_json(self.run_dir / (name + ".tmp"))
+            os.replace(self.run_dir / (name + ".tmp"), self.run_dir / name)
+        train_seconds, cpu_seconds = self._times()
+        summary = {
+            "algo": self.algo,
+            "table": cfg.table,
+            "seed": cfg.seed,
+            "frames": self.frames,
+            "updates": self.agent.n_updates,
+            "train_seconds": round(train_seconds, 2),
+            "cpu_seconds": round(cpu_seconds, 2),
+            "frames_per_second": round(self.frames / max(train_seconds, 1e-9), 1),
+            "updates_per_second": round(self.agent.n_updates / max(train_seconds, 1e-9), 2),
+            "eval": {r.start: eval_row(r) for r in results},
+        }
+        atomic_write_text(self.run_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+        for r in results:
+            log.info("final eval (%s start): %s", r.start, r.summary())
+        return results
+
+
+def train(cfg: DictConfig, run_dir: str | Path | None = None) -> float:
+    """Train as configured; returns the final mean points per inning (primary eval start).
+
+    ``run_dir`` defaults to Hydra's output dir of the job (or the resumed run's dir).
+    """
+    if run_dir is None:
+        from hydra.core.hydra_config import HydraConfig
+
+        run_dir = HydraConfig.get().runtime.output_dir
+    try:
+        trainer = Trainer(cfg, Path(run_dir))
+    except (CheckpointError, ConfigError) as err:
+        raise SystemExit(f"Error: {err}") from None
+    return trainer.run()
+
+
+__all__ = ["Trainer", "train"]

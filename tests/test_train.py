@@ -1,0 +1,145 @@
+"""train.py through its Hydra entry point, in subprocesses: smoke runs of every algorithm,
+a joblib multirun, kill + resume, and command lines that must fail fast and write nothing.
+
+Every run writes under pytest's tmp_path (hydra.run.dir / hydra.sweep.dir) and runs with
+cwd=tmp_path, so "writes nothing" can be checked on the whole directory.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from billiards.evaluation import EvalResult
+
+REPO = Path(__file__).resolve().parents[1]
+TRAIN = str(REPO / "train.py")
+ENV = {
+    **os.environ,
+    "WANDB_MODE": "offline",
+    "WANDB_SILENT": "true",
+    "OMP_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+    "HYDRA_FULL_ERROR": "0",
+}
+
+
+def train(tmp_path: Path, *overrides: str, timeout: float = 240) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, TRAIN, *overrides, "progress=false"],
+        cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=timeout,
+    )
+
+
+def ok(proc: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{proc.stdout[-3000:]}\nstderr:\n{proc.stderr[-5000:]}"
+    return proc
+
+
+def metric_rows(run_dir: Path) -> list[dict]:
+    with (run_dir / "metrics.csv").open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def check_finished(run_dir: Path, frames: int, innings: int = 10) -> EvalResult:
+    result = EvalResult.from_json(run_dir / "eval.json")
+    assert result.n_innings == innings and result.max_shots == 10 and result.start == "random"
+    assert 0.0 <= result.mean <= 10.0 and len(result.points) == innings
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["frames"] == frames
+    assert (run_dir / "checkpoint.pt").is_file() and (run_dir / "config.yaml").is_file()
+    history = [json.loads(line) for line in (run_dir / "eval_history.jsonl").read_text().splitlines()]
+    assert history[-1]["final"] and history[-1]["eval_mean"] == result.mean
+    steps = [int(r["step"]) for r in metric_rows(run_dir)]
+    assert steps == sorted(steps) and steps[-1] == frames
+    return result
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
+def test_smoke_run_writes_eval_json(tmp_path, algo):
+    run_dir = tmp_path / "run"
+    extra = ["logger=wandb"] if algo == "ppo" else []  # wandb offline: never a login prompt
+    ok(train(tmp_path, f"algo={algo}", "budget=smoke", f"hydra.run.dir={run_dir}", *extra))
+    check_finished(run_dir, frames=2048)
+    if extra:
+        assert list((run_dir / "wandb").glob("offline-run-*")), "no offline wandb run"
+    # the report reads the run (no paper table: grouped by settings)
+    proc = subprocess.run([sys.executable, "-m", "billiards.report", str(run_dir)], cwd=tmp_path, env=ENV,
+                          capture_output=True, text=True, timeout=60)
+    ok(proc)
+    assert f"{algo}, random_continue, plain, shaping=none | 1 |" in proc.stdout
+    assert (run_dir / "report.md").read_text() == proc.stdout
+
+
+def test_joblib_multirun_and_report(tmp_path):
+    sweep = tmp_path / "sweep"
+    ok(train(
+        tmp_path, "-m", "hydra/launcher=local_parallel", "seed=0,1", "env=aim_features", "table=table4",
+        "budget=smoke", "budget.total_steps=1024", "budget.eval_every=0", "budget.checkpoint_every=0",
+        f"hydra.sweep.dir={sweep}",
+    ))
+    runs = sorted(p.parent for p in sweep.glob("*/eval.json"))
+    assert len(runs) == 2
+    for run in runs:
+        check_finished(run, frames=1024)
+    assert {json.loads((r / "summary.json").read_text())["seed"] for r in runs} == {0, 1}
+    proc = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(sweep)], cwd=tmp_path, env=ENV,
+                             capture_output=True, text=True, timeout=60))
+    # Table 4 layout with the paper's figures beside ours
+    row = next(line for line in proc.stdout.splitlines() if line.startswith("| + extra feat."))
+    assert "| 2 |" in row and "6.460 ± 0.123" in row
+    assert "No runs yet for: plain SAC, + aim constraint." in proc.stdout
+
+
+def test_killed_run_resumes_and_finishes(tmp_path):
+    run_dir = tmp_path / "run"
+    proc = train(tmp_path, "budget=smoke", "budget.kill_after_checkpoint=1", f"hydra.run.dir={run_dir}")
+    assert proc.returncode == -9, proc.stderr[-3000:]  # SIGKILL right after the first checkpoint
+    assert (run_dir / "checkpoint.pt").is_file() and not (run_dir / "eval.json").exists()
+    assert not list(run_dir.glob("*.tmp"))
+
+    ok(train(tmp_path, f"resume={run_dir}"))
+    result = check_finished(run_dir, frames=2048)
+    history = [json.loads(line) for line in (run_dir / "eval_history.jsonl").read_text().splitlines()]
+    assert [h["step"] for h in history] == [1024, 2048]  # the pre-kill evaluation survives
+    assert (run_dir / ".hydra" / "overrides.yaml").read_text().count("kill_after_checkpoint") == 1
+    assert (run_dir / ".hydra_resume").is_dir()
+
+    # a corrupt checkpoint is reported as such
+    (run_dir / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    proc = train(tmp_path, f"resume={run_dir}")
+    assert proc.returncode != 0 and "corrupt or truncated" in proc.stderr
+    assert EvalResult.from_json(run_dir / "eval.json") == result  # untouched
+
+
+BAD = [
+    (["algo=dqn"], "Could not find 'algo/dqn'"),
+    (["budget.total_steps=-5"], "budget.total_steps must be > 0, got -5"),
+    (["env.paradigm=sideways"], "Invalid value 'sideways', expected one of [canonical_reset"),
+    (["foo=1"], "Key 'foo' not in 'Config'"),
+    (["algo.lrr=0.1"], "Key 'lrr' not in 'SACConfig'"),
+    (["algo=ppo", "algo.utd=2"], "Key 'utd' not in 'PPOConfig'"),
+    (["env.num_envs=0"], "env.num_envs must be > 0"),
+    (["resume=nowhere"], "resume='nowhere': no such run directory"),
+    (["-m", "seed=0,1", "budget.eval_innings=0"], "budget.eval_innings must be > 0"),
+    (["experiment=table4", "budget.total_steps=-1"], "budget.total_steps must be > 0, got -1"),
+]
+
+
+@pytest.mark.parametrize("overrides,message", BAD, ids=[" ".join(o) for o, _ in BAD])
+def test_bad_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
+    t0 = time.perf_counter()
+    proc = train(tmp_path, *overrides, timeout=60)
+    elapsed = time.perf_counter() - t0
+    assert proc.returncode != 0
+    assert message in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert elapsed < 30, f"took {elapsed:.1f}s to fail"  # ~1-3 s on a quiet machine; generous for loaded CI
+    assert list(tmp_path.iterdir()) == [], f"wrote {list(tmp_path.rglob('*'))}"
