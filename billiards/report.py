@@ -11,6 +11,9 @@ Table 5), and aggregated over seeds:
 * max: the best single inning over all seeds' evaluation innings;
 * foul and success percentages: means over seeds.
 
+Search runs (``results.json`` written by ``search.py``) found under the same directories are
+laid out as the paper's Table 6 (:mod:`billiards.search.report`).
+
 The paper's figures are printed beside ours for runs whose preset names a table. Runs without
 a table are grouped by the settings that differ between them. The markdown goes to stdout and
 to ``--out`` (default: ``DIR/report.md`` for one DIR, else ``./report.md``).
@@ -234,9 +237,16 @@ def render_table(table: str | None, groups: dict[str, list[Run]]) -> str:
 
 
 def report(dirs: list[Path]) -> str:
+    from billiards.search.report import find_results, table6_markdown
+
     runs, unfinished = find_runs(dirs)
+    searches = find_results(dirs)
+    if not runs and not searches:
+        raise SystemExit(
+            f"Error: no finished training runs (config.yaml + eval.json) or search results under {', '.join(map(str, dirs))}"
+        )
     if not runs:
-        raise SystemExit(f"Error: no finished runs (config.yaml + eval.json) under {', '.join(map(str, dirs))}")
+        return "## Search results\n\n" + table6_markdown(searches)
     by_table: dict[str | None, dict[str, list[Run]]] = defaultdict(lambda: defaultdict(list))
     for run in runs:
         by_table[run.table][run.variant()].append(run)
@@ -254,6 +264,8 @@ def report(dirs: list[Path]) -> str:
     if unfinished:
         parts.append(f"Unfinished runs (no eval.json), skipped: {', '.join(str(p) for p in unfinished)}")
         parts.append("")
+    if searches:
+        parts += ["## Search results", "", table6_markdown(searches)]
     return "\n".join(parts)
 
 

@@ -124,6 +124,11 @@ def test_search_entry_point_writes_results(tmp_path):
     assert data["protocol"] == "p3" and data["search"] == "h2" and data["proposer"] == "geometric"
     assert len(data["values"]) == 2 and data["sims_per_decision"] == 80
     assert (out / "longest_chain.png").stat().st_size > 1000
+    # the report command lays search results out as the paper's Table 6
+    from billiards.report import report
+
+    text = report([tmp_path])
+    assert "| geometric | — \\| — | — \\| — | " in text and f"{data['mean']:.1f} ({data['max']:.0f}, cap 4)" in text
 
 
 @pytest.mark.parametrize("override, message", [
