@@ -120,9 +120,9 @@ def main(argv: list[str] | None = None) -> None:
     for name, cfg in configs.items():
         u, f = statistics.median(ups[name]), statistics.median(fps[name])
         train_fps = 1.0 / (1.0 / f + cfg.algo.utd / u)  # seconds per frame: collect it + utd updates
-        hours = lambda frames: frames / train_fps / 3600  # noqa: E731
+        h400k, h1m = (frames / train_fps / 3600 for frames in (4e5, 1e6))
         print(f"{name:<24} {describe(cfg):<46} {u:>10.1f} {u * cfg.algo.batch_size:>10.0f} {f:>10.0f} "
-              f"{train_fps:>10.1f} {hours(4e5):>6.2f}h {hours(1e6):>6.2f}h")
+              f"{train_fps:>10.1f} {h400k:>6.2f}h {h1m:>6.2f}h")
     print("\nsamples/s = updates/s x batch; train fr/s = frames per second of training at the config's UTD; "
           "400k / 1M: implied hours for the paper's budgets (evaluation excluded).")
 

@@ -17,11 +17,29 @@ from __future__ import annotations
 
 import torch
 from tensordict import TensorDictBase
-from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictModuleBase, TensorDictSequential
+from tensordict.nn import (
+    NormalParamExtractor,
+    TensorDictModule,
+    TensorDictModuleBase,
+    TensorDictSequential,
+)
 from torch import nn
 from torchrl.data import Bounded
-from torchrl.modules import MLP, AdditiveGaussianModule, ProbabilisticActor, TanhModule, TanhNormal, ValueOperator
-from torchrl.objectives import ClipPPOLoss, SACLoss, SoftUpdate, TD3Loss, ValueEstimators
+from torchrl.modules import (
+    MLP,
+    AdditiveGaussianModule,
+    ProbabilisticActor,
+    TanhModule,
+    TanhNormal,
+    ValueOperator,
+)
+from torchrl.objectives import (
+    ClipPPOLoss,
+    SACLoss,
+    SoftUpdate,
+    TD3Loss,
+    ValueEstimators,
+)
 
 ACTION_NORM = "action_norm"
 

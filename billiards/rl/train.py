@@ -33,6 +33,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from .checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from .config import (
     CONFIG_FILE,
     EVAL_FILE,
@@ -42,7 +43,6 @@ from .config import (
     env_paradigm,
     validate,
 )
-from .checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from .metrics import MetricLogger, atomic_write_text, eval_row
 
 log = logging.getLogger(__name__)
