@@ -143,3 +143,38 @@ def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, override, me
     assert proc.returncode != 0
     assert message in proc.stderr + proc.stdout
     assert not out.exists()
+
+
+def test_policy_proposer_from_a_training_run(tmp_path):
+    """A trained run (here a smoke run) becomes a proposer: candidate 0 is the policy's
+    deterministic action through the aim constraint, sampling follows the caller's rng only."""
+    import torch
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from billiards import domain
+    from billiards.rl.policy import load_policy, load_policy_proposer
+
+    run = tmp_path / "run"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "train.py", "budget=smoke", "env=aim_features", "progress=false",
+                           f"hydra.run.dir={run}"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    prop = load_policy_proposer([run], name="smoke")
+    assert prop.constrain_aim and prop.extra_features
+    racks = random_racks(np.random.default_rng(8), 4)
+    torch.manual_seed(123)
+    before = torch.rand(1)
+    torch.manual_seed(123)
+    a = prop.propose(racks, 6, np.random.default_rng(0))
+    assert torch.equal(torch.rand(1), before)  # torch's global generator untouched
+    np.testing.assert_array_equal(a, prop.propose(racks, 6, np.random.default_rng(0)))
+    assert a.shape == (4, 6, 4) and np.isfinite(a).all()
+    assert ((a[..., 1] >= 0) & (a[..., 1] <= 1)).all() and (np.abs(a[..., 2:]) <= 1).all()
+    policy, _ = load_policy(run / "checkpoint.pt")
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        mode = policy(TensorDict({"observation": prop.observation(racks)}, batch_size=[4]))["action"].detach().double().numpy()
+    np.testing.assert_allclose(a[:, 0, 1:], np.clip(mode[:, 1:], [0, -1, -1], [1, 1, 1]))
+    np.testing.assert_allclose(a[:, 0, 0], domain.constrained_theta(racks, np.clip(mode[:, 0], -1, 1)))
+    res = h2_search(racks, prop, H2Config(k1=8, m1=2, k2=4), np.random.default_rng(1))
+    assert res.actions.shape == (4, 4) and res.n_sims == 4 * 16

@@ -87,22 +87,22 @@ class PolicyProposer:
         S, E = positions.shape[0], len(self.policies)
         obs = self.observation(positions)
         out = np.empty((S, k, 4))
-        torch_gen_seed = int(rng.integers(2**62))
-        for e, policy in enumerate(self.policies):
-            cols = np.arange(e, k, E)
-            if cols.size == 0:
-                continue
-            torch.manual_seed(torch_gen_seed + e)
-            with set_exploration_type(ExplorationType.DETERMINISTIC):
-                mode = policy(TensorDict({"observation": obs}, batch_size=[S]))["action"]
-            acts = [mode]
-            if cols.size > 1:
-                rep = obs.repeat_interleave(cols.size - 1, dim=0)
-                with set_exploration_type(ExplorationType.RANDOM):
-                    sampled = policy(TensorDict({"observation": rep}, batch_size=[rep.shape[0]]))["action"]
-                acts.append(sampled.reshape(S, cols.size - 1, 4).transpose(0, 1).reshape(-1, 4))
-            a = torch.cat(acts, 0).reshape(cols.size, S, 4).transpose(0, 1).double().numpy()
-            out[:, cols] = a
+        seed = int(rng.integers(2**62))
+        with torch.random.fork_rng(devices=[]):  # sample from the caller's rng, leave torch's global state alone
+            for e, policy in enumerate(self.policies):
+                cols = np.arange(e, k, E)
+                if cols.size == 0:
+                    continue
+                torch.manual_seed(seed + e)
+                with set_exploration_type(ExplorationType.DETERMINISTIC):
+                    mode = policy(TensorDict({"observation": obs}, batch_size=[S]))["action"]
+                acts = [mode]
+                if cols.size > 1:
+                    rep = obs.repeat_interleave(cols.size - 1, dim=0)
+                    with set_exploration_type(ExplorationType.RANDOM):
+                        sampled = policy(TensorDict({"observation": rep}, batch_size=[rep.shape[0]]))["action"]
+                    acts.append(sampled.reshape(S, cols.size - 1, 4).transpose(0, 1).reshape(-1, 4))
+                out[:, cols] = torch.cat(acts, 0).reshape(cols.size, S, 4).transpose(0, 1).double().numpy()
         out[..., 1] = np.clip(out[..., 1], 0.0, 1.0)
         out[..., 2:] = np.clip(out[..., 2:], -1.0, 1.0)
         if self.constrain_aim:
