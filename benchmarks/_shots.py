@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from billiards.physics import action_to_cue, random_racks
+from billiards.provenance import git_commit  # noqa: F401  (re-exported for the benchmarks)
 
 ROOT = Path(__file__).resolve().parent.parent
 POOLTOOL_PY = Path(os.environ.get("POOLTOOL_VENV", ROOT / ".venv-pooltool")) / "bin" / "python"
@@ -49,11 +50,3 @@ def write_json(path: Path | None, summary: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(summary, indent=2) + "\n")
     print("wrote", path)
-
-
-def git_commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                              text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"

@@ -16,12 +16,12 @@ import argparse
 import dataclasses
 import json
 import shlex
-import subprocess
 import sys
 from pathlib import Path
 
 from billiards.baselines import make_policy
 from billiards.evaluation import evaluate
+from billiards.provenance import git_commit
 
 # (row name, policy, start, constrain_aim)
 RUNS = [
@@ -31,15 +31,6 @@ RUNS = [
     ("nearest red (p=0.5, centre)", "nearest", "canonical", False),
     ("random u inside the aim constraint", "random", "random", True),
 ]
-
-
-def git_commit() -> str:
-    def run(*cmd):
-        return subprocess.run(cmd, capture_output=True, text=True, check=False).stdout.strip()
-
-    commit = run("git", "rev-parse", "--short", "HEAD") or "unknown"
-    dirty = bool(run("git", "status", "--porcelain", "--untracked-files=no", "--", "billiards"))
-    return commit + ("+dirty" if dirty else "")
 
 
 def main() -> None:

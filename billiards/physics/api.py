@@ -17,7 +17,6 @@ clamped silently.
 
 from __future__ import annotations
 
-import math
 from functools import cached_property
 from typing import NamedTuple
 
@@ -27,7 +26,6 @@ from . import core
 from .params import DEFAULT_PARAMS, PhysicsParams
 from .rules import carom_outcome
 
-TWO_PI = 2.0 * math.pi
 PARALLEL_MIN_BATCH = 64  # smaller batches run on the calling thread (same kernel, same bits)
 POSITION_TOL = 1e-6  # metres a state may sit outside the table or overlap and still be accepted
 BALL_NAMES = ("white", "yellow", "red1", "red2")

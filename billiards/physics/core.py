@@ -568,6 +568,21 @@ def _grow(arr, n):
 
 
 @njit(cache=True, error_model="numpy")
+def _record(ev_time, ev_info, ev_state, n_rec, t, kind, who, other, st, lab):
+    """Append one event and every ball's state after it to the log, growing it if full."""
+    if n_rec >= ev_time.shape[0]:
+        ev_time = _grow(ev_time, n_rec)
+        ev_info = _grow(ev_info, n_rec)
+        ev_state = _grow(ev_state, n_rec)
+    ev_time[n_rec] = t
+    ev_info[n_rec, 0], ev_info[n_rec, 1], ev_info[n_rec, 2] = kind, who, other
+    for k in range(N_BALLS):
+        ev_state[n_rec, k, :7] = st[k]
+        ev_state[n_rec, k, 7] = lab[k]
+    return ev_time, ev_info, ev_state, n_rec + 1
+
+
+@njit(cache=True, error_model="numpy")
 def run_shot(positions, V0, phi, a, b, p, record):
     """Simulate one shot from rest to rest.
 
@@ -596,13 +611,9 @@ def run_shot(positions, V0, phi, a, b, p, record):
 
     strike(st, lab, V0, phi, a, b, p)
     n_ev = 0
+    n_rec = 0
     if record:
-        ev_time[0] = 0.0
-        ev_info[0, 0], ev_info[0, 1], ev_info[0, 2] = EV_STRIKE, 0, -1
-        for k in range(N_BALLS):
-            ev_state[0, k, :7] = st[k]
-            ev_state[0, k, 7] = lab[k]
-    n_rec = 1
+        ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, 0, 0.0, EV_STRIKE, 0, -1, st, lab)
 
     t = 0.0
     trans_t = np.full(N_BALLS, INF)
@@ -673,32 +684,14 @@ def run_shot(positions, V0, phi, a, b, p, record):
                 out_int[O_CUSHIONS] += 1
         n_ev += 1
         if record:
-            if n_rec >= ev_time.shape[0]:
-                ev_time = _grow(ev_time, n_rec)
-                ev_info = _grow(ev_info, n_rec)
-                ev_state = _grow(ev_state, n_rec)
-            ev_time[n_rec] = t
-            ev_info[n_rec, 0], ev_info[n_rec, 1], ev_info[n_rec, 2] = kind, who, other
-            for k in range(N_BALLS):
-                ev_state[n_rec, k, :7] = st[k]
-                ev_state[n_rec, k, 7] = lab[k]
-            n_rec += 1
+            ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, n_rec, t, kind, who, other, st, lab)
         if n_ev >= max_events:
             # safety net: stop every ball where it is and flag the shot
             for k in range(N_BALLS):
                 resolve_transition(st, lab, k, STATIONARY)
             out_int[O_TRUNC] = 1
             if record:
-                if n_rec >= ev_time.shape[0]:
-                    ev_time = _grow(ev_time, n_rec)
-                    ev_info = _grow(ev_info, n_rec)
-                    ev_state = _grow(ev_state, n_rec)
-                ev_time[n_rec] = t
-                ev_info[n_rec, 0], ev_info[n_rec, 1], ev_info[n_rec, 2] = EV_STOP, -1, -1
-                for k in range(N_BALLS):
-                    ev_state[n_rec, k, :7] = st[k]
-                    ev_state[n_rec, k, 7] = lab[k]
-                n_rec += 1
+                ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, n_rec, t, EV_STOP, -1, -1, st, lab)
             break
     out_int[O_NEVENTS] = n_ev
     out_float[OF_CLOSE2] = max(closest[0] - 2.0 * R, 0.0)

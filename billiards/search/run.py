@@ -4,11 +4,12 @@ write ``results.json`` (and a picture of the longest chain's last shots) into th
 from __future__ import annotations
 
 import json
-import subprocess
 from pathlib import Path
 
 import numba
 from omegaconf import OmegaConf
+
+from billiards.provenance import ROOT, git_commit
 
 from .actors import LookaheadActor, PUCTActor, SearchActor
 from .config import validate
@@ -17,7 +18,6 @@ from .proposers import GeometricProposer
 from .protocols import ProtocolResult, run_p1, run_p3
 from .puct import PUCTConfig
 
-ROOT = Path(__file__).resolve().parents[2]
 RESULTS_FILE = "results.json"
 
 
@@ -60,17 +60,9 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         proposer=cfg.proposer.name,
         search=cfg.search.kind,
         config=OmegaConf.to_container(cfg, resolve=True),
-        commit=_commit(),
+        commit=git_commit(),
     )
     (out_dir / RESULTS_FILE).write_text(json.dumps(summary, indent=2) + "\n")
     print(f"{proto} {summary['search']} proposer={cfg.proposer.name}: mean {result.mean:.2f} ± {result.std:.2f}, "
           f"max {result.max:.0f}, {result.ms_per_decision:.1f} ms/shot, {result.sims_per_decision:.0f} sims/shot -> {out_dir}")
     return result
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                              check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
