@@ -3,8 +3,8 @@
 Every directory under the given ones that holds a finished run (``config.yaml`` and
 ``eval.json`` written by ``train.py``) is read; runs are grouped by the paper table their
 experiment preset names (``table`` in the config), then by the table's variant (algorithm
-for Table 1, training paradigm for Table 2, domain knowledge for Table 4, reward shaping for
-Table 5), and aggregated over seeds:
+for Table 1, training paradigm for Table 2, aid for Table 3, domain knowledge for Table 4,
+reward shaping for Table 5), and aggregated over seeds:
 
 * mean ± std: the mean over seeds of each run's mean points per inning, and the std over
   seeds (population std, ddof = 0);
@@ -56,6 +56,20 @@ PAPER = {
             "random_reset": "random, reset", "random_continue": "random, continue",
         },
         "columns": ["mean", "canonical", "foul_sh", "succ_sh"],
+    },
+    "table3": {
+        "title": "Table 3: structure-free aids on the plain SAC baseline (paper: 3 seeds, 1M steps; "
+                 "the RM rows cost 10^7 offline shots; plain and aim rows shared with Table 4)",
+        "rows": {
+            "plain": {"mean": 0.487, "std": 0.097, "max": 4, "foul_sh": 20.5, "succ_sh": 4.9},
+            "staged": {"mean": 0.407, "std": 0.052, "max": 4},
+            "rm": {"mean": 0.840, "std": 0.000, "max": 4},
+            "aim": {"mean": 2.570, "std": 0.128, "max": 6, "foul_sh": 15.4, "succ_sh": 25.7},
+            "rm_aim": {"mean": 2.357, "std": 0.139},
+        },
+        "labels": {"plain": "plain baseline", "staged": "staged curriculum", "rm": "RM-guided",
+                   "aim": "aim constraint", "rm_aim": "RM + aim constraint"},
+        "columns": ["mean", "max", "foul_sh", "succ_sh"],
     },
     "table4": {
         "title": "Table 4: domain knowledge on the SAC baseline (paper: 3 seeds, 1M steps)",
@@ -114,12 +128,25 @@ class Run:
             return c["algo"]["name"]
         if table == "table2":
             return env["paradigm"]
+        if table == "table3":
+            return table3_variant(c)
         if table == "table4":
             return {(False, False): "plain", (True, False): "aim", (True, True): "aim_features"}.get(
                 (bool(env.get("constrain_aim")), bool(env.get("extra_features"))), "features_only")
         if table == "table5":
             return c["shaping"]["name"]
         return generic_label(c)
+
+
+def table3_variant(c: dict) -> str:
+    env, shaping = c.get("env", {}), c.get("shaping", {})
+    if c.get("curriculum", {}).get("name", "none") != "none":
+        return "staged" if not env.get("constrain_aim") else "staged_aim"
+    rm = bool(shaping.get("rm"))
+    aim = bool(env.get("constrain_aim"))
+    if env.get("extra_features") or shaping.get("name") not in ("none", "rm"):
+        return generic_label(c)
+    return {(False, False): "plain", (True, False): "rm", (False, True): "aim", (True, True): "rm_aim"}[(rm, aim)]
 
 
 def generic_label(c: dict) -> str:
@@ -250,6 +277,11 @@ def report(dirs: list[Path]) -> str:
     by_table: dict[str | None, dict[str, list[Run]]] = defaultdict(lambda: defaultdict(list))
     for run in runs:
         by_table[run.table][run.variant()].append(run)
+    # Rows that are the same config in two tables: Table 3's plain and aim rows are Table 4's
+    # plain and aim runs, Table 5's constraint+extra row is Table 4's aim_features runs.
+    for table, row, source in (("table3", "plain", "plain"), ("table3", "aim", "aim"), ("table5", "none", "aim_features")):
+        if table in by_table and row not in by_table[table] and source in by_table.get("table4", {}):
+            by_table[table][row] = by_table["table4"][source]
     parts = [
         "## Training results",
         "",

@@ -178,3 +178,14 @@ def test_policy_proposer_from_a_training_run(tmp_path):
     np.testing.assert_allclose(a[:, 0, 0], domain.constrained_theta(racks, np.clip(mode[:, 0], -1, 1)))
     res = h2_search(racks, prop, H2Config(k1=8, m1=2, k2=4), np.random.default_rng(1))
     assert res.actions.shape == (4, 4) and res.n_sims == 4 * 16
+
+    # the small exported policy file proposes exactly what the full checkpoint does
+    from billiards.rl.policy import export_policy
+
+    small = export_policy(run, tmp_path / "policies" / "seed0.pt")
+    assert small.stat().st_size < (run / "checkpoint.pt").stat().st_size / 5
+    exported = load_policy_proposer([small], name="smoke")
+    np.testing.assert_array_equal(exported.propose(racks, 6, np.random.default_rng(0)), a)
+    (tmp_path / "bad.pt").write_bytes(b"nope")
+    with pytest.raises(Exception, match="corrupt or not a torch file"):
+        load_policy(tmp_path / "bad.pt")

@@ -130,6 +130,10 @@ BAD = [
     (["resume=nowhere"], "resume='nowhere': no such run directory"),
     (["-m", "seed=0,1", "budget.eval_innings=0"], "budget.eval_innings must be > 0"),
     (["experiment=table4", "budget.total_steps=-1"], "budget.total_steps must be > 0, got -1"),
+    (["curriculum=staged", "curriculum.switch_at=[0.5]"], "curriculum.switch_at needs one fraction per stage boundary (2)"),
+    (["curriculum=staged", "algo=ppo"], "curriculum=staged needs an off-policy algorithm"),
+    (["shaping=rm", "shaping.rm_model=nowhere.pt"], "shaping.rm_model='nowhere.pt': no reward model there"),
+    (["-m", "experiment=table3", "variant=staged", "curriculum.switch_at=[0.7,0.2]"], "curriculum.switch_at must increase"),
 ]
 
 

@@ -12,6 +12,7 @@ from .transforms import (
     FoulPenalty,
     GentleShotBonus,
     NearMissBonus,
+    RewardModelBonus,
     make_env,
 )
 
@@ -32,6 +33,7 @@ __all__ = [
     "FoulPenalty",
     "GentleShotBonus",
     "NearMissBonus",
+    "RewardModelBonus",
     "make_env",
     "reset_to",
 ]

@@ -11,6 +11,7 @@ this module only moves tensors in and out of tensordicts.
 * :class:`GentleShotBonus` -- reward += ``beta * score * (1 - p)``.
 * :class:`NearMissBonus` -- reward += ``beta * exp(-gap / sigma)`` for a miss that hit exactly
   one red, gap = closest approach to the other red.
+* :class:`RewardModelBonus` -- reward += ``beta * V_rm(s, a)``, a learned P(score | s, a).
 
 The reward transforms only add to ``"reward"``; the raw carom outcome stays in ``"score"``.
 """
@@ -162,6 +163,33 @@ class NearMissBonus(_RewardTerm):
         return bonus[..., None]
 
 
+class RewardModelBonus(_RewardTerm):
+    """Reward shaping with a learned reward model (paper 3.2): ``reward += beta * V_rm(s, a)``,
+    ``V_rm(s, a) ~ P(score = 1 | s, a)`` (:class:`billiards.rm.RewardModel`, fitted on random
+    offline shots; inputs :func:`billiards.rm.rm_inputs` of the table before the shot and the
+    raw action). A transform's step sees the input after every inverse transform, i.e. the
+    action the simulator played: under the aim constraint that is theta, not the offset u, so
+    the model always scores the shot actually played.
+
+    Args:
+        model: a :class:`billiards.rm.RewardModel` (anything with ``prob(positions, actions)``)
+            or a path to one (:func:`billiards.rm.load_model`).
+        beta: bonus strength.
+    """
+
+    def __init__(self, model, beta: float):
+        super().__init__()
+        from billiards.rm import load_model
+
+        self.model = model if hasattr(model, "prob") else load_model(model)
+        self.beta = float(beta)
+
+    def _term(self, tensordict, next_tensordict):
+        positions = _np(tensordict.get("positions")).astype(np.float64)
+        action = _np(tensordict.get("action")).astype(np.float64)
+        return self.beta * self.model.prob(positions, action)
+
+
 def make_env(
     batch_size: int = 1,
     *,
@@ -175,6 +203,8 @@ def make_env(
     gentle: float = 0.0,
     near_miss: float = 0.0,
     near_miss_sigma: float = domain.NEAR_MISS_SIGMA,
+    rm: float = 0.0,
+    rm_model=None,
     seed: int | None = None,
     params: PhysicsParams = DEFAULT_PARAMS,
 ) -> TransformedEnv:
@@ -194,6 +224,8 @@ def make_env(
         gentle: beta of :class:`GentleShotBonus` (reward += beta * score * (1 - p)); 0 disables.
         near_miss: beta of :class:`NearMissBonus`; 0 disables it.
         near_miss_sigma: its length scale sigma in metres (default 0.05).
+        rm: beta of :class:`RewardModelBonus` (reward += beta * V_rm(s, a)); 0 disables it.
+        rm_model: the reward model (a :class:`billiards.rm.RewardModel` or a path), needed if rm.
         seed: seed of the rack generator (``env.set_seed`` re-seeds it).
         params: simulator parameters.
 
@@ -215,7 +247,11 @@ def make_env(
         transforms.append(GentleShotBonus(gentle))
     if near_miss:
         transforms.append(NearMissBonus(near_miss, near_miss_sigma))
+    if rm:
+        if rm_model is None:
+            raise ValueError("rm > 0 needs rm_model (a billiards.rm.RewardModel or a path to one)")
+        transforms.append(RewardModelBonus(rm_model, rm))
     return TransformedEnv(base, Compose(*transforms))
 
 
-__all__ = ["AimConstraint", "CaromFeatures", "FoulPenalty", "GentleShotBonus", "NearMissBonus", "make_env"]
+__all__ = ["AimConstraint", "CaromFeatures", "FoulPenalty", "GentleShotBonus", "NearMissBonus", "RewardModelBonus", "make_env"]

@@ -41,19 +41,29 @@ from torchrl.objectives import (
     ValueEstimators,
 )
 
+from .curriculum import HoldActions
+
 ACTION_NORM = "action_norm"
 
 
 class ScaleAction(TensorDictModuleBase):
-    """``action = mid + half * action_norm`` (float32), mapping [-1, 1] onto the env's bounds."""
+    """``action = mid + half * action_norm`` (float32), mapping [-1, 1] onto the env's bounds.
+
+    First, ``self.hold`` (:class:`~billiards.rl.curriculum.HoldActions`, the identity unless a
+    staged curriculum holds some dimensions) fixes the held coordinates of ``"action_norm"``,
+    so the stored and the played action agree. It has no parameters or buffers: checkpoint
+    keys are the same with and without a curriculum.
+    """
 
     def __init__(self, low: torch.Tensor, high: torch.Tensor):
         super().__init__()
-        self.in_keys, self.out_keys = [ACTION_NORM], ["action"]
+        self.in_keys, self.out_keys = [ACTION_NORM], [ACTION_NORM, "action"]
         self.register_buffer("mid", ((high + low) / 2).float())
         self.register_buffer("half_range", ((high - low) / 2).float())
+        self.hold = HoldActions(torch.zeros(low.shape[-1]), key=ACTION_NORM)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        tensordict = self.hold(tensordict)
         tensordict.set("action", self.mid + self.half_range * tensordict.get(ACTION_NORM))
         return tensordict
 

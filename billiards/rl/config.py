@@ -139,6 +139,22 @@ class ShapingConfig:
     gentle: float = 0.0  # reward += gentle * score * (1 - p)
     near_miss: float = 0.0  # reward += near_miss * exp(-gap / near_miss_sigma) for a one-red miss
     near_miss_sigma: float = 0.05
+    rm: float = 0.0  # reward += rm * V_rm(s, a), the learned reward model's P(score | s, a)
+    rm_model: str = "results/rm/model.pt"  # the reward model (python -m billiards.rm train); relative paths: cwd, then the repo
+
+
+@dataclass
+class CurriculumConfig:
+    """The staged action curriculum (paper 3.1; billiards/rl/curriculum.py). ``stages`` lists
+    the free action dimensions of each stage (0 aim, 1 power, 2-3 english a, b); the stage
+    changes at the fractions ``switch_at`` of budget.total_steps; held dimensions play
+    p = hold_power and a = b = hold_english."""
+
+    name: str = "none"
+    stages: List[List[int]] = field(default_factory=lambda: [[0, 1, 2, 3]])
+    switch_at: List[float] = field(default_factory=list)
+    hold_power: float = 0.5
+    hold_english: float = 0.0
 
 
 @dataclass
@@ -188,6 +204,7 @@ class Config:
     algo: Any = MISSING  # SACConfig | TD3Config | PPOConfig, chosen by the algo group
     env: EnvConfig = field(default_factory=EnvConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
+    curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     budget: BudgetConfig = MISSING
     eval: EvalConfig = field(default_factory=EvalConfig)
@@ -266,6 +283,13 @@ def _errors(cfg: DictConfig) -> list[str]:
     for key in ("foul_penalty", "gentle", "near_miss"):
         positive(f"shaping.{key}", cfg.shaping[key], strict=False)
     positive("shaping.near_miss_sigma", cfg.shaping.near_miss_sigma)
+    positive("shaping.rm", cfg.shaping.rm, strict=False)
+    if cfg.shaping.rm:
+        path = resolve_rm_model(cfg.shaping.rm_model)
+        need(path.is_file() and path.stat().st_size > 0,
+             f"shaping.rm_model={cfg.shaping.rm_model!r}: no reward model there; train one with "
+             f"`python -m billiards.rm generate` and `python -m billiards.rm train` (see the README)")
+    errs.extend(_curriculum_errors(cfg))
 
     need(len(a.hidden_sizes) > 0 and all(h > 0 for h in a.hidden_sizes),
          f"algo.hidden_sizes must be a non-empty list of positive widths, got {list(a.hidden_sizes)}")
@@ -311,6 +335,38 @@ def _errors(cfg: DictConfig) -> list[str]:
             )
         elif (run_dir / CHECKPOINT_FILE).stat().st_size == 0:
             errs.append(f"resume={cfg.resume!r}: {run_dir / CHECKPOINT_FILE} is empty (corrupt); start a new run instead")
+    return errs
+
+
+def resolve_rm_model(path: str) -> Path:
+    """A reward-model path as given if it exists (or is absolute), else relative to the repo."""
+    p = Path(path)
+    if p.is_absolute() or p.exists():
+        return p
+    return Path(__file__).resolve().parents[2] / p
+
+
+def _curriculum_errors(cfg: DictConfig) -> list[str]:
+    c = cfg.curriculum
+    if c.name == "none":
+        return []
+    errs = []
+    stages = [list(s) for s in c.stages]
+    if cfg.algo.name not in ("sac", "td3"):
+        errs.append(f"curriculum={c.name} needs an off-policy algorithm (sac, td3), got algo={cfg.algo.name}")
+    if not stages or any(not s or any(d not in (0, 1, 2, 3) for d in s) or len(set(s)) != len(s) for s in stages):
+        errs.append(f"curriculum.stages must be non-empty lists of distinct action dims in 0..3, got {stages}")
+    elif sorted(stages[-1]) != [0, 1, 2, 3]:
+        errs.append(f"curriculum.stages: the last stage must free the whole action [0, 1, 2, 3], got {stages[-1]}")
+    f = list(c.switch_at)
+    if len(f) != len(stages) - 1:
+        errs.append(f"curriculum.switch_at needs one fraction per stage boundary ({len(stages) - 1}), got {f}")
+    elif not all(0.0 < x < 1.0 for x in f) or any(b <= a for a, b in zip(f, f[1:])):
+        errs.append(f"curriculum.switch_at must increase strictly inside (0, 1), got {f}")
+    if not 0.0 <= c.hold_power <= 1.0:
+        errs.append(f"curriculum.hold_power must lie in [0, 1], got {c.hold_power!r}")
+    if not -1.0 <= c.hold_english <= 1.0:
+        errs.append(f"curriculum.hold_english must lie in [-1, 1], got {c.hold_english!r}")
     return errs
 
 

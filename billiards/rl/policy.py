@@ -1,37 +1,90 @@
-"""Trained policies out of training checkpoints, for evaluation and as search proposers."""
+"""Trained policies out of training runs, for evaluation and as search proposers.
+
+A policy can be loaded from a run dir, its ``checkpoint.pt`` (everything needed to resume:
+networks, optimizers, replay buffer -- tens of MB), or a small exported policy file (the
+actor's weights and the run's config, ~0.3 MB) written by
+
+    python -m billiards.rl.policy export RUN_DIR [RUN_DIR ...] --out DIR
+
+which is what the repository ships for the search proposers (``results/policies/``).
+"""
 
 from __future__ import annotations
 
+import argparse
+import json
 from pathlib import Path
 
+import torch
 from omegaconf import OmegaConf
 
-from .checkpoint import load_checkpoint
+from .checkpoint import CheckpointError, load_checkpoint
 from .config import CHECKPOINT_FILE
+
+POLICY_FORMAT = "billiards-policy-1"
+
+
+def _build_agent(config: dict):
+    from billiards.envs import make_env
+
+    from .agents import make_agent
+
+    cfg = OmegaConf.create(config)
+    # only the observation and action layout matter here (no shaping, e.g. no reward model)
+    env = make_env(1, constrain_aim=bool(cfg.env.constrain_aim), extra_features=bool(cfg.env.extra_features))
+    obs_dim = env.observation_spec_unbatched["observation"].shape[-1]
+    return make_agent(cfg.algo, obs_dim, env.action_spec_unbatched), cfg
+
+
+def _load_policy_file(path: Path) -> dict:
+    from billiards.files import load_tagged
+
+    return load_tagged(path, POLICY_FORMAT, CheckpointError, "exported policy")
 
 
 def load_policy(path: str | Path):
-    """The stochastic policy of a training run: ``path`` is a run dir or its checkpoint file.
+    """The stochastic policy of a training run: ``path`` is a run dir, its checkpoint file or
+    an exported policy file (:func:`export_policy`).
 
     Returns ``(policy, cfg)``: a TensorDict module reading ``"observation"`` and writing
     ``"action"`` in the training env's action space (deterministic under
     ``ExplorationType.DETERMINISTIC``, sampled under ``RANDOM``), and the run's config.
     """
-    from billiards.envs import make_env
-
-    from .agents import make_agent
-    from .train import env_kwargs
-
     path = Path(path)
-    run_dir = path.parent if path.name == CHECKPOINT_FILE else path
-    state = load_checkpoint(run_dir)
-    cfg = OmegaConf.create(state["config"])
-    env = make_env(1, **env_kwargs(cfg))
-    obs_dim = env.observation_spec_unbatched["observation"].shape[-1]
-    agent = make_agent(cfg.algo, obs_dim, env.action_spec_unbatched)
-    agent.load_state_dict(state["agent"])
+    if path.is_file() and path.name != CHECKPOINT_FILE:
+        state = _load_policy_file(path)
+        agent, cfg = _build_agent(state["config"])
+        agent.actor.load_state_dict(state["actor"])
+    else:
+        run_dir = path.parent if path.name == CHECKPOINT_FILE else path
+        state = load_checkpoint(run_dir)
+        agent, cfg = _build_agent(state["config"])
+        agent.load_state_dict(state["agent"])
     agent.eval()
     return agent.policy, cfg
+
+
+def export_policy(run_dir: str | Path, out: str | Path) -> Path:
+    """Write the policy of a finished run (actor weights, config, final evaluation and
+    summary) to ``out``, a few hundred kB instead of the full checkpoint."""
+    run_dir, out = Path(run_dir), Path(out)
+    state = load_checkpoint(run_dir)
+    agent, _ = _build_agent(state["config"])
+    agent.load_state_dict(state["agent"])
+    read = lambda name: json.loads((run_dir / name).read_text()) if (run_dir / name).is_file() else None
+    payload = {
+        "format": POLICY_FORMAT,
+        "config": state["config"],
+        "actor": {k: v.clone() for k, v in agent.actor.state_dict().items()},
+        "eval": read("eval.json"),
+        "summary": read("summary.json"),
+        "source": str(run_dir),
+    }
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    torch.save(payload, tmp)
+    tmp.replace(out)
+    return out
 
 
 def load_policy_proposer(paths, name: str = "policy"):
@@ -45,3 +98,24 @@ def load_policy_proposer(paths, name: str = "policy"):
         raise ValueError(f"proposer {name!r}: checkpoints mix observation/action layouts {sorted(layouts)}")
     constrain_aim, extra_features = layouts.pop()
     return PolicyProposer([p for p, _ in loaded], constrain_aim=constrain_aim, extra_features=extra_features, name=name)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m billiards.rl.policy", description="Export small policy files from training runs.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    ex = sub.add_parser("export", help="write <out>/<prefix>seed<k>.pt for each run dir")
+    ex.add_argument("runs", nargs="+", type=Path)
+    ex.add_argument("--out", type=Path, required=True)
+    ex.add_argument("--prefix", default="")
+    args = parser.parse_args(argv)
+    for run in args.runs:
+        try:
+            seed = OmegaConf.create(load_checkpoint(run)["config"]).seed
+            path = export_policy(run, args.out / f"{args.prefix}seed{seed}.pt")
+        except CheckpointError as err:
+            raise SystemExit(f"Error: {err}") from None
+        print(f"{run} -> {path} ({path.stat().st_size / 1e3:.0f} kB)")
+
+
+if __name__ == "__main__":
+    main()

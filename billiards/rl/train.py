@@ -41,6 +41,7 @@ from .config import (
     Config,
     ConfigError,
     env_paradigm,
+    resolve_rm_model,
     validate,
 )
 from .metrics import MetricLogger, atomic_write_text, eval_row
@@ -79,6 +80,8 @@ def env_kwargs(cfg) -> dict[str, Any]:
         gentle=cfg.shaping.gentle,
         near_miss=cfg.shaping.near_miss,
         near_miss_sigma=cfg.shaping.near_miss_sigma,
+        rm=cfg.shaping.rm,
+        rm_model=str(resolve_rm_model(cfg.shaping.rm_model)) if cfg.shaping.rm else None,
     )
 
 
@@ -174,6 +177,11 @@ class Trainer:
         self.agent = make_agent(cfg.algo, obs_dim, self.env.action_spec_unbatched)
         if cfg.compile:
             self.agent.compile()
+        from billiards.rl.curriculum import make_curriculum
+
+        self.curriculum = make_curriculum(cfg, self.agent)
+        self.stage: int | None = None
+        self.stage_log: list[dict] = []  # {"stage", "step", "free"} at each stage entry
 
         b = cfg.budget
         self.frames = 0
@@ -190,11 +198,33 @@ class Trainer:
         wandb_id = None
         if ckpt is not None:
             wandb_id = self._restore(ckpt)
-        self.logger = MetricLogger(cfg, self.run_dir, self.agent.metric_names,
+        metric_names = self.agent.metric_names + (("stage",) if self.curriculum else ())
+        self.logger = MetricLogger(cfg, self.run_dir, metric_names,
                                    resume_step=self.frames if ckpt is not None else None, wandb_id=wandb_id)
         if ckpt is not None:  # the history file reads as one run, like metrics.csv
             self._write_eval_history()
+            self.stage_log = list(ckpt.get("stage_log") or [])
+        self._update_stage()
         self._window_reset()
+
+    # -------------------------------------------------------------- curriculum
+
+    def _update_stage(self) -> None:
+        """Frees the action dimensions of the curriculum stage in force at ``self.frames``
+        (a no-op without a curriculum). The agent -- networks, optimizer, replay buffer --
+        carries over unchanged: the warm start."""
+        if self.curriculum is None:
+            return
+        curriculum, hold = self.curriculum
+        stage = curriculum.stage_at(self.frames)
+        if stage == self.stage:
+            return
+        self.stage = stage
+        hold.set_free(curriculum.free_dims(stage))
+        entry = curriculum.describe()[stage] | {"step": self.frames}
+        if not self.stage_log or self.stage_log[-1]["stage"] != stage:
+            self.stage_log.append(entry)
+        log.info("curriculum: stage %d from step %d, free action dims %s", stage, self.frames, entry["free"])
 
     # -------------------------------------------------------------- buffer and state
 
@@ -231,6 +261,7 @@ class Trainer:
                 "env": rack_rng(self.env).bit_generator.state,
             },
             "wandb_id": self.logger.wandb_id,
+            "stage_log": self.stage_log,
         }
 
     def _restore(self, ckpt: dict[str, Any]) -> str | None:
@@ -309,6 +340,8 @@ class Trainer:
             "train_score_pct": 100.0 * self._w_score / n,
             "train_foul_pct": 100.0 * self._w_foul / n,
         }
+        if self.stage is not None:
+            row["stage"] = self.stage
         if self._w_metrics is not None:
             from billiards.rl.agents import metrics_of
 
@@ -381,6 +414,7 @@ class Trainer:
                     for _ in range(k):
                         self._w_metrics = self.agent.update(self.rb.sample())
                 self.agent.set_warmup(self.frames < b.init_random_steps)
+                self._update_stage()
                 bar.update(n)
                 self._periodic(bar)
         finally:
@@ -443,6 +477,8 @@ class Trainer:
             "updates_per_second": round(self.agent.n_updates / max(train_seconds, 1e-9), 2),
             "eval": {r.start: eval_row(r) for r in results},
         }
+        if self.curriculum is not None:
+            summary["curriculum"] = self.stage_log
         atomic_write_text(self.run_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
         for r in results:
             log.info("final eval (%s start): %s", r.start, r.summary())

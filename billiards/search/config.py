@@ -90,6 +90,15 @@ def validate(cfg) -> None:
             raise ValueError(f"protocol.{key} must be >= 1, got {getattr(p, key)}")
     if cfg.proposer.kind == "policy" and not cfg.proposer.checkpoints:
         raise ValueError(f"proposer {cfg.proposer.name!r} is a policy ensemble but lists no checkpoints")
+    if cfg.proposer.kind == "policy":
+        from pathlib import Path
+
+        from billiards.provenance import ROOT
+
+        missing = [c for c in cfg.proposer.checkpoints if not (Path(c) if Path(c).is_absolute() else ROOT / c).exists()]
+        if missing:
+            how = f" (trained with: {cfg.proposer.command})" if cfg.proposer.command else ""
+            raise ValueError(f"proposer {cfg.proposer.name!r}: no checkpoint at {', '.join(missing)}{how}")
     if cfg.threads is not None and cfg.threads < 1:
         raise ValueError(f"threads must be >= 1, got {cfg.threads}")
 
