@@ -87,6 +87,9 @@ def test_joblib_multirun_and_report(tmp_path):
     ))
     runs = sorted(p.parent for p in sweep.glob("*/eval.json"))
     assert len(runs) == 2
+    # run dir names are valid unquoted override values (no "=" or ","), so `resume=<dir>` parses
+    assert all("=" not in r.name and "," not in r.name for r in runs), [r.name for r in runs]
+    assert runs[0].name.startswith("0_") and "+seed-0+" in runs[0].name, runs[0].name
     for run in runs:
         check_finished(run, frames=1024)
     assert {json.loads((r / "summary.json").read_text())["seed"] for r in runs} == {0, 1}
