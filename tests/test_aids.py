@@ -166,3 +166,19 @@ def test_training_with_rm_shaping_evaluates_the_true_score(tmp_path):
     policy, _ = load_policy(run_dir)
     again = evaluate(policy, n_innings=saved.n_innings, max_shots=10, start="random", seed=0)
     assert again.points == saved.points and again.mean == saved.mean
+
+
+@pytest.mark.parametrize("variant,aim,shaping,curriculum", [
+    ("plain", False, "none", "none"), ("staged", False, "none", "staged"), ("rm", False, "rm", "none"),
+    ("aim", True, "none", "none"), ("rm_aim", True, "rm", "none"),
+])
+def test_table3_variants_compose_and_report_as_their_row(variant, aim, shaping, curriculum):
+    from omegaconf import OmegaConf
+
+    from billiards.report import table3_variant
+
+    cfg = compose_cfg("experiment=table3", f"variant={variant}")
+    assert (cfg.table, cfg.algo.name, cfg.env.constrain_aim, cfg.env.extra_features) == ("table3", "sac", aim, False)
+    assert (cfg.shaping.name, cfg.curriculum.name) == (shaping, curriculum)
+    assert cfg.shaping.rm == (1.0 if shaping == "rm" else 0.0)
+    assert table3_variant(OmegaConf.to_container(cfg, resolve=True)) == variant
