@@ -79,30 +79,41 @@ class PolicyProposer:
             obs = np.concatenate([obs, domain.carom_features(positions).astype(np.float32)], axis=-1)
         return torch.from_numpy(obs)
 
+    @staticmethod
+    def _actions(policy, obs: torch.Tensor, n: int, rng: np.random.Generator) -> torch.Tensor:
+        """(S, n, 4) actions of one policy: its deterministic action, then n - 1 samples.
+
+        One network call per policy: the policy's action distribution (``get_dist`` of its
+        probabilistic actor) gives the deterministic action, and the samples are the
+        distribution's reparameterised draws ``transforms(loc + scale * eps)`` with eps from
+        the caller's numpy ``rng``, so torch's global RNG is never touched. The policy's last
+        module (:class:`~billiards.rl.agents.ScaleAction`) maps them onto the env's bounds.
+        """
+        from tensordict import TensorDict
+
+        actor, scale = policy[0], policy[1]
+        S = obs.shape[0]
+        dist = actor.get_dist(TensorDict({"observation": obs}, batch_size=[S]))
+        draws = [dist.deterministic_sample[:, None]]
+        if n > 1:
+            normal = dist.base_dist.base_dist
+            eps = torch.from_numpy(rng.standard_normal((S, n - 1, normal.loc.shape[-1]))).to(normal.loc.dtype)
+            x = normal.loc[:, None] + normal.scale[:, None] * eps
+            for t in dist.transforms:
+                x = t(x)
+            draws.append(x)
+        norm = torch.cat(draws, dim=1).reshape(S * n, -1)
+        return scale(TensorDict({"action_norm": norm}, batch_size=[S * n]))["action"].reshape(S, n, -1)
+
     @torch.no_grad()
     def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
-        from tensordict import TensorDict
-        from torchrl.envs.utils import ExplorationType, set_exploration_type
-
         S, E = positions.shape[0], len(self.policies)
         obs = self.observation(positions)
         out = np.empty((S, k, 4))
-        seed = int(rng.integers(2**62))
-        with torch.random.fork_rng(devices=[]):  # sample from the caller's rng, leave torch's global state alone
-            for e, policy in enumerate(self.policies):
-                cols = np.arange(e, k, E)
-                if cols.size == 0:
-                    continue
-                torch.manual_seed(seed + e)
-                with set_exploration_type(ExplorationType.DETERMINISTIC):
-                    mode = policy(TensorDict({"observation": obs}, batch_size=[S]))["action"]
-                acts = [mode]
-                if cols.size > 1:
-                    rep = obs.repeat_interleave(cols.size - 1, dim=0)
-                    with set_exploration_type(ExplorationType.RANDOM):
-                        sampled = policy(TensorDict({"observation": rep}, batch_size=[rep.shape[0]]))["action"]
-                    acts.append(sampled.reshape(S, cols.size - 1, 4).transpose(0, 1).reshape(-1, 4))
-                out[:, cols] = torch.cat(acts, 0).reshape(cols.size, S, 4).transpose(0, 1).double().numpy()
+        for e, policy in enumerate(self.policies):
+            cols = np.arange(e, k, E)
+            if cols.size:
+                out[:, cols] = self._actions(policy, obs, cols.size, rng).double().numpy()
         out[..., 1] = np.clip(out[..., 1], 0.0, 1.0)
         out[..., 2:] = np.clip(out[..., 2:], -1.0, 1.0)
         if self.constrain_aim:
