@@ -301,11 +301,37 @@ def report(dirs: list[Path]) -> str:
     return "\n".join(parts)
 
 
+SMALL_RUN_FILES = ("config.yaml", "eval.json", "eval_*.json", "summary.json", "eval_history.jsonl", "metrics.csv")
+
+
+def copy_runs(dirs: list[Path], dest: Path) -> list[Path]:
+    """Copy the small files of every finished run under ``dirs`` (no checkpoint) to
+    ``dest/<run dir name>/``; the report reads the copies like the originals."""
+    import shutil
+
+    runs, _ = find_runs(dirs)
+    copied = []
+    for run in runs:
+        target = dest / run.path.name
+        target.mkdir(parents=True, exist_ok=True)
+        for pattern in SMALL_RUN_FILES:
+            for f in run.path.glob(pattern):
+                shutil.copy2(f, target / f.name)
+        copied.append(target)
+    print(f"copied {len(copied)} runs to {dest}", file=sys.stderr)
+    return copied
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m billiards.report", description=__doc__.split("\n\n")[0])
     parser.add_argument("dirs", nargs="+", type=Path, help="run or sweep directories (searched recursively)")
     parser.add_argument("--out", type=Path, default=None, help="markdown file (default DIR/report.md or ./report.md)")
+    parser.add_argument("--copy-to", type=Path, default=None,
+                        help="also copy each finished run's small files (config, evaluations, summary, metrics) "
+                             "to COPY_TO/<run name>/, e.g. to commit them under results/")
     args = parser.parse_args(argv)
+    if args.copy_to is not None:
+        copy_runs(args.dirs, args.copy_to)
     text = report(args.dirs)
     out = args.out or (args.dirs[0] / "report.md" if len(args.dirs) == 1 else Path("report.md"))
     out.write_text(text)

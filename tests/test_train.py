@@ -99,6 +99,15 @@ def test_joblib_multirun_and_report(tmp_path):
     row = next(line for line in proc.stdout.splitlines() if line.startswith("| + extra feat."))
     assert "| 2 |" in row and "6.460 ± 0.123" in row
     assert "No runs yet for: plain SAC, + aim constraint." in proc.stdout
+    # --copy-to keeps the small files only, and the report reads the copies the same way
+    copies = tmp_path / "copies"
+    ok(subprocess.run([sys.executable, "-m", "billiards.report", str(sweep), "--copy-to", str(copies), "--out", str(tmp_path / "a.md")],
+                      cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=60))
+    assert sorted(p.name for p in copies.iterdir()) == [r.name for r in runs]
+    assert not list(copies.rglob("checkpoint.pt")) and len(list(copies.rglob("eval.json"))) == 2
+    again = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(copies)], cwd=tmp_path, env=ENV,
+                              capture_output=True, text=True, timeout=60))
+    assert row in again.stdout
 
 
 def test_killed_run_resumes_and_finishes(tmp_path):
