@@ -95,7 +95,9 @@ def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random
                 allowed = math.ceil(cfg.pw_c * (node.visits + 1) ** cfg.pw_alpha)
                 n_child = len(node.children)
                 if n_child < allowed or not live:
-                    if n_child == len(node.pool):  # prior samples used up: draw more
+                    if node.pool is None:  # first expansion of this node: draw its prior samples
+                        node.pool = proposer.propose(node.positions[None], cfg.pool, rng)[0]
+                    elif n_child == len(node.pool):  # prior samples used up: draw more
                         more = proposer.propose(node.positions[None], cfg.pool, rng)[0]
                         node.pool = np.concatenate([node.pool, more])
                     pending.append((s, path, path[-1], node.pool[n_child]))
@@ -115,7 +117,6 @@ def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random
             acts = np.stack([a for *_, a in expand])
             res = simulate_batch(start, acts, params)
             rewards = verifier_reward(res, cfg.foul_penalty)
-            new_ids = []
             for n, (s, path, parent, a) in enumerate(expand):
                 tree = trees[s]
                 child = _Node(res.positions[n], tree[parent].depth + 1, terminal=not bool(res.score[n]))
@@ -125,12 +126,6 @@ def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random
                 tree[parent].rewards.append(float(rewards[n]))
                 path.append(len(tree) - 1)
                 sims[s] += 1
-                new_ids.append((s, len(tree) - 1))
-            live = [(s, i) for s, i in new_ids if not trees[s][i].terminal and trees[s][i].depth < cfg.max_depth]
-            if live:
-                pools = proposer.propose(np.stack([trees[s][i].positions for s, i in live]), cfg.pool, rng)
-                for (s, i), pool in zip(live, pools):
-                    trees[s][i].pool = pool
         for s, path, _, _ in pending:  # back up discounted returns along each path
             tree, ret = trees[s], 0.0
             for depth in range(len(path) - 1, -1, -1):
