@@ -189,3 +189,26 @@ def test_policy_proposer_from_a_training_run(tmp_path):
     (tmp_path / "bad.pt").write_bytes(b"nope")
     with pytest.raises(Exception, match="corrupt or not a torch file"):
         load_policy(tmp_path / "bad.pt")
+
+
+SHIPPED = sorted(p.stem for p in (ROOT / "conf" / "proposer").glob("*.yaml") if p.stem != "geometric")
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_proposer_works_out_of_the_box(tmp_path, name):
+    """`python search.py proposer=<name>` runs from a fresh checkout: the exported policies
+    of conf/proposer/<name>.yaml are in the repository and load as one ensemble."""
+    out = tmp_path / "run"
+    proc = run_search(f"proposer={name}", "protocol=p3", "protocol.seeds=1", "protocol.cap=3", "search.k1=40",
+                      "search.m1=4", "search.budget=80", "progress=false", "picture=false", f"hydra.run.dir={out}")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    data = json.loads((out / "results.json").read_text())
+    assert data["proposer"] == name and len(data["config"]["proposer"]["checkpoints"]) == 3
+
+
+def test_a_missing_proposer_checkpoint_fails_fast(tmp_path):
+    out = tmp_path / "never"
+    proc = run_search("proposer=geometric", "proposer.kind=policy", "proposer.checkpoints=[results/policies/none/seed0.pt]",
+                      f"hydra.run.dir={out}")
+    assert proc.returncode != 0 and "no checkpoint at results/policies/none/seed0.pt" in proc.stderr
+    assert not out.exists()
