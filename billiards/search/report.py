@@ -35,7 +35,8 @@ def _cell(res: dict | None, protocol: str) -> str:
     if res is None:
         return "—"
     if protocol == "p1":
-        return f"{res['mean']:.2f}"
+        innings = res.get("extra", {}).get("n_innings")
+        return f"{res['mean']:.2f}" + (f" ({innings} inn.)" if innings and innings != 100 else "")
     capped = res.get("extra", {}).get("cap")
     tail = f", cap {capped}" if capped and capped != 10000 else ""
     return f"{res['mean']:.1f} ({res['max']:.0f}{tail})"
@@ -57,7 +58,8 @@ def table6_markdown(results: list[dict]) -> str:
     names = sorted({k[0] for k in cells}, key=lambda n: (n not in PAPER_TABLE6, list(PAPER_TABLE6).index(n) if n in PAPER_TABLE6 else 0, n))
     lines = [
         "Table 6: proposers at 400 simulations per shot. P1: points per 100-shot random-start inning (100 innings); "
-        "P3: canonical-start chain length before the first miss or foul, mean (longest). Ours | paper.",
+        "P3: canonical-start chain length before the first miss or foul, mean (longest). Ours | paper. "
+        "(n inn.): fewer P1 innings; cap: chains stopped at that length.",
         "",
         "| proposer | P1 h=2 | P1 PUCT | P3 h=2 mean (max) | P3 PUCT mean (max) |",
         "|---|---|---|---|---|",
