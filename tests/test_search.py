@@ -194,16 +194,26 @@ def test_policy_proposer_from_a_training_run(tmp_path):
 SHIPPED = sorted(p.stem for p in (ROOT / "conf" / "proposer").glob("*.yaml") if p.stem != "geometric")
 
 
-@pytest.mark.parametrize("name", SHIPPED)
-def test_shipped_proposer_works_out_of_the_box(tmp_path, name):
+def test_shipped_proposers_work_out_of_the_box(tmp_path):
     """`python search.py proposer=<name>` runs from a fresh checkout: the exported policies
-    of conf/proposer/<name>.yaml are in the repository and load as one ensemble."""
-    out = tmp_path / "run"
-    proc = run_search(f"proposer={name}", "protocol=p3", "protocol.seeds=1", "protocol.cap=3", "search.k1=40",
-                      "search.m1=4", "search.budget=80", "progress=false", "picture=false", f"hydra.run.dir={out}")
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    data = json.loads((out / "results.json").read_text())
-    assert data["proposer"] == name and len(data["config"]["proposer"]["checkpoints"]) == 3
+    of every conf/proposer/<name>.yaml are in the repository and load as one ensemble."""
+    import yaml
+
+    from billiards.rl.policy import load_policy_proposer
+
+    racks = random_racks(np.random.default_rng(5), 2)
+    for name in SHIPPED:
+        cfg = yaml.safe_load((ROOT / "conf" / "proposer" / f"{name}.yaml").read_text())
+        assert cfg["kind"] == "policy" and len(cfg["checkpoints"]) == 3
+        prop = load_policy_proposer([ROOT / c for c in cfg["checkpoints"]], name=name)
+        res = h2_search(racks, prop, H2Config(k1=8, m1=2, k2=4), np.random.default_rng(1))
+        assert res.actions.shape == (2, 4) and np.isfinite(res.actions).all()
+    if SHIPPED:  # one through the entry point
+        out = tmp_path / "run"
+        proc = run_search(f"proposer={SHIPPED[0]}", "protocol=p3", "protocol.seeds=1", "protocol.cap=3", "search.k1=40",
+                          "search.m1=4", "search.budget=80", "progress=false", "picture=false", f"hydra.run.dir={out}")
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert json.loads((out / "results.json").read_text())["proposer"] == SHIPPED[0]
 
 
 def test_a_missing_proposer_checkpoint_fails_fast(tmp_path):
