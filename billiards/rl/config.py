@@ -340,10 +340,12 @@ def _errors(cfg: DictConfig) -> list[str]:
 
 def resolve_rm_model(path: str) -> Path:
     """A reward-model path as given if it exists (or is absolute), else relative to the repo."""
+    from billiards.provenance import ROOT
+
     p = Path(path)
     if p.is_absolute() or p.exists():
         return p
-    return Path(__file__).resolve().parents[2] / p
+    return ROOT / p
 
 
 def _curriculum_errors(cfg: DictConfig) -> list[str]:
