@@ -17,6 +17,12 @@ laid out as the paper's Table 6 (:mod:`billiards.search.report`).
 The paper's figures are printed beside ours for runs whose preset names a table. Runs without
 a table are grouped by the settings that differ between them. The markdown goes to stdout and
 to ``--out`` (default: ``DIR/report.md`` for one DIR, else ``./report.md``).
+
+Learning curves (``--curves``): every periodic evaluation in each run's
+``eval_history.jsonl``, unfinished runs included, as one markdown table per variant (steps,
+CPU minutes, mean ± std over seeds); ``--cpu-budget MIN`` adds, per run, the last evaluation
+made within MIN CPU minutes of training; ``--plot FILE.png`` draws the curves against env
+steps and CPU minutes.
 """
 
 from __future__ import annotations
@@ -304,6 +310,127 @@ def report(dirs: list[Path]) -> str:
 SMALL_RUN_FILES = ("config.yaml", "eval.json", "eval_*.json", "summary.json", "eval_history.jsonl", "metrics.csv")
 
 
+@dataclass
+class Curve:
+    """One run's periodic evaluations from the run's primary start (``eval_history.jsonl``)."""
+
+    path: Path
+    config: dict
+    points: list[dict]  # step, updates, cpu_time, wall_time, eval_mean, ... in step order
+
+    @property
+    def variant(self) -> str:
+        return Run(self.path, self.config, {}, {}).variant()
+
+    @property
+    def table(self) -> str | None:
+        return self.config.get("table")
+
+    def within_cpu(self, seconds: float) -> dict | None:
+        """The last evaluation made within ``seconds`` of process CPU time, or None."""
+        inside = [p for p in self.points if p["cpu_time"] <= seconds]
+        return inside[-1] if inside else None
+
+
+def find_curves(dirs: list[Path]) -> list[Curve]:
+    """Every run dir under ``dirs`` with a ``config.yaml`` and an ``eval_history.jsonl``
+    (finished or not)."""
+    from billiards.rl.config import EVAL_HISTORY_FILE
+
+    curves = []
+    for d in dirs:
+        for hist in sorted(d.rglob(EVAL_HISTORY_FILE)):
+            run_dir = hist.parent
+            cfg_path = run_dir / "config.yaml"
+            if not cfg_path.is_file():
+                continue
+            config = yaml.safe_load(cfg_path.read_text())
+            rows = [json.loads(line) for line in hist.read_text().splitlines() if line.strip()]
+            if not rows:
+                continue
+            start = rows[0].get("start", "random")
+            points = sorted((r for r in rows if r.get("start", "random") == start), key=lambda r: r["step"])
+            curves.append(Curve(run_dir, config, points))
+    return curves
+
+
+def _label(table: str | None, variant: str) -> str:
+    spec = PAPER.get(table or "")
+    return spec["labels"].get(variant, variant) if spec else variant
+
+
+def _group_curves(curves: list[Curve]) -> dict[tuple, list[Curve]]:
+    groups: dict[tuple, list[Curve]] = defaultdict(list)
+    for c in curves:
+        groups[(c.table or "", c.variant)].append(c)
+    return dict(sorted(groups.items()))
+
+
+def curves_markdown(curves: list[Curve], cpu_budget_min: float | None = None) -> str:
+    """Learning curves as markdown: per variant, the mean ± std over seeds of the evaluation
+    mean at each evaluated step (only steps every seed has reached), with mean CPU minutes."""
+    lines = ["## Learning curves", "",
+             "Periodic evaluations (unified protocol, the run's own eval innings) from each run's "
+             "eval_history.jsonl; mean ± std over the seeds that reached the step; CPU min: mean "
+             "process CPU minutes at that evaluation.", ""]
+    for (table, variant), group in _group_curves(curves).items():
+        seeds = sorted(c.config.get("seed") for c in group)
+        lines += [f"### {table + ': ' if table else ''}{_label(table, variant)} (seeds {', '.join(map(str, seeds))})", ""]
+        lines += ["| steps | seeds | updates | CPU min | mean ± std | best |", "|---|---|---|---|---|---|"]
+        steps = sorted({p["step"] for c in group for p in c.points})
+        for step in steps:
+            pts = [p for c in group for p in c.points if p["step"] == step]
+            means = np.array([p["eval_mean"] for p in pts])
+            cpu = np.mean([p["cpu_time"] for p in pts]) / 60
+            updates = int(np.mean([p.get("updates", 0) for p in pts]))
+            best = max(int(p["eval_best"]) for p in pts)
+            lines.append(f"| {step:,} | {len(pts)} | {updates:,} | {cpu:.1f} | {means.mean():.3f} ± {means.std():.3f} | {best} |")
+        if cpu_budget_min is not None:
+            lines += ["", f"Within {cpu_budget_min:g} CPU minutes of training, per seed:", "",
+                      "| seed | steps | CPU min | wall min | mean | final evaluation? |", "|---|---|---|---|---|---|"]
+            picks = []
+            for c in sorted(group, key=lambda c: c.config.get("seed")):
+                p = c.within_cpu(cpu_budget_min * 60)
+                if p is None:
+                    lines.append(f"| {c.config.get('seed')} | – | – | – | no evaluation yet | – |")
+                    continue
+                picks.append(p["eval_mean"])
+                lines.append(f"| {c.config.get('seed')} | {p['step']:,} | {p['cpu_time'] / 60:.1f} | "
+                             f"{p['wall_time'] / 60:.1f} | {p['eval_mean']:.3f} | {'yes' if p.get('final') else 'no'} |")
+            if picks:
+                lines += ["", f"Mean over seeds: {np.mean(picks):.3f} ± {np.std(picks):.3f}"]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def plot_curves(curves: list[Curve], path: Path) -> Path:
+    """Evaluation mean against env steps and against CPU minutes, one colour per variant,
+    one line per seed."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11, 4.2), dpi=110)
+    axes = fig.subplots(1, 2, sharey=True)
+    for i, ((table, variant), group) in enumerate(_group_curves(curves).items()):
+        colour = f"C{i % 10}"
+        for j, c in enumerate(sorted(group, key=lambda c: c.config.get("seed"))):
+            steps = [p["step"] for p in c.points]
+            cpu = [p["cpu_time"] / 60 for p in c.points]
+            means = [p["eval_mean"] for p in c.points]
+            label = f"{table + ': ' if table else ''}{_label(table, variant)}" if j == 0 else None
+            axes[0].plot(steps, means, "-o", ms=3, color=colour, alpha=0.8, label=label)
+            axes[1].plot(cpu, means, "-o", ms=3, color=colour, alpha=0.8)
+    axes[0].set_xlabel("env steps (shots)")
+    axes[1].set_xlabel("CPU minutes (training process)")
+    axes[0].set_ylabel("points per inning (eval)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
 def copy_runs(dirs: list[Path], dest: Path) -> list[Path]:
     """Copy the small files of every finished run under ``dirs`` (no checkpoint) to
     ``dest/<run dir name>/``; the report reads the copies like the originals."""
@@ -329,10 +456,27 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--copy-to", type=Path, default=None,
                         help="also copy each finished run's small files (config, evaluations, summary, metrics) "
                              "to COPY_TO/<run name>/, e.g. to commit them under results/")
+    parser.add_argument("--curves", action="store_true",
+                        help="learning curves: every periodic evaluation per variant (unfinished runs included)")
+    parser.add_argument("--cpu-budget", type=float, default=None, metavar="MIN",
+                        help="with --curves: each run's last evaluation within MIN CPU minutes of training")
+    parser.add_argument("--plot", type=Path, default=None, metavar="FILE.png",
+                        help="draw the learning curves against env steps and CPU minutes")
     args = parser.parse_args(argv)
+    if args.cpu_budget is not None and (not args.curves or not args.cpu_budget > 0):
+        parser.error("--cpu-budget needs --curves and a positive number of minutes")
     if args.copy_to is not None:
         copy_runs(args.dirs, args.copy_to)
-    text = report(args.dirs)
+    if args.curves or args.plot:
+        curves = find_curves(args.dirs)
+        if not curves:
+            raise SystemExit(f"Error: no eval_history.jsonl under {', '.join(map(str, args.dirs))}")
+    if args.plot:
+        print(f"(learning curves drawn to {plot_curves(curves, args.plot)})", file=sys.stderr)
+    if args.curves:
+        text = curves_markdown(curves, args.cpu_budget)
+    else:
+        text = report(args.dirs)
     out = args.out or (args.dirs[0] / "report.md" if len(args.dirs) == 1 else Path("report.md"))
     out.write_text(text)
     sys.stdout.write(text)

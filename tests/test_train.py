@@ -76,6 +76,28 @@ def test_smoke_run_writes_eval_json(tmp_path, algo):
     ok(proc)
     assert f"{algo}, random_continue, plain, shaping=none | 1 |" in proc.stdout
     assert (run_dir / "report.md").read_text() == proc.stdout
+    if algo == "sac":
+        check_learning_curves(run_dir, tmp_path)
+
+
+def check_learning_curves(run_dir: Path, tmp_path: Path) -> None:
+    """`report --curves --cpu-budget --plot` on a real run: one row per periodic evaluation,
+    and the CPU-budget pick is the last evaluation within the budget."""
+    from billiards.report import main as report_main
+
+    history = [json.loads(line) for line in (run_dir / "eval_history.jsonl").read_text().splitlines()]
+    assert [h["step"] for h in history] == [1024, 2048]
+    # a budget between the two evaluations' CPU times picks the first one
+    budget_min = (history[0]["cpu_time"] + history[1]["cpu_time"]) / 2 / 60
+    out, png = tmp_path / "curves.md", tmp_path / "curves.png"
+    report_main([str(run_dir), "--curves", "--cpu-budget", str(budget_min), "--plot", str(png), "--out", str(out)])
+    text = out.read_text()
+    for h in history:
+        assert f"| {h['step']:,} | 1 | {h['updates']:,} | {h['cpu_time'] / 60:.1f} | {h['eval_mean']:.3f} ± 0.000 |" in text
+    assert f"| 0 | 1,024 | {history[0]['cpu_time'] / 60:.1f} |" in text and f"{history[0]['eval_mean']:.3f} | no |" in text
+    assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
+    with pytest.raises(SystemExit):  # a CPU budget without --curves is a usage error
+        report_main([str(run_dir), "--cpu-budget", "5"])
 
 
 def test_joblib_multirun_and_report(tmp_path):
