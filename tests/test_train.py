@@ -72,7 +72,7 @@ def test_smoke_run_writes_eval_json(tmp_path, algo):
         assert list((run_dir / "wandb").glob("offline-run-*")), "no offline wandb run"
     # the report reads the run (no paper table: grouped by settings)
     proc = subprocess.run([sys.executable, "-m", "billiards.report", str(run_dir)], cwd=tmp_path, env=ENV,
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=180)
     ok(proc)
     assert f"{algo}, random_continue, plain, shaping=none | 1 |" in proc.stdout
     assert (run_dir / "report.md").read_text() == proc.stdout
@@ -116,7 +116,7 @@ def test_joblib_multirun_and_report(tmp_path):
         check_finished(run, frames=1024)
     assert {json.loads((r / "summary.json").read_text())["seed"] for r in runs} == {0, 1}
     proc = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(sweep)], cwd=tmp_path, env=ENV,
-                             capture_output=True, text=True, timeout=60))
+                             capture_output=True, text=True, timeout=180))
     # Table 4 layout with the paper's figures beside ours
     row = next(line for line in proc.stdout.splitlines() if line.startswith("| + extra feat."))
     assert "| 2 |" in row and "6.460 ± 0.123" in row
@@ -124,12 +124,24 @@ def test_joblib_multirun_and_report(tmp_path):
     # --copy-to keeps the small files only, and the report reads the copies the same way
     copies = tmp_path / "copies"
     ok(subprocess.run([sys.executable, "-m", "billiards.report", str(sweep), "--copy-to", str(copies), "--out", str(tmp_path / "a.md")],
-                      cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=60))
+                      cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=180))
     assert sorted(p.name for p in copies.iterdir()) == [r.name for r in runs]
     assert not list(copies.rglob("checkpoint.pt")) and len(list(copies.rglob("eval.json"))) == 2
     again = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(copies)], cwd=tmp_path, env=ENV,
-                              capture_output=True, text=True, timeout=60))
+                              capture_output=True, text=True, timeout=180))
     assert row in again.stdout
+
+
+def test_report_loads_without_torch_or_the_simulator(tmp_path):
+    """`billiards.report` (and the search tables it reads) is file work: it must not pay for
+    importing torch, TorchRL or numba, so it stays instant on a loaded cluster node."""
+    code = (
+        "import sys, billiards.report, billiards.search.report; "
+        "heavy = [m for m in ('torch', 'torchrl', 'tensordict', 'numba') if m in sys.modules]; "
+        "assert not heavy, heavy; "
+        "from billiards.search import H2Config; assert 'numba' in sys.modules"
+    )
+    ok(subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=180))
 
 
 def test_killed_run_resumes_and_finishes(tmp_path):

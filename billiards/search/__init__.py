@@ -1,11 +1,27 @@
-"""Inference-time search with the simulator as verifier: depth-2 lookahead and PUCT."""
+"""Inference-time search with the simulator as verifier: depth-2 lookahead and PUCT.
 
-from .actors import LookaheadActor, PUCTActor, SearchActor, make_search_collector
-from .lookahead import H2Config, SearchResult, h2_search, verifier_reward
-from .proposers import GeometricProposer, PolicyProposer, Proposer
-from .puct import PUCTConfig, puct_search
+Names are imported lazily (PEP 562), so ``billiards.search.report`` -- used by
+``python -m billiards.report`` -- loads without torch, TorchRL or the simulator.
+"""
 
-__all__ = [
-    "GeometricProposer", "H2Config", "LookaheadActor", "PUCTActor", "PUCTConfig", "PolicyProposer", "Proposer",
-    "SearchActor", "SearchResult", "h2_search", "make_search_collector", "puct_search", "verifier_reward",
-]
+from importlib import import_module
+
+_WHERE = {
+    "LookaheadActor": "actors", "PUCTActor": "actors", "SearchActor": "actors", "make_search_collector": "actors",
+    "H2Config": "lookahead", "SearchResult": "lookahead", "h2_search": "lookahead", "verifier_reward": "lookahead",
+    "GeometricProposer": "proposers", "PolicyProposer": "proposers", "Proposer": "proposers",
+    "PUCTConfig": "puct", "puct_search": "puct",
+}
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f".{_WHERE[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
