@@ -87,6 +87,13 @@ PAPER = {
         "labels": {"plain": "plain SAC", "aim": "+ aim constraint", "aim_features": "+ extra feat."},
         "columns": ["mean", "max", "foul_sh", "succ_sh"],
     },
+    "cpu_hour": {
+        "title": "One CPU hour per seed (experiment=cpu_hour): aim constraint + carom features SAC, "
+                 "against the paper's Table 4 row at 1M steps",
+        "rows": {"aim_features": {"mean": 6.460, "std": 0.123, "max": 10, "foul_sh": 11.1, "succ_sh": 64.6}},
+        "labels": {"plain": "plain SAC", "aim": "+ aim constraint", "aim_features": "+ extra feat."},
+        "columns": ["mean", "max", "foul_sh", "succ_sh"],
+    },
     "table5": {
         "title": "Table 5: reward shaping on the constraint+extra base (paper: 3 seeds, 1M steps)",
         "rows": {
@@ -136,7 +143,7 @@ class Run:
             return env["paradigm"]
         if table == "table3":
             return table3_variant(c)
-        if table == "table4":
+        if table in ("table4", "cpu_hour"):
             return {(False, False): "plain", (True, False): "aim", (True, True): "aim_features"}.get(
                 (bool(env.get("constrain_aim")), bool(env.get("extra_features"))), "features_only")
         if table == "table5":

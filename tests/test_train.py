@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 
 from billiards.evaluation import EvalResult
 
@@ -132,6 +133,29 @@ def test_joblib_multirun_and_report(tmp_path):
     assert row in again.stdout
 
 
+def test_cpu_hour_preset_stops_at_its_cpu_budget(tmp_path):
+    """experiment=cpu_hour composes (aim + features SAC, lr 1e-3, gamma 0.9) and
+    budget.cpu_minutes ends training long before budget.total_steps, then evaluates."""
+    sweep = tmp_path / "sweep"
+    ok(train(
+        tmp_path, "experiment=cpu_hour", "seed=0", "budget=smoke", "budget.total_steps=1000000",
+        "budget.cpu_minutes=0.1", "budget.eval_every=0", "budget.checkpoint_every=0", f"hydra.sweep.dir={sweep}",
+    ))
+    (run,) = [p.parent for p in sweep.glob("*/eval.json")]
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["stopped_by"] == "cpu_minutes"
+    assert 512 < summary["frames"] < 1_000_000 and summary["cpu_seconds"] >= 6.0
+    config = yaml.safe_load((run / "config.yaml").read_text())
+    assert (config["algo"]["lr"], config["algo"]["gamma"]) == (1e-3, 0.9)
+    assert config["env"]["constrain_aim"] and config["env"]["extra_features"]
+    assert EvalResult.from_json(run / "eval.json").n_innings == 10
+    proc = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(sweep)], cwd=tmp_path, env=ENV,
+                             capture_output=True, text=True, timeout=180))
+    assert "One CPU hour per seed" in proc.stdout
+    row = next(line for line in proc.stdout.splitlines() if line.startswith("| + extra feat."))
+    assert "| 1 |" in row and "6.460 ± 0.123" in row
+
+
 def test_report_loads_without_torch_or_the_simulator(tmp_path):
     """`billiards.report` (and the search tables it reads) is file work: it must not pay for
     importing torch, TorchRL or numba, so it stays instant on a loaded cluster node."""
@@ -173,6 +197,7 @@ BAD = [
     (["algo.lrr=0.1"], "Key 'lrr' not in 'SACConfig'"),
     (["algo=ppo", "algo.utd=2"], "Key 'utd' not in 'PPOConfig'"),
     (["env.num_envs=0"], "env.num_envs must be > 0"),
+    (["budget.cpu_minutes=-1"], "budget.cpu_minutes must be >= 0, got -1.0"),
     (["resume=nowhere"], "resume='nowhere': no such run directory"),
     (["-m", "seed=0,1", "budget.eval_innings=0"], "budget.eval_innings must be > 0"),
     (["experiment=table4", "budget.total_steps=-1"], "budget.total_steps must be > 0, got -1"),

@@ -86,6 +86,8 @@ class OffPolicyConfig:
 @dataclass
 class SACConfig(OffPolicyConfig):
     name: str = "sac"
+    lr: float = 1e-3  # learns far more per CPU minute here than 3e-4 (conf/algo/sac.yaml)
+    gamma: float = 0.9  # the horizon of a 10-shot inning; 0.99 learns far slower here
     alpha_init: float = 1.0
     target_entropy: Optional[float] = None  # None = "auto" = -dim(action)
 
@@ -180,6 +182,7 @@ class BudgetConfig:
     final_eval_innings: int = 100  # innings of the final evaluation (the paper's protocol: 100)
     checkpoint_every: int = 50_000  # 0 = only at the end
     log_every: int = 5_000
+    cpu_minutes: float = 0.0  # also stop training once this run has used this many process CPU minutes (0 = no limit); the final evaluation follows
     kill_after_checkpoint: int = 0  # debug: SIGKILL the run right after writing its n-th checkpoint (0 = never)
 
 
@@ -274,6 +277,7 @@ def _errors(cfg: DictConfig) -> list[str]:
         positive(f"budget.{key}", b[key], strict=False)
     for key in ("eval_innings", "final_eval_innings", "log_every"):
         positive(f"budget.{key}", b[key])
+    positive("budget.cpu_minutes", b.cpu_minutes, strict=False)
     positive("env.num_envs", e.num_envs)
     positive("env.max_shots", e.max_shots)
     positive("eval.max_shots", cfg.eval.max_shots)

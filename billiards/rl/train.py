@@ -313,6 +313,15 @@ class Trainer:
         return (self.train_seconds + time.perf_counter() - self._t0,
                 self.cpu_seconds + time.process_time() - self._c0)
 
+    def _cpu_spent(self) -> bool:
+        """True once budget.cpu_minutes (if set) of process CPU time are used up."""
+        limit = self.cfg.budget.cpu_minutes
+        return bool(limit) and self._times()[1] >= 60.0 * limit
+
+    def _finished(self) -> bool:
+        """The training budget is spent: budget.total_steps frames or budget.cpu_minutes."""
+        return self.frames >= self.cfg.budget.total_steps or self._cpu_spent()
+
     def _window_reset(self) -> None:
         self._w_frames, self._w_updates, self._w_t = 0, self.agent.n_updates, time.perf_counter()
         self._w_reward = self._w_score = self._w_foul = 0.0
@@ -354,7 +363,7 @@ class Trainer:
             self.logger.log(self._log_row())
             self._window_reset()
             self.next_log = (self.frames // b.log_every + 1) * b.log_every
-        done = self.frames >= b.total_steps  # the final evaluation and checkpoint follow
+        done = self._finished()  # the final evaluation and checkpoint follow
         if self.frames >= self.next_eval and not done:
             result = evaluate_policy(self.cfg, self.agent.policy, b.eval_innings, eval_starts(self.cfg)[0])
             self._record_eval(result, final=False)
@@ -417,6 +426,8 @@ class Trainer:
                 self._update_stage()
                 bar.update(n)
                 self._periodic(bar)
+                if self._cpu_spent():
+                    break
         finally:
             collector.shutdown()
 
@@ -435,6 +446,8 @@ class Trainer:
                         self._w_metrics = self.agent.update(flat[perm[i:i + a.minibatch_size]])
                 bar.update(n)
                 self._periodic(bar)
+                if self._cpu_spent():
+                    break
         finally:
             collector.shutdown()
 
@@ -445,7 +458,7 @@ class Trainer:
         with tqdm(total=b.total_steps, initial=self.frames, unit="shot", unit_scale=True, dynamic_ncols=True,
                   mininterval=1.0 if interactive else 30.0, disable=not cfg.progress, file=sys.stderr,
                   desc=f"{self.algo} {self.run_dir.name}", smoothing=0.05) as bar:
-            if self.frames < b.total_steps:
+            if not self._finished():
                 (self._off_policy if self.off_policy else self._ppo)(bar)
             results = self._final_eval()
             save_checkpoint(self.run_dir, self._state())
@@ -471,6 +484,7 @@ class Trainer:
             "seed": cfg.seed,
             "frames": self.frames,
             "updates": self.agent.n_updates,
+            "stopped_by": "total_steps" if self.frames >= cfg.budget.total_steps else "cpu_minutes",
             "train_seconds": round(train_seconds, 2),
             "cpu_seconds": round(cpu_seconds, 2),
             "frames_per_second": round(self.frames / max(train_seconds, 1e-9), 1),
