@@ -151,6 +151,42 @@ class Run:
         return generic_label(c)
 
 
+# Top-level config keys that never put two runs in different rows: the seed, run-time switches,
+# the budget (the steps column shows it), logging and the table label itself.
+SAME_ROW_KEYS = ("seed", "resume", "threads", "progress", "compile", "budget", "logger", "checkpoint", "table", "paper_steps")
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = tuple(v) if isinstance(v, list) else v
+    return out
+
+
+def split_by_settings(items: list, config_of) -> dict[str, list]:
+    """Split the runs (or curves) of one row by the settings that differ between them, so runs
+    with, say, another learning rate never merge into one mean: ``{"": items}`` when they agree,
+    else ``{" (algo.lr=0.001, algo.gamma=0.9)": [...], ...}``. Keys missing from some configs
+    (written before the schema had them) are not compared."""
+    flats = [{k: v for k, v in _flat(config_of(it)).items() if k.split(".")[0] not in SAME_ROW_KEYS} for it in items]
+    common = set.intersection(*(set(f) for f in flats)) if flats else set()
+    differing = sorted(k for k in common if len({repr(f[k]) for f in flats}) > 1)
+    if not differing:
+        return {"": items}
+    out: dict[str, list] = defaultdict(list)
+    for it, f in zip(items, flats):
+        out[" (" + ", ".join(f"{k}={f[k]}" for k in differing) + ")"].append(it)
+    return dict(sorted(out.items()))
+
+
+def base_variant(variant: str) -> str:
+    """The table's variant name of a row key that :func:`split_by_settings` may have suffixed."""
+    return variant.split(" (", 1)[0]
+
+
 def table3_variant(c: dict) -> str:
     env, shaping = c.get("env", {}), c.get("shaping", {})
     if c.get("curriculum", {}).get("name", "none") != "none":
@@ -242,8 +278,9 @@ def render_table(table: str | None, groups: dict[str, list[Run]]) -> str:
     spec = PAPER.get(table or "")
     lines = []
     if spec:
-        columns, order = spec["columns"], list(spec["rows"])
-        order += sorted(v for v in groups if v not in order)
+        columns, rows = spec["columns"], list(spec["rows"])
+        rank = {v: i for i, v in enumerate(rows)}
+        order = sorted(groups, key=lambda v: (rank.get(base_variant(v), len(rows)), v))
         lines.append(f"### {spec['title']}")
         lines.append("")
         header = ["variant", "seeds", "steps", "wall min", "CPU min"]
@@ -260,15 +297,16 @@ def render_table(table: str | None, groups: dict[str, list[Run]]) -> str:
         if variant not in groups:
             continue
         agg = aggregate(groups[variant])
-        label = spec["labels"].get(variant, variant) if spec else variant
+        label = _label(table, variant)
         minutes = [f"{agg[k]:.1f}" if agg[k] is not None else "–" for k in ("minutes", "cpu_minutes")]
         cells = [label, str(agg["n"]), _steps(agg["frames"]), *minutes]
         for c in columns:
             cells.append(_fmt(c, agg))
             if spec:
-                cells.append(_fmt(c, spec["rows"].get(variant)))
+                cells.append(_fmt(c, spec["rows"].get(base_variant(variant))))
         lines.append("| " + " | ".join(cells) + " |")
-    missing = [spec["labels"][v] for v in spec["rows"] if v not in groups] if spec else []
+    present = {base_variant(v) for v in groups}
+    missing = [spec["labels"][v] for v in spec["rows"] if v not in present] if spec else []
     if missing:
         lines.append("")
         lines.append(f"No runs yet for: {', '.join(missing)}.")
@@ -295,6 +333,9 @@ def report(dirs: list[Path]) -> str:
     for table, row, source in (("table3", "plain", "plain"), ("table3", "aim", "aim"), ("table5", "none", "aim_features")):
         if table in by_table and row not in by_table[table] and source in by_table.get("table4", {}):
             by_table[table][row] = by_table["table4"][source]
+    for table, groups in by_table.items():
+        by_table[table] = {variant + suffix: part for variant, group in groups.items()
+                           for suffix, part in split_by_settings(group, lambda r: r.config).items()}
     parts = [
         "## Training results",
         "",
@@ -363,14 +404,19 @@ def find_curves(dirs: list[Path]) -> list[Curve]:
 
 def _label(table: str | None, variant: str) -> str:
     spec = PAPER.get(table or "")
-    return spec["labels"].get(variant, variant) if spec else variant
+    if not spec:
+        return variant
+    base = base_variant(variant)
+    return spec["labels"].get(base, base) + variant[len(base):]
 
 
 def _group_curves(curves: list[Curve]) -> dict[tuple, list[Curve]]:
     groups: dict[tuple, list[Curve]] = defaultdict(list)
     for c in curves:
         groups[(c.table or "", c.variant)].append(c)
-    return dict(sorted(groups.items()))
+    split = {(table, variant + suffix): part for (table, variant), group in groups.items()
+             for suffix, part in split_by_settings(group, lambda c: c.config).items()}
+    return dict(sorted(split.items()))
 
 
 def curves_markdown(curves: list[Curve], cpu_budget_min: float | None = None) -> str:

@@ -156,6 +156,38 @@ def test_cpu_hour_preset_stops_at_its_cpu_budget(tmp_path):
     assert "| 1 |" in row and "6.460 ± 0.123" in row
 
 
+def test_report_never_merges_runs_with_different_settings(tmp_path):
+    """Runs of one table row that differ in a setting (here algo.lr) get one row each, named by
+    the setting and still beside the paper's figure; seeds and budgets do not split a row."""
+    from billiards.report import main as report_main
+
+    def fake_run(name: str, seed: int, lr: float, mean: float, steps: int) -> None:
+        d = tmp_path / "runs" / name
+        d.mkdir(parents=True)
+        config = {"table": "table4", "seed": seed, "budget": {"total_steps": steps},
+                  "algo": {"name": "sac", "lr": lr, "hidden_sizes": [256, 256]},
+                  "env": {"paradigm": "random_continue", "constrain_aim": True, "extra_features": True},
+                  "shaping": {"name": "none"}}
+        (d / "config.yaml").write_text(yaml.safe_dump(config))
+        (d / "eval.json").write_text(json.dumps({"mean": mean, "best": 7, "start": "random", "foul_innings_pct": 50.0,
+                                                 "foul_per_shot_pct": 10.0, "success_per_shot_pct": 30.0}))
+        point = {"step": steps, "updates": 1, "cpu_time": 60.0, "wall_time": 60.0, "eval_mean": mean, "eval_best": 7}
+        (d / "eval_history.jsonl").write_text(json.dumps(point) + "\n")
+
+    fake_run("a0", 0, 3e-4, 2.0, 100_000)
+    fake_run("a1", 1, 3e-4, 4.0, 200_000)
+    fake_run("b0", 0, 1e-3, 5.0, 100_000)
+    out = tmp_path / "report.md"
+    report_main([str(tmp_path / "runs"), "--out", str(out)])
+    rows = [line for line in out.read_text().splitlines() if line.startswith("| + extra feat.")]
+    assert len(rows) == 2, rows
+    assert rows[0].startswith("| + extra feat. (algo.lr=0.0003) | 2 | 100k/200k |") and "3.000 ± 1.000 | 6.460 ± 0.123" in rows[0]
+    assert rows[1].startswith("| + extra feat. (algo.lr=0.001) | 1 | 100k |") and "5.000 ± 0.000 | 6.460 ± 0.123" in rows[1]
+    report_main([str(tmp_path / "runs"), "--curves", "--out", str(out)])
+    titles = [line for line in out.read_text().splitlines() if line.startswith("### ")]
+    assert titles == ["### table4: + extra feat. (algo.lr=0.0003) (seeds 0, 1)", "### table4: + extra feat. (algo.lr=0.001) (seeds 0)"]
+
+
 def test_report_loads_without_torch_or_the_simulator(tmp_path):
     """`billiards.report` (and the search tables it reads) is file work: it must not pay for
     importing torch, TorchRL or numba, so it stays instant on a loaded cluster node."""
@@ -187,6 +219,29 @@ def test_killed_run_resumes_and_finishes(tmp_path):
     proc = train(tmp_path, f"resume={run_dir}")
     assert proc.returncode != 0 and "corrupt or truncated" in proc.stderr
     assert EvalResult.from_json(run_dir / "eval.json") == result  # untouched
+
+
+def test_resume_takes_a_cpu_limit_only_when_given(caplog):
+    """A resume keeps the checkpoint's config: budget.cpu_minutes comes from the command line
+    only when given there (so a cpu_hour run resumed without it keeps its 60-minute limit),
+    threads always, and other overrides are ignored with a warning."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from billiards.rl.train import resume_config
+
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base=None):
+        saved = OmegaConf.to_container(compose("config", ["budget=smoke", "budget.cpu_minutes=60"]), resolve=True,
+                                       enum_to_str=True)
+        given = ["budget.cpu_minutes=5", "algo.lr=0.5", "threads=2", "resume=somewhere"]
+        current = compose("config", given)
+        plain = compose("config", ["resume=somewhere"])
+    cfg = resume_config(saved, current, overrides=given)
+    assert cfg.budget.cpu_minutes == 5 and cfg.threads == 2 and cfg.resume == "somewhere"
+    assert cfg.algo.lr == saved["algo"]["lr"] != 0.5 and cfg.budget.name == "smoke"
+    assert "ignoring overrides ['algo.lr=0.5']" in caplog.text
+    kept = resume_config(saved, plain, overrides=["resume=somewhere"])
+    assert kept.budget.cpu_minutes == 60 and plain.budget.cpu_minutes == 0
 
 
 BAD = [

@@ -50,6 +50,9 @@ log = logging.getLogger(__name__)
 
 # Keys taken from the command line when resuming (everything else comes from the checkpoint).
 RUNTIME_KEYS = ("threads", "progress", "compile", "budget.kill_after_checkpoint")
+# Keys a resume takes from the command line only when given there (else the checkpoint's value):
+# a killed run can be given a CPU-time limit, e.g. to end it within one CPU hour.
+RESUME_KEYS = ("budget.cpu_minutes",)
 
 
 # ----------------------------------------------------------------------------- setup helpers
@@ -125,20 +128,32 @@ def _typed(container: dict) -> DictConfig:
     return OmegaConf.merge(schema, container)
 
 
-def resume_config(saved: dict, current: DictConfig) -> DictConfig:
-    """The checkpoint's config, with RUNTIME_KEYS from the command line. Warns about other
-    command-line overrides, which a resume ignores."""
-    cfg = _typed(saved)
-    for key in RUNTIME_KEYS:
-        OmegaConf.update(cfg, key, OmegaConf.select(current, key), merge=False)
-    cfg.resume = current.resume
+def _command_line_overrides() -> list[str]:
+    """This invocation's Hydra task overrides (empty outside a Hydra app)."""
     try:
         from hydra.core.hydra_config import HydraConfig
 
-        overrides = list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else []
+        return list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else []
     except ValueError:
-        overrides = []
-    ignored = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") not in RUNTIME_KEYS + ("resume",)]
+        return []
+
+
+def resume_config(saved: dict, current: DictConfig, overrides: list[str] | None = None) -> DictConfig:
+    """The checkpoint's config, with RUNTIME_KEYS from the command line, and RESUME_KEYS where
+    ``overrides`` (default: this invocation's command line) set them. Warns about other
+    command-line overrides, which a resume ignores."""
+    if overrides is None:
+        overrides = _command_line_overrides()
+    cfg = _typed(saved)
+    for key in RUNTIME_KEYS:
+        OmegaConf.update(cfg, key, OmegaConf.select(current, key), merge=False)
+    given = {o.split("=", 1)[0].lstrip("+~") for o in overrides}
+    for key in RESUME_KEYS:
+        if key in given:
+            OmegaConf.update(cfg, key, OmegaConf.select(current, key), merge=False)
+            log.info("resume: %s=%s from the command line", key, OmegaConf.select(current, key))
+    cfg.resume = current.resume
+    ignored = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") not in RUNTIME_KEYS + RESUME_KEYS + ("resume",)]
     if ignored:
         log.warning("resume: the run keeps its checkpointed config; ignoring overrides %s", ignored)
     return cfg
