@@ -268,10 +268,13 @@ def _fmt(col: str, row: dict | None) -> str:
 
 
 def _steps(frames: list[int]) -> str:
+    """Steps of a row's runs, 3 significant digits: "100k", "100k/200k", or "1.23M–1.29M" for
+    more than two different counts (runs stopped by a CPU budget)."""
     def k(n: int) -> str:
-        return f"{n / 1e6:g}M" if n >= 1_000_000 else f"{n / 1e3:g}k" if n >= 1000 else str(n)
+        return f"{n / 1e6:.3g}M" if n >= 1_000_000 else f"{n / 1e3:.3g}k" if n >= 1000 else str(n)
 
-    return "/".join(k(f) for f in frames)
+    labels = list(dict.fromkeys(k(f) for f in frames))
+    return f"{labels[0]}–{labels[-1]}" if len(labels) > 2 else "/".join(labels)
 
 
 def render_table(table: str | None, groups: dict[str, list[Run]]) -> str:

@@ -176,16 +176,17 @@ def test_report_never_merges_runs_with_different_settings(tmp_path):
 
     fake_run("a0", 0, 3e-4, 2.0, 100_000)
     fake_run("a1", 1, 3e-4, 4.0, 200_000)
+    fake_run("a2", 2, 3e-4, 3.0, 1_234_567)  # e.g. stopped by a CPU budget: steps shown as a range
     fake_run("b0", 0, 1e-3, 5.0, 100_000)
     out = tmp_path / "report.md"
     report_main([str(tmp_path / "runs"), "--out", str(out)])
     rows = [line for line in out.read_text().splitlines() if line.startswith("| + extra feat.")]
     assert len(rows) == 2, rows
-    assert rows[0].startswith("| + extra feat. (algo.lr=0.0003) | 2 | 100k/200k |") and "3.000 ± 1.000 | 6.460 ± 0.123" in rows[0]
+    assert rows[0].startswith("| + extra feat. (algo.lr=0.0003) | 3 | 100k–1.23M |") and "3.000 ± 0.816 | 6.460 ± 0.123" in rows[0]
     assert rows[1].startswith("| + extra feat. (algo.lr=0.001) | 1 | 100k |") and "5.000 ± 0.000 | 6.460 ± 0.123" in rows[1]
     report_main([str(tmp_path / "runs"), "--curves", "--out", str(out)])
     titles = [line for line in out.read_text().splitlines() if line.startswith("### ")]
-    assert titles == ["### table4: + extra feat. (algo.lr=0.0003) (seeds 0, 1)", "### table4: + extra feat. (algo.lr=0.001) (seeds 0)"]
+    assert titles == ["### table4: + extra feat. (algo.lr=0.0003) (seeds 0, 1, 2)", "### table4: + extra feat. (algo.lr=0.001) (seeds 0)"]
 
 
 def test_report_loads_without_torch_or_the_simulator(tmp_path):
