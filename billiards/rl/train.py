@@ -147,13 +147,13 @@ def resume_config(saved: dict, current: DictConfig, overrides: list[str] | None 
     cfg = _typed(saved)
     for key in RUNTIME_KEYS:
         OmegaConf.update(cfg, key, OmegaConf.select(current, key), merge=False)
-    given = {o.split("=", 1)[0].lstrip("+~") for o in overrides}
+    keys = [o.split("=", 1)[0].lstrip("+~") for o in overrides]
     for key in RESUME_KEYS:
-        if key in given:
+        if key in keys:
             OmegaConf.update(cfg, key, OmegaConf.select(current, key), merge=False)
             log.info("resume: %s=%s from the command line", key, OmegaConf.select(current, key))
     cfg.resume = current.resume
-    ignored = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") not in RUNTIME_KEYS + RESUME_KEYS + ("resume",)]
+    ignored = [o for o, key in zip(overrides, keys) if key not in RUNTIME_KEYS + RESUME_KEYS + ("resume",)]
     if ignored:
         log.warning("resume: the run keeps its checkpointed config; ignoring overrides %s", ignored)
     return cfg
