@@ -434,7 +434,10 @@ def curves_markdown(curves: list[Curve], cpu_budget_min: float | None = None) ->
     for (table, variant), group in _group_curves(curves).items():
         seeds = sorted(c.config.get("seed") for c in group)
         lines += [f"### {table + ': ' if table else ''}{_label(table, variant)} (seeds {', '.join(map(str, seeds))})", ""]
-        lines += ["| steps | seeds | updates | CPU min | mean ± std | best |", "|---|---|---|---|---|---|"]
+        # runs with an averaged actor (algo.actor_ema) evaluate it, and the live actor beside it
+        live = any("live_eval_mean" in p for c in group for p in c.points)
+        lines += ["| steps | seeds | updates | CPU min | mean ± std | best |" + (" live actor |" if live else ""),
+                  "|---|---|---|---|---|---|" + ("---|" if live else "")]
         steps = sorted({p["step"] for c in group for p in c.points})
         for step in steps:
             pts = [p for c in group for p in c.points if p["step"] == step]
@@ -442,7 +445,11 @@ def curves_markdown(curves: list[Curve], cpu_budget_min: float | None = None) ->
             cpu = np.mean([p["cpu_time"] for p in pts]) / 60
             updates = int(np.mean([p.get("updates", 0) for p in pts]))
             best = max(int(p["eval_best"]) for p in pts)
-            lines.append(f"| {step:,} | {len(pts)} | {updates:,} | {cpu:.1f} | {means.mean():.3f} ± {means.std():.3f} | {best} |")
+            row = f"| {step:,} | {len(pts)} | {updates:,} | {cpu:.1f} | {means.mean():.3f} ± {means.std():.3f} | {best} |"
+            if live:
+                lives = np.array([p["live_eval_mean"] for p in pts if "live_eval_mean" in p])
+                row += f" {lives.mean():.3f} ± {lives.std():.3f} |" if len(lives) else " – |"
+            lines.append(row)
         if cpu_budget_min is not None:
             lines += ["", f"Within {cpu_budget_min:g} CPU minutes of training, per seed:", "",
                       "| seed | steps | CPU min | wall min | mean | final evaluation? |", "|---|---|---|---|---|---|"]

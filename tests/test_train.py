@@ -134,7 +134,7 @@ def test_joblib_multirun_and_report(tmp_path):
 
 
 def test_cpu_hour_preset_stops_at_its_cpu_budget(tmp_path):
-    """experiment=cpu_hour composes (aim + features SAC, lr 1e-3, gamma 0.9) and
+    """experiment=cpu_hour composes (aim + features SAC, lr 1e-3, gamma 0.9, averaged actor) and
     budget.cpu_minutes ends training long before budget.total_steps, then evaluates."""
     sweep = tmp_path / "sweep"
     ok(train(
@@ -146,7 +146,9 @@ def test_cpu_hour_preset_stops_at_its_cpu_budget(tmp_path):
     assert summary["stopped_by"] == "cpu_minutes"
     assert 512 < summary["frames"] < 1_000_000 and summary["cpu_seconds"] >= 6.0
     config = yaml.safe_load((run / "config.yaml").read_text())
-    assert (config["algo"]["lr"], config["algo"]["gamma"]) == (1e-3, 0.9)
+    assert (config["algo"]["lr"], config["algo"]["gamma"], config["algo"]["actor_ema"]) == (1e-3, 0.9, 5e-4)
+    final = json.loads((run / "eval_history.jsonl").read_text().splitlines()[-1])
+    assert final["final"] and "live_eval_mean" in final  # the averaged actor is evaluated, the live one beside it
     assert config["env"]["constrain_aim"] and config["env"]["extra_features"]
     assert EvalResult.from_json(run / "eval.json").n_innings == 10
     proc = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(sweep)], cwd=tmp_path, env=ENV,
@@ -245,6 +247,64 @@ def test_resume_takes_a_cpu_limit_only_when_given(caplog):
     assert kept.budget.cpu_minutes == 60 and plain.budget.cpu_minutes == 0
 
 
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_averaged_actor_is_what_a_run_evaluates_checkpoints_and_exports(tmp_path, algo):
+    """algo.actor_ema > 0: after every actor step the average moves by exactly
+    ``rate * (live - average)``; evaluations (periodic and final) play the averaged actor and
+    record the live one beside it; the checkpoint, load_policy and the exported policy file
+    all give the averaged actor."""
+    import torch
+    from hydra import compose, initialize_config_dir
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from billiards.rl.policy import export_policy, load_policy
+    from billiards.rl.train import Trainer
+
+    rate = 0.05
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base=None):
+        cfg = compose("config", [f"algo={algo}", "budget=smoke", "env=aim_features", f"algo.actor_ema={rate}",
+                                 "logger=csv", "progress=false"])
+    run_dir = tmp_path / "run"
+    trainer = Trainer(cfg, run_dir)
+    agent = trainer.agent
+    trainer.run()
+    check_finished(run_dir, frames=2048)
+    history = [json.loads(line) for line in (run_dir / "eval_history.jsonl").read_text().splitlines()]
+    assert len(history) == 2 and all(0 <= h["live_eval_mean"] <= 10 for h in history)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["eval_live"]["random"]["eval_mean"] == history[-1]["live_eval_mean"]
+    from billiards.report import main as report_main  # the learning curves show both actors
+
+    report_main([str(run_dir), "--curves", "--out", str(tmp_path / "curves.md")])
+    last = history[-1]
+    assert (f"| {last['eval_mean']:.3f} ± 0.000 | {last['eval_best']} | {last['live_eval_mean']:.3f} ± 0.000 |"
+            in (tmp_path / "curves.md").read_text())
+
+    live, avg = list(agent.actor.parameters()), list(agent.actor_avg.parameters())
+    assert all(not p.requires_grad for p in avg)
+    assert any(not torch.equal(a, b) for a, b in zip(live, avg))
+    # one more actor step (TD3 steps its actor every policy_delay-th update): the exact Polyak move
+    avg0 = [p.clone() for p in avg]
+    for _ in range(getattr(agent, "policy_delay", 1)):
+        agent.update(trainer.rb.sample())
+    for a0, a1, l1 in zip(avg0, avg, live):
+        torch.testing.assert_close(a1, a0 + rate * (l1 - a0), rtol=1e-5, atol=1e-7)
+
+    obs = TensorDict({"observation": torch.randn(16, 32)}, batch_size=[16])
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        def act(policy):
+            return policy(obs.clone())["action"]
+
+        loaded, _ = load_policy(run_dir)  # the checkpoint written at the end of run()
+        agent.load_state_dict(torch.load(run_dir / "checkpoint.pt", weights_only=False)["agent"])
+        expected = act(agent.eval_policy)
+        assert not torch.allclose(expected, act(agent.policy))
+        torch.testing.assert_close(act(loaded), expected)
+        exported, _ = load_policy(export_policy(run_dir, tmp_path / "seed0.pt"))
+        torch.testing.assert_close(act(exported), expected)
+
+
 BAD = [
     (["algo=dqn"], "Could not find 'algo/dqn'"),
     (["budget.total_steps=-5"], "budget.total_steps must be > 0, got -5"),
@@ -254,6 +314,7 @@ BAD = [
     (["algo=ppo", "algo.utd=2"], "Key 'utd' not in 'PPOConfig'"),
     (["env.num_envs=0"], "env.num_envs must be > 0"),
     (["budget.cpu_minutes=-1"], "budget.cpu_minutes must be >= 0, got -1.0"),
+    (["algo.actor_ema=1.5"], "algo.actor_ema must lie in [0, 1) (0 = off), got 1.5"),
     (["resume=nowhere"], "resume='nowhere': no such run directory"),
     (["-m", "seed=0,1", "budget.eval_innings=0"], "budget.eval_innings must be > 0"),
     (["experiment=table4", "budget.total_steps=-1"], "budget.total_steps must be > 0, got -1"),

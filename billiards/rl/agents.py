@@ -15,6 +15,8 @@ batched (B, 4) spec silently gives SAC a target entropy of -4B instead of -4.
 
 from __future__ import annotations
 
+import copy
+
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import (
@@ -131,7 +133,28 @@ def _params(module_params) -> list[torch.Tensor]:
 class OffPolicyAgent(nn.Module):
     """Common part of SAC and TD3: a loss module (actor, critics, targets), one optimizer and
     a soft target update. ``policy`` (deterministic at eval) and ``explore`` (collection,
-    warm-up switch) both write ``"action"``."""
+    warm-up switch) both write ``"action"``.
+
+    With ``algo.actor_ema > 0`` the agent also keeps ``actor_avg``, a Polyak average of the
+    actor's parameters (``avg += actor_ema * (live - avg)`` after every gradient step), and
+    ``eval_policy`` plays it; without, ``eval_policy`` is ``policy``. The average is part of
+    the state dict, so checkpoints carry it."""
+
+    def _init_averaging(self, rate: float) -> None:
+        """Call after ``self.actor``, ``self.scale`` and ``self.policy`` exist, before the loss
+        module is built."""
+        self.ema_rate = float(rate)
+        if self.ema_rate > 0:
+            self.actor_avg = copy.deepcopy(self.actor).requires_grad_(False)
+            self.eval_policy = TensorDictSequential(self.actor_avg, self.scale)
+        else:
+            self.actor_avg = None
+            self.eval_policy = self.policy
+
+    @torch.no_grad()
+    def _average_actor(self) -> None:
+        if self.actor_avg is not None:
+            torch._foreach_lerp_(list(self.actor_avg.parameters()), list(self.actor.parameters()), self.ema_rate)
 
     metric_names: tuple[str, ...] = ()
     replay_keys = ("observation", ACTION_NORM, ("next", "observation"), ("next", "reward"), ("next", "done"), ("next", "terminated"))
@@ -162,6 +185,7 @@ class SACAgent(OffPolicyAgent):
         self.critic = q_critic(obs_dim, act_dim, cfg.hidden_sizes)
         self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
         self.policy = TensorDictSequential(self.actor, self.scale)
+        self._init_averaging(cfg.get("actor_ema", 0.0))  # absent from configs saved before it existed
         self.explore = TensorDictSequential(Switch(UniformAction(act_dim), self.actor, warm=True), self.scale)
         self.loss = SACLoss(
             self.actor,
@@ -196,6 +220,7 @@ class SACAgent(OffPolicyAgent):
 
     def update(self, batch: TensorDictBase) -> TensorDictBase:
         out = self._step(batch)
+        self._average_actor()
         self.n_updates += 1
         return out
 
@@ -214,6 +239,7 @@ class TD3Agent(OffPolicyAgent):
         self.critic = q_critic(obs_dim, act_dim, cfg.hidden_sizes)
         self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
         self.policy = TensorDictSequential(self.actor, self.scale)
+        self._init_averaging(cfg.get("actor_ema", 0.0))  # absent from configs saved before it existed
         noisy = TensorDictSequential(
             self.actor,
             AdditiveGaussianModule(spec=norm, sigma_init=1.0, sigma_end=1.0, std=cfg.exploration_noise, action_key=ACTION_NORM),
@@ -257,6 +283,7 @@ class TD3Agent(OffPolicyAgent):
         self.n_updates += 1
         if self.n_updates % self.policy_delay == 0:
             self._last_actor_loss = self._actor_step(batch)
+            self._average_actor()
         return {"loss_qvalue": q_loss, "loss_actor": self._last_actor_loss}
 
     def compile(self, **kwargs) -> None:
@@ -280,6 +307,7 @@ class PPOAgent(nn.Module):
     """Clipped PPO with GAE on a tanh-Gaussian policy (``"action_norm"`` log-probabilities)."""
 
     metric_names = ("loss_objective", "loss_critic", "loss_entropy", "entropy", "kl_approx", "clip_fraction")
+    actor_avg = None  # no averaged actor: eval_policy is policy
 
     def __init__(self, cfg, obs_dim: int, action_spec):
         super().__init__()
@@ -288,7 +316,7 @@ class PPOAgent(nn.Module):
         self.critic = ValueOperator(mlp(obs_dim, 1, cfg.hidden_sizes), in_keys=["observation"])
         self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
         self.policy = TensorDictSequential(self.actor, self.scale)
-        self.explore = self.policy
+        self.explore = self.eval_policy = self.policy
         self.loss = ClipPPOLoss(
             self.actor,
             self.critic,

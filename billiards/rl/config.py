@@ -81,6 +81,10 @@ class OffPolicyConfig:
     tau: float = 0.005  # soft target update rate
     buffer_size: int = 1_000_000
     frames_per_batch: int = 0  # env frames per collector iteration; 0 = env.num_envs (one step of every inning)
+    # Polyak rate of an averaged copy of the actor, updated after every gradient step and used
+    # for evaluation (periodic and final; the live actor is evaluated beside it). 0 = off:
+    # evaluate the live actor.
+    actor_ema: float = 0.0
 
 
 @dataclass
@@ -304,6 +308,7 @@ def _errors(cfg: DictConfig) -> list[str]:
         positive("algo.utd", a.utd)
         positive("algo.buffer_size", a.buffer_size)
         need(0.0 < a.tau <= 1.0, f"algo.tau must lie in (0, 1], got {a.tau!r}")
+        need(0.0 <= a.actor_ema < 1.0, f"algo.actor_ema must lie in [0, 1) (0 = off), got {a.actor_ema!r}")
         positive("algo.frames_per_batch", a.frames_per_batch, strict=False)
         fpb = a.frames_per_batch or e.num_envs
         need(e.num_envs <= 0 or fpb % e.num_envs == 0,

@@ -54,19 +54,21 @@ def load_policy(path: str | Path):
     if path.is_file() and path.name != CHECKPOINT_FILE:
         state = _load_policy_file(path)
         agent, cfg = _build_agent(state["config"])
-        agent.actor.load_state_dict(state["actor"])
+        agent.actor.load_state_dict(state["actor"])  # the exported (evaluated) actor
+        policy = agent.policy
     else:
         run_dir = path.parent if path.name == CHECKPOINT_FILE else path
         state = load_checkpoint(run_dir)
         agent, cfg = _build_agent(state["config"])
         agent.load_state_dict(state["agent"])
+        policy = agent.eval_policy  # the averaged actor when algo.actor_ema > 0
     agent.eval()
-    return agent.policy, cfg
+    return policy, cfg
 
 
 def export_policy(run_dir: str | Path, out: str | Path) -> Path:
-    """Write the policy of a finished run (actor weights, config, final evaluation and
-    summary) to ``out``, a few hundred kB instead of the full checkpoint."""
+    """Write the policy of a finished run (the evaluated actor's weights, config, final
+    evaluation and summary) to ``out``, a few hundred kB instead of the full checkpoint."""
     run_dir, out = Path(run_dir), Path(out)
     state = load_checkpoint(run_dir)
     agent, _ = _build_agent(state["config"])
@@ -75,7 +77,8 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
     payload = {
         "format": POLICY_FORMAT,
         "config": state["config"],
-        "actor": {k: v.clone() for k, v in agent.actor.state_dict().items()},
+        # the actor the run's evaluations measure: the averaged one when algo.actor_ema > 0
+        "actor": {k: v.clone() for k, v in (agent.actor if agent.actor_avg is None else agent.actor_avg).state_dict().items()},
         "eval": read("eval.json"),
         "summary": read("summary.json"),
         "source": str(run_dir),

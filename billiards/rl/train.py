@@ -380,8 +380,9 @@ class Trainer:
             self.next_log = (self.frames // b.log_every + 1) * b.log_every
         done = self._finished()  # the final evaluation and checkpoint follow
         if self.frames >= self.next_eval and not done:
-            result = evaluate_policy(self.cfg, self.agent.policy, b.eval_innings, eval_starts(self.cfg)[0])
-            self._record_eval(result, final=False)
+            start = eval_starts(self.cfg)[0]
+            result = evaluate_policy(self.cfg, self.agent.eval_policy, b.eval_innings, start)
+            self._record_eval(result, final=False, live=self._eval_live(b.eval_innings, start))
             self.next_eval = (self.frames // b.eval_every + 1) * b.eval_every
         if self.frames >= self.next_ckpt and not done:
             self.next_ckpt = (self.frames // b.checkpoint_every + 1) * b.checkpoint_every
@@ -391,7 +392,14 @@ class Trainer:
             postfix["eval"] = f"{self.latest_eval:.2f}"
         bar.set_postfix(postfix, refresh=False)
 
-    def _record_eval(self, result, final: bool) -> None:
+    def _eval_live(self, n_innings: int, start: str):
+        """With an averaged actor (algo.actor_ema > 0): the live actor's evaluation, recorded
+        beside the averaged one's under ``live_*`` keys; else None."""
+        if self.agent.eval_policy is self.agent.policy:
+            return None
+        return evaluate_policy(self.cfg, self.agent.policy, n_innings, start)
+
+    def _record_eval(self, result, final: bool, live=None) -> None:
         wall, cpu = self._times()
         entry = {
             "step": self.frames,
@@ -403,11 +411,15 @@ class Trainer:
             "n_innings": result.n_innings,
             **{k: v for k, v in eval_row(result).items()},
         }
+        if live is not None:
+            entry |= {f"live_{k}": v for k, v in eval_row(live).items()}
         self.eval_history.append(entry)
         self._write_eval_history()
         self.latest_eval = result.mean
         self.logger.log({k: entry[k] for k in ("step", "updates", "wall_time", "cpu_time")} | eval_row(result))
         log.info("eval @ %d frames: %s", self.frames, result.summary())
+        if live is not None:
+            log.info("eval @ %d frames, live actor: %s", self.frames, live.summary())
 
     # -------------------------------------------------------------- loops
 
@@ -484,11 +496,14 @@ class Trainer:
         cfg = self.cfg
         if self._w_frames:
             self.logger.log(self._log_row())
-        results = []
+        results, lives = [], {}
         for i, start in enumerate(eval_starts(cfg)):
-            result = evaluate_policy(cfg, self.agent.policy, cfg.budget.final_eval_innings, start)
-            self._record_eval(result, final=True)
+            result = evaluate_policy(cfg, self.agent.eval_policy, cfg.budget.final_eval_innings, start)
+            live = self._eval_live(cfg.budget.final_eval_innings, start)
+            self._record_eval(result, final=True, live=live)
             results.append(result)
+            if live is not None:
+                lives[start] = eval_row(live)
             name = EVAL_FILE if i == 0 else f"eval_{start}.json"
             result.to_json(self.run_dir / (name + ".tmp"))
             os.replace(self.run_dir / (name + ".tmp"), self.run_dir / name)
@@ -506,6 +521,8 @@ class Trainer:
             "updates_per_second": round(self.agent.n_updates / max(train_seconds, 1e-9), 2),
             "eval": {r.start: eval_row(r) for r in results},
         }
+        if lives:  # eval is the averaged actor's (algo.actor_ema); this, the live actor's
+            summary["eval_live"] = lives
         if self.curriculum is not None:
             summary["curriculum"] = self.stage_log
         atomic_write_text(self.run_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
