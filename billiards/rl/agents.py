@@ -136,7 +136,8 @@ class OffPolicyAgent(nn.Module):
     warm-up switch) both write ``"action"``.
 
     With ``algo.actor_ema > 0`` the agent also keeps ``actor_avg``, a Polyak average of the
-    actor's parameters (``avg += actor_ema * (live - avg)`` after every gradient step), and
+    actor's parameters (``avg += actor_ema * (live - avg)`` after every actor update: every
+    gradient step for SAC, every ``policy_delay``-th for TD3), and
     ``eval_policy`` plays it; without, ``eval_policy`` is ``policy``. The average is part of
     the state dict, so checkpoints carry it."""
 

@@ -81,7 +81,7 @@ class OffPolicyConfig:
     tau: float = 0.005  # soft target update rate
     buffer_size: int = 1_000_000
     frames_per_batch: int = 0  # env frames per collector iteration; 0 = env.num_envs (one step of every inning)
-    # Polyak rate of an averaged copy of the actor, updated after every gradient step and used
+    # Polyak rate of an averaged copy of the actor, updated after every actor update and used
     # for evaluation (periodic and final; the live actor is evaluated beside it). 0 = off:
     # evaluate the live actor.
     actor_ema: float = 0.0
