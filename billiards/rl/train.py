@@ -380,9 +380,7 @@ class Trainer:
             self.next_log = (self.frames // b.log_every + 1) * b.log_every
         done = self._finished()  # the final evaluation and checkpoint follow
         if self.frames >= self.next_eval and not done:
-            start = eval_starts(self.cfg)[0]
-            result = evaluate_policy(self.cfg, self.agent.eval_policy, b.eval_innings, start)
-            self._record_eval(result, final=False, live=self._eval_live(b.eval_innings, start))
+            self._evaluate(b.eval_innings, eval_starts(self.cfg)[0], final=False)
             self.next_eval = (self.frames // b.eval_every + 1) * b.eval_every
         if self.frames >= self.next_ckpt and not done:
             self.next_ckpt = (self.frames // b.checkpoint_every + 1) * b.checkpoint_every
@@ -392,12 +390,16 @@ class Trainer:
             postfix["eval"] = f"{self.latest_eval:.2f}"
         bar.set_postfix(postfix, refresh=False)
 
-    def _eval_live(self, n_innings: int, start: str):
-        """With an averaged actor (algo.actor_ema > 0): the live actor's evaluation, recorded
-        beside the averaged one's under ``live_*`` keys; else None."""
-        if self.agent.eval_policy is self.agent.policy:
-            return None
-        return evaluate_policy(self.cfg, self.agent.policy, n_innings, start)
+    def _evaluate(self, n_innings: int, start: str, final: bool):
+        """Evaluates and records the agent's eval policy; with an averaged actor
+        (algo.actor_ema > 0) also the live actor, recorded beside it under ``live_*`` keys.
+        Returns ``(result, live result or None)``."""
+        result = evaluate_policy(self.cfg, self.agent.eval_policy, n_innings, start)
+        live = None
+        if self.agent.eval_policy is not self.agent.policy:
+            live = evaluate_policy(self.cfg, self.agent.policy, n_innings, start)
+        self._record_eval(result, final, live)
+        return result, live
 
     def _record_eval(self, result, final: bool, live=None) -> None:
         wall, cpu = self._times()
@@ -498,9 +500,7 @@ class Trainer:
             self.logger.log(self._log_row())
         results, lives = [], {}
         for i, start in enumerate(eval_starts(cfg)):
-            result = evaluate_policy(cfg, self.agent.eval_policy, cfg.budget.final_eval_innings, start)
-            live = self._eval_live(cfg.budget.final_eval_innings, start)
-            self._record_eval(result, final=True, live=live)
+            result, live = self._evaluate(cfg.budget.final_eval_innings, start, final=True)
             results.append(result)
             if live is not None:
                 lives[start] = eval_row(live)
