@@ -14,8 +14,13 @@ Contents
 * observation layout: :func:`rest_observation` (28 floats) and the action bounds;
 * the aim constraint: :func:`nearest_red`, :func:`aim_window`, :func:`constrained_theta`;
 * the carom features: :func:`carom_features`;
-* reward shaping: :func:`foul_penalty`, :func:`gentle_bonus`, :func:`near_miss_bonus`,
+* reward shaping: :func:`foul_penalty`, :func:`gentle_bonus` (the paper's leave-position
+  bonus) or :func:`gentle_power_bonus` (a power-based alternative), :func:`near_miss_bonus`,
   summed by :func:`shaped_reward`.
+
+The constants are the paper's as its authors configured them (``physics_reference.md`` §10):
+the aim window capped at 80 degrees, the gentle bonus 0.2 exp(-(d - 0.2)^2 / (2 0.1^2)), the
+near-miss bonus 0.05 exp(-gap / 0.03).
 """
 
 from __future__ import annotations
@@ -36,7 +41,11 @@ ACTION_DIM = 4  # theta, p, a, b
 # (the simulator wraps it mod 2*pi); the bound [0, 2*pi] is what specs and policies see.
 ACTION_LOW = np.array([0.0, 0.0, -1.0, -1.0])
 ACTION_HIGH = np.array([2.0 * math.pi, 1.0, 1.0, 1.0])
-NEAR_MISS_SIGMA = 0.05  # default length scale (m) of the near-miss bonus
+AIM_MAX_HALF_WIDTH = math.radians(80.0)  # the aim window's half-width cap (the paper's 80 degrees)
+NEAR_MISS_SIGMA = 0.03  # length scale (m) of the near-miss bonus (the paper's; its weight is 0.05)
+GENTLE_CENTER = 0.2  # the leave-position bonus peaks when the white rests this far (m) from the second red
+GENTLE_WIDTH = 0.1  # ... with this Gaussian width (m)
+GENTLE_KINDS = ("leave", "power")  # the paper's leave-position bonus; the power-based alternative
 
 
 # ----------------------------------------------------------------------------- observation
@@ -73,13 +82,16 @@ def _take_ball(positions: np.ndarray, index: np.ndarray) -> np.ndarray:
     return np.take_along_axis(positions, index[..., None, None], axis=-2)[..., 0, :]
 
 
-def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius) -> tuple[np.ndarray, np.ndarray]:
+def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius,
+               max_half_width: float = AIM_MAX_HALF_WIDTH) -> tuple[np.ndarray, np.ndarray]:
     """The cone of aim angles whose straight path makes the white hit the nearest red.
 
     With ``delta = c_red - c_white`` (nearest red) and ``d = |delta|``:
 
         theta_target = atan2(delta_y, delta_x)
-        half_width   = asin(min(1, 2R / d))
+        half_width   = asin(min(2R / d, sin(max_half_width)))
+
+    (the paper caps the half-width at 80 degrees, reached only when the balls nearly touch).
 
     A ball of radius R travelling along direction theta touches a resting ball of radius R
     whose centre lies at distance d iff the perpendicular offset ``d * |sin(theta -
@@ -95,7 +107,7 @@ def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius) -> 
     delta = _take_ball(positions, nearest_red(positions)) - positions[..., WHITE, :]
     d = np.hypot(delta[..., 0], delta[..., 1])
     theta_target = np.arctan2(delta[..., 1], delta[..., 0])
-    half_width = np.arcsin(np.minimum(1.0, 2.0 * R / d))
+    half_width = np.arcsin(np.minimum(2.0 * R / d, math.sin(max_half_width)))
     return theta_target, half_width
 
 
@@ -152,12 +164,45 @@ def foul_penalty(foul: np.ndarray, c: float) -> np.ndarray:
     return -float(c) * np.asarray(foul, dtype=np.float64)
 
 
-def gentle_bonus(score: np.ndarray, power: np.ndarray, beta: float) -> np.ndarray:
-    """Gentle-shot bonus: ``beta * score * (1 - p)``, p in [0, 1] the shot's power.
+def gentle_bonus(
+    score: np.ndarray,
+    positions: np.ndarray,
+    second_red: np.ndarray,
+    beta: float,
+    center: float = GENTLE_CENTER,
+    width: float = GENTLE_WIDTH,
+) -> np.ndarray:
+    """The paper's gentle-shot bonus, a leave-position bonus: on a scoring shot,
 
-    Rewards scoring with little power (a soft carom keeps the balls together for the next shot).
+        beta * exp(-(d - center)^2 / (2 width^2)),
+
+    d (m) the distance from the white at rest to the second red it contacted (``positions``
+    (..., 4, 2) the table after the shot, ``second_red`` (...,) that red's ball index 2 or 3,
+    as the simulator reports it). It favours soft shots because a hard shot carries the white
+    far from that red; a score is never a foul, so no foul check is needed. The paper uses
+    beta = 0.2, center 0.2 m, width 0.1 m.
     """
+    score = np.asarray(score, dtype=bool)
+    positions = np.asarray(positions, dtype=np.float64)
+    red = np.where(np.asarray(second_red) >= RED1, second_red, RED1).astype(np.int64)
+    d = np.linalg.norm(_take_ball(positions, red) - positions[..., WHITE, :], axis=-1)
+    return np.where(score, float(beta) * np.exp(-((d - center) ** 2) / (2.0 * width * width)), 0.0)
+
+
+def gentle_power_bonus(score: np.ndarray, power: np.ndarray, beta: float) -> np.ndarray:
+    """A power-based alternative to :func:`gentle_bonus`: ``beta * score * (1 - p)``, p in
+    [0, 1] the shot's power (``shaping.gentle_kind=power``; the project's gentle bonus before
+    the paper's constants were adopted)."""
     return float(beta) * np.asarray(score, dtype=np.float64) * (1.0 - np.asarray(power, dtype=np.float64))
+
+
+def check_coefficient(name: str, value: float, strict: bool = False) -> float:
+    """A shaping coefficient as a float, or a ValueError naming it if it is NaN, inf or
+    negative (or zero when ``strict``)."""
+    value = float(value)
+    if not math.isfinite(value) or value < 0 or (strict and value == 0):
+        raise ValueError(f"{name} must be a finite number {'> 0' if strict else '>= 0'}, got {value!r}")
+    return value
 
 
 def near_miss_bonus(
@@ -177,7 +222,8 @@ def near_miss_bonus(
     where gap (m) is the white's closest surface gap to the red it did not touch during the
     shot (:func:`billiards.physics.unhit_red_gap`; the simulator measures it over the whole
     shot). The bonus is beta for a hair's-breadth miss and decays with length scale sigma
-    (default 0.05 m). hits (..., 3) = (yellow, red1, red2), closest (..., 2) gaps to red1, red2.
+    (the paper: beta = 0.05, sigma = 0.03 m). hits (..., 3) = (yellow, red1, red2), closest
+    (..., 2) gaps to red1, red2.
     """
     if sigma <= 0:
         raise ValueError(f"near-miss sigma must be > 0, got {sigma!r}")
@@ -194,18 +240,27 @@ def shaped_reward(
     power: np.ndarray,
     hits: np.ndarray,
     closest: np.ndarray,
+    positions: np.ndarray | None = None,
+    second_red: np.ndarray | None = None,
     foul_c: float = 0.0,
     gentle_beta: float = 0.0,
+    gentle_kind: str = "leave",
     near_miss_beta: float = 0.0,
     near_miss_sigma: float = NEAR_MISS_SIGMA,
 ) -> np.ndarray:
-    """Total reward: ``score + foul_penalty + gentle_bonus + near_miss_bonus`` (terms with a
-    zero coefficient are skipped). With all coefficients 0 this is the raw carom score."""
+    """Total reward: ``score + foul_penalty + gentle + near_miss_bonus`` (terms with a zero
+    coefficient are skipped). With all coefficients 0 this is the raw carom score. The
+    leave-position gentle bonus needs the rest ``positions`` and ``second_red`` of the shot."""
     reward = np.asarray(score, dtype=np.float64).copy()
     if foul_c:
         reward += foul_penalty(foul, foul_c)
     if gentle_beta:
-        reward += gentle_bonus(score, power, gentle_beta)
+        if gentle_kind == "leave":
+            reward += gentle_bonus(score, positions, second_red, gentle_beta)
+        elif gentle_kind == "power":
+            reward += gentle_power_bonus(score, power, gentle_beta)
+        else:
+            raise ValueError(f"gentle_kind must be one of {GENTLE_KINDS}, got {gentle_kind!r}")
     if near_miss_beta:
         reward += near_miss_bonus(score, foul, hits, closest, near_miss_beta, near_miss_sigma)
     return reward

@@ -136,6 +136,12 @@ class Run:
     def table(self) -> str | None:
         return self.config.get("table")
 
+    @property
+    def physics(self) -> str:
+        """The table the run played: the summary's label (overrides included), else the
+        config's preset."""
+        return self.summary.get("physics") or self.config["physics"]["preset"]
+
     def variant(self) -> str:
         c, env = self.config, self.config.get("env", {})
         table = self.table
@@ -152,6 +158,11 @@ class Run:
             return c["shaping"]["name"]
         return generic_label(c)
 
+
+# The table of runs saved before the physics presets existed (billiards.physics.config's
+# LEGACY_PHYSICS; not imported, so the report loads without numba). Runs of different physics
+# never share a row: split_by_settings compares physics.preset like any other setting.
+LEGACY_PHYSICS = "international"
 
 # Top-level config keys that never put two runs in different rows: the seed, run-time switches,
 # the budget (the steps column shows it), logging and the table label itself.
@@ -224,6 +235,7 @@ def find_runs(dirs: list[Path]) -> tuple[list[Run], list[Path]]:
                     unfinished.append(run_dir)
                 continue
             config = yaml.safe_load(cfg_path.read_text())
+            config.setdefault("physics", {"preset": LEGACY_PHYSICS})
             extra = {}
             for p in run_dir.glob("eval_*.json"):
                 extra[p.stem[len("eval_"):]] = json.loads(p.read_text())
@@ -291,11 +303,12 @@ def render_table(table: str | None, groups: dict[str, list[Run]]) -> str:
         header = ["variant", "seeds", "steps", "wall min", "CPU min"]
         for c in columns:
             header += [f"{COLUMN_TITLES[c]} (ours)", "(paper)"]
+        header.append("physics")
     else:
         columns, order = GENERIC_COLUMNS, sorted(groups)
         lines.append(f"### {table or 'Runs without a paper table'}")
         lines.append("")
-        header = ["variant", "seeds", "steps", "wall min", "CPU min"] + [COLUMN_TITLES[c] for c in columns]
+        header = ["variant", "seeds", "steps", "wall min", "CPU min"] + [COLUMN_TITLES[c] for c in columns] + ["physics"]
     lines.append("| " + " | ".join(header) + " |")
     lines.append("|" + "---|" * len(header))
     for variant in order:
@@ -309,6 +322,7 @@ def render_table(table: str | None, groups: dict[str, list[Run]]) -> str:
             cells.append(_fmt(c, agg))
             if spec:
                 cells.append(_fmt(c, spec["rows"].get(base_variant(variant))))
+        cells.append(", ".join(sorted({r.physics for r in groups[variant]})))
         lines.append("| " + " | ".join(cells) + " |")
     present = {base_variant(v) for v in groups}
     missing = [spec["labels"][v] for v in spec["rows"] if v not in present] if spec else []

@@ -47,9 +47,15 @@ def test_aim_window_hand_values():
     theta, half = domain.aim_window(left, R)
     assert abs(theta) == pytest.approx(math.pi)
     assert half == pytest.approx(math.asin(2 * R / 0.25))
-    # touching balls: 2R/d = 1, half-width pi/2
-    touching = rack((0.5, 0.5), (1.2, 2.6), (0.5 + 2 * R, 0.5), (1.0, 2.0))
-    assert domain.aim_window(touching, R)[1] == pytest.approx(math.pi / 2)
+    # touching balls: 2R/d = 1, the half-width is capped at the paper's 80 degrees
+    touching = rack((0.5, 0.5), (1.2, 2.4), (0.5 + 2 * R, 0.5), (1.0, 2.0))
+    assert domain.aim_window(touching, R)[1] == pytest.approx(math.radians(80))
+    # the cap binds from d = 2R / sin(80 deg) on and not before it
+    d_cap = 2 * R / math.sin(math.radians(80))
+    near = rack((0.5, 0.5), (1.2, 2.4), (0.5 + 1.001 * d_cap, 0.5), (1.0, 2.0))
+    assert domain.aim_window(near, R)[1] == pytest.approx(math.asin(2 * R / (1.001 * d_cap)))
+    assert domain.aim_window(near, R)[1] < math.radians(80)
+    assert domain.aim_window(touching, R, max_half_width=math.pi / 2)[1] == pytest.approx(math.pi / 2)
 
 
 def test_constrained_theta_is_target_plus_u_halfwidth():
@@ -101,10 +107,22 @@ def test_foul_penalty_formula():
     np.testing.assert_array_equal(domain.foul_penalty(foul, 1.5), [-1.5, 0.0, -1.5])
 
 
-def test_gentle_bonus_formula():
+def test_gentle_bonus_is_the_papers_leave_position_bonus():
+    # the white rests 0.2 m from red2 (the second red it hit): the peak 0.2; 0.5 m from red1:
+    # 0.2 exp(-0.3^2 / 0.02); a miss earns nothing whatever the leave
+    at_peak = rack((0.5, 0.5), (1.2, 2.4), (1.0, 2.0), (0.5, 0.7))
+    far = rack((0.5, 0.5), (1.2, 2.4), (0.5, 1.0), (1.0, 2.0))
+    positions = np.stack([at_peak, far, at_peak])
+    score = np.array([True, True, False])
+    second = np.array([3, 2, -1])
+    np.testing.assert_allclose(domain.gentle_bonus(score, positions, second, 0.2),
+                               [0.2, 0.2 * math.exp(-0.3 ** 2 / (2 * 0.1 ** 2)), 0.0])
+
+
+def test_gentle_power_bonus_formula():
     score = np.array([True, True, False])
     power = np.array([0.25, 1.0, 0.1])
-    np.testing.assert_allclose(domain.gentle_bonus(score, power, 0.4), [0.4 * 0.75, 0.0, 0.0])
+    np.testing.assert_allclose(domain.gentle_power_bonus(score, power, 0.4), [0.4 * 0.75, 0.0, 0.0])
 
 
 def test_near_miss_bonus_formula():
@@ -131,6 +149,15 @@ def test_shaped_reward_sums_the_terms():
     hits = np.array([[False, True, True], [True, False, False], [False, True, False]])
     closest = np.array([[0, 0], [0.2, 0.3], [0, 0.04]])
     power = np.array([0.2, 0.9, 0.5])
-    reward = domain.shaped_reward(score, foul, power, hits, closest, foul_c=1.0, gentle_beta=0.5, near_miss_beta=0.2)
-    np.testing.assert_allclose(reward, [1 + 0.5 * 0.8, -1.0, 0.2 * math.exp(-0.04 / 0.05)])
+    positions = np.stack([rack((0.5, 0.5), (1.2, 2.4), (0.5, 0.85), (1.0, 2.0))] * 3)  # white 0.35 m from red1
+    second = np.array([2, -1, -1])
+    reward = domain.shaped_reward(score, foul, power, hits, closest, positions, second,
+                                  foul_c=1.0, gentle_beta=0.2, near_miss_beta=0.05)
+    leave = 0.2 * math.exp(-0.15 ** 2 / (2 * 0.1 ** 2))
+    np.testing.assert_allclose(reward, [1 + leave, -1.0, 0.05 * math.exp(-0.04 / 0.03)])
+    power_kind = domain.shaped_reward(score, foul, power, hits, closest, foul_c=1.0, gentle_beta=0.5,
+                                      gentle_kind="power", near_miss_beta=0.2, near_miss_sigma=0.05)
+    np.testing.assert_allclose(power_kind, [1 + 0.5 * 0.8, -1.0, 0.2 * math.exp(-0.04 / 0.05)])
     np.testing.assert_array_equal(domain.shaped_reward(score, foul, power, hits, closest), score.astype(float))
+    with pytest.raises(ValueError, match="gentle_kind"):
+        domain.shaped_reward(score, foul, power, hits, closest, positions, second, gentle_beta=0.2, gentle_kind="soft")

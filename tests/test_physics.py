@@ -1,23 +1,28 @@
-"""The simulator against the reference's closed forms, symmetry, rules, determinism and bad input."""
+"""The simulator against the reference's closed forms, symmetry, rules, determinism and bad input.
 
+The worked numbers and hand-built racks here are those of the reference's §7, i.e. pooltool's
+international BILLIARD table, so every simulator call in this module plays the
+``international`` preset (the default ``korean_medium`` table has its own tests in
+tests/test_presets.py).
+"""
+
+import dataclasses
 import math
+from functools import partial
 
 import numpy as np
 import pytest
 
-from billiards.physics import (
-    DEFAULT_PARAMS,
-    PhysicsParams,
-    action_to_cue,
-    canonical_rack,
-    random_rack,
-    random_racks,
-    simulate_batch,
-    simulate_shot,
-)
+from billiards.physics import PRESETS, PhysicsParams, api
 from billiards.physics import core
 
-P = DEFAULT_PARAMS
+P = PRESETS["international"]
+action_to_cue = partial(api.action_to_cue, params=P)
+canonical_rack = partial(api.canonical_rack, params=P)
+random_rack = partial(api.random_rack, params=P)
+random_racks = partial(api.random_racks, params=P)
+simulate_batch = partial(api.simulate_batch, params=P)
+simulate_shot = partial(api.simulate_shot, params=P)
 R, M, W, L = P.ball_radius, P.ball_mass, P.table_width, P.table_length
 G = P.g
 
@@ -82,7 +87,7 @@ def test_left_english_spins_clockwise_and_squirt_is_optional():
     s = after_strike(res)[0]
     assert s[6] < 0  # a > 0 (left english): clockwise seen from above
     assert s[2] == pytest.approx(0.0, abs=1e-12)  # no squirt by default: straight along +y
-    squirty = PhysicsParams(squirt=True)
+    squirty = dataclasses.replace(P, squirt=True)
     s2 = after_strike(simulate_shot(lone_white_rack(), [math.pi / 2, 0.5, 1.0, 0.0], params=squirty))[0]
     # left english deflects the ball to the right (towards +x when shooting along +y), by 1.73 deg at |a| = 0.6
     assert s2[2] > 0

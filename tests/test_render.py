@@ -8,7 +8,7 @@ from billiards.baselines import nearest_red_policy
 from billiards.envs import Billiards4BallInningEnv
 from billiards.physics import canonical_rack, simulate_shot
 
-# canonical rack, white shot at red1 (straight along -x) with some power: hits red1 first
+# the paper's opening rack, white shot straight along -x at red2 beside it: hits red2 first
 ACTION = np.array([np.pi, 0.6, 0.0, 0.0])
 
 
@@ -17,7 +17,7 @@ def test_render_shot_png(tmp_path):
     result = render.render_shot(canonical_rack(), ACTION, path, title="test")
     ref = simulate_shot(canonical_rack(), ACTION)
     np.testing.assert_array_equal(result.positions, ref.positions)
-    assert result.first_contact == 2
+    assert result.first_contact == 3
     image = np.asarray(Image.open(path).convert("RGB"))
     assert image.shape[0] > image.shape[1] > 200  # portrait table
     # the cloth, the white ball and a red are all in the picture
@@ -25,7 +25,7 @@ def test_render_shot_png(tmp_path):
     for hex_colour in (render.CLOTH, render.BALL_COLORS[2]):
         rgb = tuple(int(hex_colour[i:i + 2], 16) for i in (1, 3, 5))
         assert any(sum(abs(a - b) for a, b in zip(rgb, c)) < 30 for c in colours), hex_colour
-    assert "first contact: red1" in render.outcome_text(result)
+    assert "first contact: red2" in render.outcome_text(result)
 
 
 def test_table_rgb_array_and_gym_render():

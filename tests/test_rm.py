@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from billiards.physics import DEFAULT_PARAMS, canonical_rack, simulate_batch
+from billiards.physics import DEFAULT_PARAMS, PRESETS, canonical_rack, simulate_batch
 from billiards.rm import (
     N_FEATURES,
     DatasetError,
@@ -63,9 +63,10 @@ def file_bytes(directory) -> dict[str, bytes]:
 
 
 def test_rm_inputs_values_and_shapes():
-    w, l = DEFAULT_PARAMS.table_width, DEFAULT_PARAMS.table_length
-    rack = canonical_rack()  # white (w - 0.2, l/4), yellow (0.2, l/4), reds (w/2, l/4), (w/2, 3l/4)
-    x = rm_inputs(rack, np.array([math.pi / 2, 0.25, 0.2, -0.3]))
+    P = PRESETS["international"]
+    w, l = P.table_width, P.table_length
+    rack = canonical_rack(P)  # white (w - 0.2, l/4), yellow (0.2, l/4), reds (w/2, l/4), (w/2, 3l/4)
+    x = rm_inputs(rack, np.array([math.pi / 2, 0.25, 0.2, -0.3]), P)
     assert x.shape == (N_FEATURES,) and x.dtype == np.float32
     expected = [
         2 * (w - 0.2) / w - 1, -0.5, 2 * 0.2 / w - 1, -0.5, 0.0, -0.5, 0.0, 0.5,
@@ -74,8 +75,12 @@ def test_rm_inputs_values_and_shapes():
     np.testing.assert_allclose(x, expected, atol=1e-7)
 
     corners = np.array([[0.0, 0.0], [w, l], [0.0, l], [w, 0.0]])
-    np.testing.assert_allclose(rm_inputs(corners, [0, 0, 0, 0])[:8], [-1, -1, 1, 1, -1, 1, 1, -1])
-    np.testing.assert_allclose(rm_inputs(corners, [0, 1, 0, 0])[8:11], [1, 0, 1])
+    np.testing.assert_allclose(rm_inputs(corners, [0, 0, 0, 0], P)[:8], [-1, -1, 1, 1, -1, 1, 1, -1])
+    np.testing.assert_allclose(rm_inputs(corners, [0, 1, 0, 0], P)[8:11], [1, 0, 1])
+    # the default table scales by its own size
+    K = DEFAULT_PARAMS
+    kc = np.array([[0.0, 0.0], [K.table_width, K.table_length], [0.0, K.table_length], [K.table_width, 0.0]])
+    np.testing.assert_allclose(rm_inputs(kc, [0, 0, 0, 0])[:8], [-1, -1, 1, 1, -1, 1, 1, -1])
 
     # leading axes broadcast: one rack against many actions, many racks against one action
     assert rm_inputs(rack, np.zeros((3, 4))).shape == (3, 13)
@@ -107,9 +112,15 @@ def test_save_load_round_trip(tmp_path):
     assert not list(path.parent.glob("*.tmp"))
     loaded = load_model(path)
     assert loaded.hidden == (8, 4, 4) and not loaded.training
-    assert loaded.meta == {"auc": 0.7, "rows": 3}
+    assert {k: loaded.meta[k] for k in ("auc", "rows")} == {"auc": 0.7, "rows": 3}
+    assert loaded.meta["physics"] == "korean_medium" and loaded.params == model.params == DEFAULT_PARAMS
     rack, action = canonical_rack(), np.array([0.3, 0.5, 0.1, -0.2])
     assert loaded.prob(rack, action) == model.prob(rack, action)
+    # the table the inputs are scaled to travels with the file
+    model.params = PRESETS["international"]
+    again = load_model(save_model(tmp_path / "intl.pt", model))
+    assert again.params == PRESETS["international"] and again.prob(rack, action) == model.prob(rack, action)
+    assert again.prob(rack, action) != loaded.prob(rack, action)
 
 
 def test_load_model_rejects_bad_files(tmp_path):

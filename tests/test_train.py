@@ -322,6 +322,12 @@ BAD = [
     (["curriculum=staged", "algo=ppo"], "curriculum=staged needs an off-policy algorithm"),
     (["shaping=rm", "shaping.rm_model=nowhere.pt"], "shaping.rm_model='nowhere.pt': no reward model there"),
     (["-m", "experiment=table3", "variant=staged", "curriculum.switch_at=[0.7,0.2]"], "curriculum.switch_at must increase"),
+    (["physics=bogus"], "Could not find 'physics/bogus'"),
+    (["physics.preset=bogus"], "physics.preset='bogus' is not a preset"),
+    (["physics.u_roll=-1"], "physics.u_roll: PhysicsParams.u_roll must be a finite positive number, got -1.0"),
+    (["physics.u_rol=0.1"], "Key 'u_rol' not in 'PhysicsConfig'"),
+    (["physics=international", "physics.table_width=0.2"], "'spots' opening rack does not fit a 0.2 x 2.84 m table"),
+    (["shaping.gentle_kind=soft"], "shaping.gentle_kind must be leave"),
 ]
 
 

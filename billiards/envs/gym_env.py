@@ -4,6 +4,7 @@ Registered as ``Billiards4Ball-v0`` when :mod:`billiards.envs` is imported::
 
     import gymnasium as gym, billiards.envs
     env = gym.make("Billiards4Ball-v0", start="random", on_miss="continue", max_shots=10)
+    env = gym.make("Billiards4Ball-v0", physics="international")   # another table (default korean_medium)
 
 Same semantics and the same domain functions (:mod:`billiards.domain`) as the TorchRL env
 and its transforms, so ``constrain_aim``, ``extra_features`` and the shaping coefficients
@@ -19,9 +20,9 @@ import numpy as np
 
 from billiards import domain
 from billiards.physics import (
-    DEFAULT_PARAMS,
     PhysicsParams,
     check_positions,
+    get_params,
     simulate_batch,
 )
 
@@ -48,7 +49,13 @@ class Billiards4BallInningEnv(gym.Env):
 
     Reward: the carom score in {0, 1}, plus the shaping terms whose coefficient is non-zero
     (:func:`billiards.domain.shaped_reward`): ``-foul_penalty * foul``,
-    ``gentle * score * (1 - p)``, ``near_miss * exp(-gap / near_miss_sigma)``.
+    the gentle bonus (``gentle_kind="leave"``, the paper's: on a score ``gentle * exp(-(d -
+    0.2)^2 / (2 0.1^2))``, d the white's rest distance to the second red it hit; ``"power"``:
+    ``gentle * score * (1 - p)``), ``near_miss * exp(-gap / near_miss_sigma)``.
+
+    Physics: ``physics`` is a preset name (``"korean_medium"``, the default, the paper's table;
+    ``"international"``), a :class:`~billiards.physics.PhysicsParams` or a dict of fields
+    (:func:`billiards.physics.get_params`); ``params`` is an older spelling of the same.
 
     Inning: at most ``max_shots`` shots (then ``truncated``); under ``on_miss="reset"`` a miss
     or a foul ends it (``terminated``); under ``"continue"`` it always runs ``max_shots`` shots
@@ -73,17 +80,30 @@ class Billiards4BallInningEnv(gym.Env):
         extra_features: bool = False,
         foul_penalty: float = 0.0,
         gentle: float = 0.0,
+        gentle_kind: str = "leave",
         near_miss: float = 0.0,
         near_miss_sigma: float = domain.NEAR_MISS_SIGMA,
-        params: PhysicsParams = DEFAULT_PARAMS,
+        physics: PhysicsParams | str | dict | None = None,
+        params: PhysicsParams | str | dict | None = None,
         render_mode: str | None = None,
     ):
+        if physics is not None and params is not None:
+            raise ValueError("give the physics once: physics= (or its older spelling params=), not both")
+        params = get_params(physics if physics is not None else params)
         self.max_shots = check_inning_options(start, on_miss, max_shots)
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.start, self.on_miss, self.params, self.render_mode = start, on_miss, params, render_mode
         self.constrain_aim, self.extra_features = bool(constrain_aim), bool(extra_features)
-        self.shaping = dict(foul_c=foul_penalty, gentle_beta=gentle, near_miss_beta=near_miss, near_miss_sigma=near_miss_sigma)
+        if gentle_kind not in domain.GENTLE_KINDS:
+            raise ValueError(f"gentle_kind must be one of {domain.GENTLE_KINDS}, got {gentle_kind!r}")
+        self.shaping = dict(
+            foul_c=domain.check_coefficient("foul_penalty", foul_penalty),
+            gentle_beta=domain.check_coefficient("gentle", gentle),
+            gentle_kind=gentle_kind,
+            near_miss_beta=domain.check_coefficient("near_miss", near_miss),
+            near_miss_sigma=domain.check_coefficient("near_miss_sigma", near_miss_sigma, strict=True),
+        )
 
         low, high = domain.ACTION_LOW.copy(), domain.ACTION_HIGH.copy()
         if self.constrain_aim:
@@ -143,13 +163,15 @@ class Billiards4BallInningEnv(gym.Env):
         res = simulate_batch(self._positions[None], act[None], self.params)
         self._positions = res.positions[0]
         self._shot += 1
-        reward = domain.shaped_reward(res.score, res.foul, act[None, 1], res.hits, res.closest, **self.shaping)
+        reward = domain.shaped_reward(res.score, res.foul, act[None, 1], res.hits, res.closest,
+                                      res.positions, res.second_red, **self.shaping)
         terminated, truncated = terminated_truncated(res.score, np.array([self._shot]), self.on_miss, self.max_shots)
         info = {
             "score": bool(res.score[0]),
             "foul": bool(res.foul[0]),
             "miss": bool(res.miss[0]),
             "first_contact": int(res.first_contact[0]),
+            "second_red": int(res.second_red[0]),
             "hits": res.hits[0].copy(),
             "closest": res.closest[0].copy(),
             "cushions": int(res.cushions[0]),

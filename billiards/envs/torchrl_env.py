@@ -22,6 +22,7 @@ done/terminated/   (1,) bool    terminated: a miss or foul under ``on_miss="rese
 truncated                       truncated: ``shot == max_shots`` and not terminated
 score/foul/miss    (1,) bool    the shot's carom outcome (exactly one is true after a shot)
 first_contact      (1,) i64     first ball the white touched (1, 2, 3) or -1
+second_red         (1,) i64     the red (2, 3) the white touched second, -1 unless it touched both
 hits               (3,) bool    the white touched (yellow, red1, red2)
 closest            (2,) f32     the white's closest surface gap to red1, red2 (m), 0 if hit
 n_events           (1,) i64     physical events of the shot
@@ -61,7 +62,7 @@ from ._common import (
     validate_action,
 )
 
-INFO_KEYS = ("score", "foul", "miss", "first_contact", "hits", "closest", "n_events")
+INFO_KEYS = ("score", "foul", "miss", "first_contact", "second_red", "hits", "closest", "n_events")
 
 
 def _bool_spec(shape) -> Categorical:
@@ -130,6 +131,7 @@ class BilliardsEnv(EnvBase):
             foul=_bool_spec((*B, 1)),
             miss=_bool_spec((*B, 1)),
             first_contact=Bounded(-1, 3, shape=(*B, 1), dtype=torch.int64),
+            second_red=Bounded(-1, 3, shape=(*B, 1), dtype=torch.int64),
             hits=_bool_spec((*B, 3)),
             closest=Unbounded(shape=(*B, 2), dtype=torch.float32),
             n_events=Unbounded(shape=(*B, 1), dtype=torch.int64),
@@ -176,6 +178,7 @@ class BilliardsEnv(EnvBase):
             foul=result.foul,
             miss=result.miss,
             first_contact=result.first_contact,
+            second_red=result.second_red,
             hits=result.hits,
             closest=result.closest.astype(np.float32),
             n_events=result.n_events,
@@ -227,6 +230,7 @@ class BilliardsEnv(EnvBase):
             foul=no,
             miss=no,
             first_contact=np.full(B, -1, dtype=np.int64),
+            second_red=np.full(B, -1, dtype=np.int64),
             hits=np.zeros((B, 3), dtype=bool),
             closest=np.zeros((B, 2), dtype=np.float32),
             n_events=np.zeros(B, dtype=np.int64),

@@ -8,7 +8,9 @@ this module only moves tensors in and out of tensordicts.
 * :class:`CaromFeatures` -- appends (d1, d2, sin phi, cos phi) to ``"observation"``
   (:func:`billiards.domain.carom_features`), 28 -> 32 floats.
 * :class:`FoulPenalty` -- reward += ``-c * foul``.
-* :class:`GentleShotBonus` -- reward += ``beta * score * (1 - p)``.
+* :class:`GentleShotBonus` -- on a score, reward += ``beta * exp(-(d - 0.2)^2 / (2 0.1^2))``,
+  d the white's rest distance to the second red it hit (the paper's leave-position bonus), or
+  ``beta * score * (1 - p)`` with ``kind="power"``.
 * :class:`NearMissBonus` -- reward += ``beta * exp(-gap / sigma)`` for a miss that hit exactly
   one red, gap = closest approach to the other red.
 * :class:`RewardModelBonus` -- reward += ``beta * V_rm(s, a)``, a learned P(score | s, a).
@@ -25,7 +27,8 @@ from torchrl.data import Bounded, Composite, Unbounded
 from torchrl.envs import Compose, Transform, TransformedEnv
 
 from billiards import domain
-from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params
+from billiards.physics.config import warn_physics_mismatch
 
 from ._common import resolve_paradigm, validate_action
 from .torchrl_env import BilliardsEnv
@@ -127,23 +130,31 @@ class FoulPenalty(_RewardTerm):
 
     def __init__(self, c: float = 1.0):
         super().__init__()
-        self.c = float(c)
+        self.c = domain.check_coefficient("foul penalty c", c)
 
     def _term(self, tensordict, next_tensordict):
         return domain.foul_penalty(_np(next_tensordict.get("foul")), self.c)
 
 
 class GentleShotBonus(_RewardTerm):
-    """Reward shaping: ``reward += beta * score * (1 - p)``, p = action[..., 1] the shot's
-    power (:func:`billiards.domain.gentle_bonus`)."""
+    """Reward shaping on a scoring shot. ``kind="leave"`` (the paper's): ``reward += beta *
+    exp(-(d - 0.2)^2 / (2 * 0.1^2))``, d the distance from the white at rest to the second red
+    it contacted (:func:`billiards.domain.gentle_bonus`); ``kind="power"``: ``reward += beta *
+    (1 - p)``, p = action[..., 1] the shot's power (:func:`billiards.domain.gentle_power_bonus`)."""
 
-    def __init__(self, beta: float):
+    def __init__(self, beta: float, kind: str = "leave"):
         super().__init__()
-        self.beta = float(beta)
+        if kind not in domain.GENTLE_KINDS:
+            raise ValueError(f"GentleShotBonus kind must be one of {domain.GENTLE_KINDS}, got {kind!r}")
+        self.beta, self.kind = domain.check_coefficient("gentle beta", beta), kind
 
     def _term(self, tensordict, next_tensordict):
-        power = _np(tensordict.get("action"))[..., 1:2]
-        return domain.gentle_bonus(_np(next_tensordict.get("score")), power, self.beta)
+        score = _np(next_tensordict.get("score"))
+        if self.kind == "power":
+            return domain.gentle_power_bonus(score, _np(tensordict.get("action"))[..., 1:2], self.beta)
+        bonus = domain.gentle_bonus(score[..., 0], _np(next_tensordict.get("positions")),
+                                    _np(next_tensordict.get("second_red"))[..., 0], self.beta)
+        return bonus[..., None]
 
 
 class NearMissBonus(_RewardTerm):
@@ -153,9 +164,8 @@ class NearMissBonus(_RewardTerm):
 
     def __init__(self, beta: float, sigma: float = domain.NEAR_MISS_SIGMA):
         super().__init__()
-        if sigma <= 0:
-            raise ValueError(f"sigma must be > 0, got {sigma!r}")
-        self.beta, self.sigma = float(beta), float(sigma)
+        self.beta = domain.check_coefficient("near-miss beta", beta)
+        self.sigma = domain.check_coefficient("near-miss sigma", sigma, strict=True)
 
     def _term(self, tensordict, next_tensordict):
         get = lambda key: _np(next_tensordict.get(key))
@@ -177,12 +187,14 @@ class RewardModelBonus(_RewardTerm):
         beta: bonus strength.
     """
 
-    def __init__(self, model, beta: float):
+    def __init__(self, model, beta: float, params: PhysicsParams | None = None):
         super().__init__()
         from billiards.rm import load_model
 
         self.model = model if hasattr(model, "prob") else load_model(model)
-        self.beta = float(beta)
+        if params is not None and hasattr(self.model, "params"):
+            warn_physics_mismatch("the reward model", self.model.params, params)
+        self.beta = domain.check_coefficient("reward-model beta", beta)
 
     def _term(self, tensordict, next_tensordict):
         positions = _np(tensordict.get("positions")).astype(np.float64)
@@ -201,12 +213,13 @@ def make_env(
     extra_features: bool = False,
     foul_penalty: float = 0.0,
     gentle: float = 0.0,
+    gentle_kind: str = "leave",
     near_miss: float = 0.0,
     near_miss_sigma: float = domain.NEAR_MISS_SIGMA,
     rm: float = 0.0,
     rm_model=None,
     seed: int | None = None,
-    params: PhysicsParams = DEFAULT_PARAMS,
+    params: PhysicsParams | str | dict | None = None,
 ) -> TransformedEnv:
     """The environment of every experiment: a :class:`BilliardsEnv` with the chosen layers.
 
@@ -221,13 +234,16 @@ def make_env(
         constrain_aim: add :class:`AimConstraint` (action[0] is u in [-1, 1]).
         extra_features: add :class:`CaromFeatures` (observation 28 -> 32).
         foul_penalty: c of :class:`FoulPenalty` (reward -= c * foul); 0 disables it.
-        gentle: beta of :class:`GentleShotBonus` (reward += beta * score * (1 - p)); 0 disables.
-        near_miss: beta of :class:`NearMissBonus`; 0 disables it.
-        near_miss_sigma: its length scale sigma in metres (default 0.05).
+        gentle: beta of :class:`GentleShotBonus` (the paper: 0.2); 0 disables it.
+        gentle_kind: ``"leave"`` (the paper's leave-position bonus) or ``"power"`` (beta * (1 - p)).
+        near_miss: beta of :class:`NearMissBonus` (the paper: 0.05); 0 disables it.
+        near_miss_sigma: its length scale sigma in metres (the paper: 0.03).
         rm: beta of :class:`RewardModelBonus` (reward += beta * V_rm(s, a)); 0 disables it.
         rm_model: the reward model (a :class:`billiards.rm.RewardModel` or a path), needed if rm.
         seed: seed of the rack generator (``env.set_seed`` re-seeds it).
-        params: simulator parameters.
+        params: the physics: a preset name (``"korean_medium"``, the default, or
+            ``"international"``), a :class:`~billiards.physics.PhysicsParams`, or a dict of fields
+            (:func:`billiards.physics.get_params`).
 
     Returns:
         ``TransformedEnv(BilliardsEnv(...), Compose(...))`` with batch_size [B], always a
@@ -235,6 +251,7 @@ def make_env(
         ``env.action_spec_unbatched`` / ``env.observation_spec_unbatched``.
     """
     start, on_miss = resolve_paradigm(paradigm, start, on_miss)
+    params = get_params(params)
     base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=max_shots, params=params, seed=seed)
     transforms: list[Transform] = []
     if constrain_aim:
@@ -244,13 +261,13 @@ def make_env(
     if foul_penalty:
         transforms.append(FoulPenalty(foul_penalty))
     if gentle:
-        transforms.append(GentleShotBonus(gentle))
+        transforms.append(GentleShotBonus(gentle, gentle_kind))
     if near_miss:
         transforms.append(NearMissBonus(near_miss, near_miss_sigma))
     if rm:
         if rm_model is None:
             raise ValueError("rm > 0 needs rm_model (a billiards.rm.RewardModel or a path to one)")
-        transforms.append(RewardModelBonus(rm_model, rm))
+        transforms.append(RewardModelBonus(rm_model, rm, params))
     return TransformedEnv(base, Compose(*transforms))
 
 

@@ -22,12 +22,12 @@ from .api import (
     simulate_shot,
     trajectory,
 )
-from .params import DEFAULT_PARAMS, PhysicsParams
+from .params import DEFAULT_PARAMS, DEFAULT_PRESET, PRESETS, PhysicsParams, get_params
 from .rules import carom_outcome, unhit_red_gap
 
 __all__ = [
     "BALL_NAMES", "CUSHION_NAMES", "EVENT_KINDS", "MOTION_LABELS", "POSITION_TOL",
-    "BatchResult", "ShotResult", "DEFAULT_PARAMS", "PhysicsParams",
+    "BatchResult", "ShotResult", "DEFAULT_PARAMS", "DEFAULT_PRESET", "PRESETS", "PhysicsParams", "get_params",
     "action_to_cue", "canonical_rack", "check_actions", "check_positions", "random_rack",
     "random_racks", "simulate_batch", "simulate_shot", "trajectory", "carom_outcome", "unhit_red_gap",
 ]

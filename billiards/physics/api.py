@@ -3,10 +3,12 @@
 Action convention (one shot): ``(theta, p, a, b)``
 * ``theta``: aim angle in radians, any finite real, wrapped mod 2*pi; 0 along +x,
   counter-clockwise (pi/2 is along +y, towards the far short cushion).
-* ``p``: power in [0, 1]; the cue speed is ``V0 = p * params.cue_speed_max`` (default 6 m/s,
-  so the cue ball leaves at up to 1.4595 * 6 = 8.76 m/s for a centre hit).
+* ``p``: power in [0, 1]; the cue speed is ``V0 = p * params.cue_speed_max`` (4.5 m/s on the
+  default ``korean_medium`` table, so the cue ball leaves at up to 2/(1 + 0.21/0.55) * 4.5 =
+  6.51 m/s for a centre hit; 6 m/s on ``international``).
 * ``a, b``: tip offsets in [-1, 1]; (a, b) is projected onto the unit disk (divided by its
-  norm if that exceeds 1) and scaled by ``params.max_english`` (default 0.6) to give the
+  norm if that exceeds 1) and scaled by ``params.max_english`` (1.0 on ``korean_medium``,
+  0.6 on ``international``) to give the
   contact point as a fraction of R, in pooltool's convention: a > 0 is left english
   (clockwise spin seen from above), b > 0 is above centre (topspin).
 
@@ -45,9 +47,12 @@ class ShotResult:
     * ``first_contact``: the first ball the white hit (1, 2, 3), or -1;
     * ``hits`` (3,) bool: the white touched yellow, red1, red2;
     * ``closest`` (2,): the white's closest surface gap to red1, red2 (m; 0 if hit);
+    * ``second_red``: the red (2 or 3) the white touched second, -1 unless it touched both
+      (the leave-position bonus measures the white's rest position from it);
     * ``cushions``: cushion contacts of the white; ``n_events``: physical events (strike
-      excluded); ``duration``: simulated seconds until every ball rests; ``truncated``:
-      stopped by ``params.max_events``;
+      excluded); ``duration``: simulated seconds until every ball rests (at most
+      ``params.max_time``); ``timed_out``: stopped at ``params.max_time`` (every ball then
+      rests where it is, the paper's rule); ``truncated``: stopped by ``params.max_events``;
     * the event log: ``event_time`` (E,) (event 0 is the strike at t = 0), ``event_kind`` (E,)
       index into EVENT_KINDS, ``event_ball`` (E,), ``event_other`` (E,) (other ball for
       ball_ball, cushion id for cushion, new motion label for transition), ``event_state``
@@ -78,6 +83,8 @@ class ShotResult:
     cushions = property(lambda self: int(self._oi[core.O_CUSHIONS]))
     n_events = property(lambda self: int(self._oi[core.O_NEVENTS]))
     truncated = property(lambda self: bool(self._oi[core.O_TRUNC]))
+    timed_out = property(lambda self: bool(self._oi[core.O_TIMEOUT]))
+    second_red = property(lambda self: int(self._oi[core.O_SECOND_RED]))
     duration = property(lambda self: float(self._of[core.OF_TIME]))
     closest = property(lambda self: self._of[core.OF_CLOSE2:core.OF_CLOSE3 + 1])
     event_kind = property(lambda self: self._ev_info[:, 0])
@@ -110,6 +117,8 @@ class BatchResult(NamedTuple):
     n_events: np.ndarray  # (N,) int64
     duration: np.ndarray  # (N,) float64
     truncated: np.ndarray  # (N,) bool
+    second_red: np.ndarray  # (N,) int64: the red (2, 3) the white touched second, -1 unless both
+    timed_out: np.ndarray  # (N,) bool: stopped at params.max_time
 
 
 # ----------------------------------------------------------------------------- validation
@@ -184,38 +193,59 @@ def action_to_cue(action, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
 
 
 def canonical_rack(params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
-    """The fixed starting rack, (4, 2).
+    """The opening rack of ``params``'s table (its ``rack`` field), (4, 2). W is the width
+    (short side), L the length, R the ball radius:
 
-    Reds on the head spot (w/2, l/4) and the foot spot (w/2, 3l/4); the two cue balls on the
-    head string y = l/4, 0.2 m from the side cushions' nose lines: white at (w - 0.2, l/4)
-    and yellow at (0.2, l/4). With the default 2.84 x 1.42 m table: white (1.22, 0.71),
-    yellow (0.20, 0.71), red1 (0.71, 0.71), red2 (0.71, 2.13).
+    * ``"korean"`` (the paper's, ``korean_medium``): yellow, red1 and red2 on the long centre
+      line x = W/2 at y = L/8, 2L/8 and 6L/8; the white beside red2 at (W/2 + 4R, 6L/8), two
+      ball diameters centre to centre. On the 1.27 x 2.54 m table: white (0.766, 1.905),
+      yellow (0.635, 0.3175), red1 (0.635, 0.635), red2 (0.635, 1.905).
+    * ``"spots"`` (``international``): reds on the head spot (W/2, L/4) and the foot spot
+      (W/2, 3L/4); white at (W - 0.2, L/4) and yellow at (0.2, L/4). On the 2.84 x 1.42 m
+      table: white (1.22, 0.71), yellow (0.20, 0.71), red1 (0.71, 0.71), red2 (0.71, 2.13).
+
+    A layout that does not fit its table is refused when the PhysicsParams is built.
     """
-    w, l = params.table_width, params.table_length
-    return np.array([[w - 0.2, l / 4], [0.2, l / 4], [w / 2, l / 4], [w / 2, 3 * l / 4]], dtype=np.float64)
+    return params.opening_rack()
 
 
 def random_rack(rng: np.random.Generator, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
-    """A uniform random rack, (4, 2): each centre uniform in [R, w-R] x [R, l-R], the whole
-    rack redrawn until no two balls overlap (centre distance >= 2R)."""
+    """A uniform random rack, (4, 2) (see :func:`random_racks`)."""
     return random_racks(rng, 1, params)[0]
 
 
+RACK_ATTEMPTS = 1000  # rejection rounds of random_racks before it gives up with an error
+
+
 def random_racks(rng: np.random.Generator, n: int, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
-    """n independent uniform non-overlapping racks, (n, 4, 2) (see :func:`random_rack`)."""
-    R = params.ball_radius
-    lo = np.array([R, R])
-    hi = np.array([params.table_width - R, params.table_length - R])
+    """n independent uniform racks, (n, 4, 2): each centre uniform in
+    [R + m, W - R - m] x [R + m, L - R - m] with m = ``params.rack_margin``, the whole rack
+    redrawn until every pair of centres is at least 2R + ``params.rack_clearance`` apart
+    (the paper's sampling on ``korean_medium``: m = 5 mm, clearance 2 mm; 0 and 0 on
+    ``international``). Raises ValueError if some rack is still not placed after
+    ``RACK_ATTEMPTS`` rounds (a table barely larger than four balls)."""
+    R, m = params.ball_radius, params.rack_margin
+    lo = np.array([R + m, R + m])
+    hi = np.array([params.table_width - R - m, params.table_length - R - m])
+    min_gap = 2 * R + params.rack_clearance
     out = np.empty((n, 4, 2))
     todo = np.arange(n)
-    while todo.size:
+    for _ in range(RACK_ATTEMPTS):
+        if not todo.size:
+            return out
         cand = lo + (hi - lo) * rng.random((todo.size, 4, 2))
         d = np.linalg.norm(cand[:, :, None, :] - cand[:, None, :, :], axis=-1)
         d[:, np.arange(4), np.arange(4)] = np.inf
-        ok = d.min(axis=(1, 2)) >= 2 * R
+        ok = d.min(axis=(1, 2)) >= min_gap
         out[todo[ok]] = cand[ok]
         todo = todo[~ok]
-    return out
+    if not todo.size:
+        return out
+    raise ValueError(
+        f"random_racks: {todo.size} of {n} racks could not be placed in {RACK_ATTEMPTS} rounds on a "
+        f"{params.table_width} x {params.table_length} m table (R = {R} m, margin {m} m, clearance "
+        f"{params.rack_clearance} m): the table is too small for random racks"
+    )
 
 
 # ----------------------------------------------------------------------------- simulation
@@ -285,6 +315,8 @@ def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -
         n_events=out_int[:, core.O_NEVENTS],
         duration=out_float[:, core.OF_TIME],
         truncated=out_int[:, core.O_TRUNC].astype(bool),
+        second_red=out_int[:, core.O_SECOND_RED],
+        timed_out=out_int[:, core.O_TIMEOUT].astype(bool),
     )
 
 

@@ -27,7 +27,7 @@ from numba import njit, prange
 
 from .params import (
     P_BALL_BALL, P_CUE_END_M, P_CUE_M, P_CUE_V_MAX, P_MAX_ENGLISH, P_E_B, P_E_C, P_F_C, P_G, P_H, P_L, P_M,
-    P_MAX_EVENTS, P_MIN_DIST, P_R, P_SQUIRT, P_U_R, P_U_S, P_U_SP, P_W,
+    P_MAX_EVENTS, P_MAX_TIME, P_MIN_DIST, P_R, P_SQUIRT, P_U_R, P_U_S, P_U_SP, P_W,
 )
 
 # Motion labels (pooltool's numbering).
@@ -42,8 +42,8 @@ INF = np.inf
 PAIR_I = np.array([0, 0, 0, 1, 1, 2], dtype=np.int64)
 PAIR_J = np.array([1, 2, 3, 2, 3, 3], dtype=np.int64)
 # Outcome slots of the integer and float result vectors.
-O_FIRST, O_HIT1, O_HIT2, O_HIT3, O_NEVENTS, O_TRUNC, O_CUSHIONS = range(7)
-N_OUT_INT = 7
+O_FIRST, O_HIT1, O_HIT2, O_HIT3, O_NEVENTS, O_TRUNC, O_CUSHIONS, O_SECOND_RED, O_TIMEOUT = range(9)
+N_OUT_INT = 9
 OF_CLOSE2, OF_CLOSE3, OF_TIME = range(3)
 N_OUT_FLOAT = 3
 # Validation error codes (see api.py for the messages).
@@ -599,6 +599,7 @@ def run_shot(positions, V0, phi, a, b, p, record):
     out_int = np.zeros(N_OUT_INT, dtype=np.int64)
     out_float = np.zeros(N_OUT_FLOAT)
     out_int[O_FIRST] = -1
+    out_int[O_SECOND_RED] = -1
     R = p[P_R]
     max_events = int(p[P_MAX_EVENTS])
     cap = 64 if record else 1
@@ -655,6 +656,10 @@ def run_shot(positions, V0, phi, a, b, p, record):
                 kind, who, other, t_next = EV_CUSHION, k, cush_w[k], cush_t[k]
         if kind < 0:
             break
+        # the shot-time limit (reference §10): evolve to it, then every ball rests
+        timeout = t_next > p[P_MAX_TIME]
+        if timeout:
+            t_next = p[P_MAX_TIME]
         dt = t_next - t
         # the carom facts: cue ball's closest approach to each red not yet hit
         for r in range(2):
@@ -664,6 +669,13 @@ def run_shot(positions, V0, phi, a, b, p, record):
         for k in range(N_BALLS):
             evolve_ball(st, lab, k, dt, p)
         t = t_next
+        if timeout:
+            for k in range(N_BALLS):
+                resolve_transition(st, lab, k, STATIONARY)
+            out_int[O_TIMEOUT] = 1
+            if record:
+                ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, n_rec, t, EV_STOP, -1, -1, st, lab)
+            break
         if kind == EV_TRANSITION:
             resolve_transition(st, lab, who, other)
             dirty[who] = True
@@ -672,6 +684,8 @@ def run_shot(positions, V0, phi, a, b, p, record):
             dirty[who] = True
             dirty[other] = True
             if who == 0:
+                if other >= 2 and out_int[O_HIT1 + other - 1] == 0 and out_int[O_HIT1 + (5 - other) - 1] != 0:
+                    out_int[O_SECOND_RED] = other  # the white's first contact with the second red
                 out_int[O_HIT1 + other - 1] = 1
                 if out_int[O_FIRST] < 0:
                     out_int[O_FIRST] = other

@@ -1,12 +1,22 @@
 """Physical parameters of the table, balls, cushions and cue, in one immutable object.
 
-Defaults are the paper's stack (see ``shared/physics_reference.md``, first table):
-pooltool's pocketless BILLIARD table and BILLIARD_GENERIC balls, Han 2005 (corrected)
-cushions, equal-mass restitution ball–ball contact with e_b = 0.95, level-cue
-instantaneous-point strike without squirt.
+Two named presets (:data:`PRESETS`), the single source of truth for every table the project
+plays (``shared/physics_reference.md`` §10):
 
-The numba kernels never see this dataclass: :meth:`PhysicsParams.as_array` packs it into a
-flat float64 vector whose slots are the ``P_*`` indices below.
+* ``korean_medium`` -- **the default**: the table and values the paper's authors published
+  (1.27 x 2.54 m, 65.5 mm balls, mu_r = 0.018, spin decay 50 rad/s^2, e_b = 0.94, f_c = 0.20,
+  cue 0.55 kg at 4.5 m/s, tip offsets up to 1.0 R, a 12 s shot limit), its opening rack and
+  its random-rack sampling (5 mm cushion margin, 2 mm pair clearance). ``PhysicsParams()``
+  is this preset.
+* ``international`` -- pooltool's pocketless BILLIARD table and BILLIARD_GENERIC balls
+  (2.84 x 1.42 m, R = 30.75 mm), e_b = 0.95, cue 6 m/s at p = 1, tip offsets up to 0.6 R, runs
+  to rest; the project's defaults before the presets existed.
+
+Both use Han 2005 (corrected) cushions, equal-mass restitution ball–ball contact and the
+level-cue instantaneous-point strike without squirt.
+
+The numba kernels never see this dataclass: :attr:`PhysicsParams.array` packs it into a flat
+float64 vector whose slots are the ``P_*`` indices below.
 """
 
 from __future__ import annotations
@@ -25,8 +35,11 @@ BALL_BALL_MODELS = {"restitution": BALL_BALL_RESTITUTION, "elastic": BALL_BALL_E
 # Slots of the packed parameter vector.
 P_W, P_L, P_R, P_M, P_U_S, P_U_R, P_U_SP, P_E_B, P_E_C, P_F_C, P_G, P_H = range(12)
 P_CUE_M, P_CUE_V_MAX, P_MAX_ENGLISH, P_SQUIRT, P_CUE_END_M, P_BALL_BALL = range(12, 18)
-P_MAX_EVENTS, P_MIN_DIST = 18, 19
-N_PARAMS = 20
+P_MAX_EVENTS, P_MIN_DIST, P_MAX_TIME = 18, 19, 20
+N_PARAMS = 21
+
+# Opening racks (:func:`billiards.physics.canonical_rack`), by name.
+RACKS = ("korean", "spots")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,29 +54,34 @@ class PhysicsParams:
     """
 
     # table
-    table_width: float = 1.42  # x extent of the playing surface (nose line to nose line)
-    table_length: float = 2.84  # y extent
+    table_width: float = 1.27  # x extent of the playing surface (nose line to nose line)
+    table_length: float = 2.54  # y extent
     cushion_height: float = 0.037  # nose height h above the cloth
     # balls
-    ball_radius: float = 0.03075
+    ball_radius: float = 0.03275
     ball_mass: float = 0.21
     u_slide: float = 0.2  # mu_s, ball–cloth sliding friction
-    u_roll: float = 0.01  # mu_r, rolling resistance
-    u_spin: float = 0.03075 * 4.0 / 9.0  # mu_sp (a length): (4/9) R
-    e_ball: float = 0.95  # ball–ball restitution
+    u_roll: float = 0.018  # mu_r, rolling resistance
+    u_spin: float = 0.0668  # mu_sp (a length): spin decays at 5 mu_sp g / (2R) = 50 rad/s^2 for R = 32.75 mm
+    e_ball: float = 0.94  # ball–ball restitution
     e_cushion: float = 0.85  # ball–cushion restitution
-    f_cushion: float = 0.15  # ball–cushion friction
+    f_cushion: float = 0.20  # ball–cushion friction
     g: float = 9.81
     # cue
-    cue_mass: float = 0.567
-    cue_speed_max: float = 6.0  # cue speed at power p = 1 (m/s)
-    max_english: float = 0.6  # tip offset radius at |(a, b)| = 1, fraction of R
+    cue_mass: float = 0.55
+    cue_speed_max: float = 4.5  # cue speed at power p = 1 (m/s)
+    max_english: float = 1.0  # tip offset radius at |(a, b)| = 1, fraction of R
     squirt: bool = False  # cue-ball deflection from side spin (reference §1.3)
     cue_end_mass: float = 0.170097 / 30.0  # m_e, only used with squirt
     # models and numerics
     ball_ball: str = "restitution"  # "restitution" (§4b) or "elastic" (§4a)
+    max_time: float = 12.0  # a shot is simulated for at most this many seconds, then every ball rests (inf: to rest)
     max_events: int = 5000  # safety net: a shot with more events is stopped (flagged)
     min_dist: float = 1e-6  # make_kiss spacer between touching bodies (m)
+    # racks
+    rack: str = "korean"  # the opening rack: "korean" (the paper's) or "spots" (see canonical_rack)
+    rack_margin: float = 0.005  # random racks: every centre at least R + margin inside the nose lines (m)
+    rack_clearance: float = 0.002  # random racks: every pair of centres at least 2R + clearance apart (m)
 
     def __post_init__(self) -> None:
         positive = [
@@ -74,7 +92,7 @@ class PhysicsParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"PhysicsParams.{name} must be a finite positive number, got {value!r}")
-        for name in ["f_cushion", "cue_end_mass"]:
+        for name in ["f_cushion", "cue_end_mass", "rack_margin", "rack_clearance"]:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"PhysicsParams.{name} must be finite and >= 0, got {value!r}")
@@ -88,10 +106,43 @@ class PhysicsParams:
             raise ValueError("PhysicsParams.cushion_height must lie between R and 2R for the Han cushion model")
         if self.ball_ball not in BALL_BALL_MODELS:
             raise ValueError(f"PhysicsParams.ball_ball must be one of {sorted(BALL_BALL_MODELS)}, got {self.ball_ball!r}")
+        if not (self.max_time > 0 and not math.isnan(self.max_time)):
+            raise ValueError(f"PhysicsParams.max_time must be > 0 seconds (inf: run every shot to rest), got {self.max_time!r}")
+        if self.rack not in RACKS:
+            raise ValueError(f"PhysicsParams.rack must be one of {RACKS}, got {self.rack!r}")
         if int(self.max_events) < 1:
             raise ValueError(f"PhysicsParams.max_events must be >= 1, got {self.max_events!r}")
-        if 2 * self.ball_radius * 2 > min(self.table_width, self.table_length):
-            raise ValueError("PhysicsParams: the table is too small for four balls")
+        # Random racks need room for four balls with the margin and clearance; the opening rack
+        # is checked by canonical_rack's own layout (see billiards.physics.api).
+        inner_w = self.table_width - 2 * (self.ball_radius + self.rack_margin)
+        inner_l = self.table_length - 2 * (self.ball_radius + self.rack_margin)
+        pitch = 2 * self.ball_radius + self.rack_clearance
+        if min(inner_w, inner_l) < 0 or inner_w * inner_l < 4 * pitch * pitch:
+            raise ValueError(
+                f"PhysicsParams: a {self.table_width} x {self.table_length} m table cannot hold four balls of "
+                f"radius {self.ball_radius} m {self.rack_margin} m inside the cushions and {self.rack_clearance} m apart"
+            )
+        self._check_opening_rack()
+
+    def opening_rack(self) -> np.ndarray:
+        """The opening rack (4, 2) of this table (white, yellow, red1, red2); see
+        :func:`billiards.physics.canonical_rack` for the layouts."""
+        w, l, R = self.table_width, self.table_length, self.ball_radius
+        if self.rack == "korean":
+            rack = [[w / 2 + 4 * R, 6 * l / 8], [w / 2, l / 8], [w / 2, 2 * l / 8], [w / 2, 6 * l / 8]]
+        else:
+            rack = [[w - 0.2, l / 4], [0.2, l / 4], [w / 2, l / 4], [w / 2, 3 * l / 4]]
+        return np.array(rack, dtype=np.float64)
+
+    def _check_opening_rack(self) -> None:
+        rack, R = self.opening_rack(), self.ball_radius
+        on_table = ((rack >= R) & (rack <= [self.table_width - R, self.table_length - R])).all()
+        gaps = [np.hypot(*(rack[i] - rack[j])) for i in range(4) for j in range(i + 1, 4)]
+        if not on_table or min(gaps) < 2 * R:
+            raise ValueError(
+                f"PhysicsParams: the {self.rack!r} opening rack does not fit a {self.table_width} x "
+                f"{self.table_length} m table with balls of radius {R} m: {rack.tolist()}"
+            )
 
     @cached_property
     def array(self) -> np.ndarray:
@@ -103,12 +154,9 @@ class PhysicsParams:
         p[P_CUE_M], p[P_CUE_V_MAX], p[P_MAX_ENGLISH] = self.cue_mass, self.cue_speed_max, self.max_english
         p[P_SQUIRT], p[P_CUE_END_M] = float(self.squirt), self.cue_end_mass
         p[P_BALL_BALL] = BALL_BALL_MODELS[self.ball_ball]
-        p[P_MAX_EVENTS], p[P_MIN_DIST] = int(self.max_events), self.min_dist
+        p[P_MAX_EVENTS], p[P_MIN_DIST], p[P_MAX_TIME] = int(self.max_events), self.min_dist, self.max_time
         p.flags.writeable = False
         return p
-
-    def as_array(self) -> np.ndarray:
-        return self.array
 
     @property
     def cushion_angle(self) -> float:
@@ -116,4 +164,81 @@ class PhysicsParams:
         return math.asin(self.cushion_height / self.ball_radius - 1.0)
 
 
-DEFAULT_PARAMS = PhysicsParams()
+    def to_dict(self) -> dict:
+        """Every field as a plain JSON-able dict (``PhysicsParams(**d)`` rebuilds it; max_time
+        inf is written as the string "inf")."""
+        d = dataclasses.asdict(self)
+        if math.isinf(d["max_time"]):
+            d["max_time"] = "inf"
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PhysicsParams":
+        """The inverse of :meth:`to_dict`; unknown keys raise a ValueError naming them."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown PhysicsParams field(s) {unknown}; known: {sorted(known)}")
+        d = dict(d)
+        if isinstance(d.get("max_time"), str):
+            d["max_time"] = float(d["max_time"])
+        return cls(**d)
+
+    def preset_name(self) -> str | None:
+        """The name of the preset these parameters equal, or None for custom physics."""
+        return next((name for name, p in PRESETS.items() if p == self), None)
+
+    def describe(self) -> str:
+        """A short label: the preset's name, or "custom" with the fields that differ from the
+        nearest preset (e.g. ``korean_medium+u_roll=0.02``)."""
+        name = self.preset_name()
+        if name:
+            return name
+        base_name, diff = min(((n, _diff(p, self)) for n, p in PRESETS.items()), key=lambda x: len(x[1]))
+        return base_name + "".join(f"+{k}={v}" for k, v in diff.items())
+
+
+def _diff(base: PhysicsParams, other: PhysicsParams) -> dict:
+    return {f.name: getattr(other, f.name) for f in dataclasses.fields(PhysicsParams)
+            if getattr(other, f.name) != getattr(base, f.name)}
+
+
+PRESETS: dict[str, PhysicsParams] = {
+    # The paper's table and values (physics_reference.md §10): the field defaults.
+    "korean_medium": PhysicsParams(),
+    # pooltool's BILLIARD table and BILLIARD_GENERIC balls (the project's defaults before §10).
+    "international": PhysicsParams(
+        table_width=1.42, table_length=2.84, ball_radius=0.03075, u_roll=0.01, u_spin=0.03075 * 4.0 / 9.0,
+        e_ball=0.95, f_cushion=0.15, cue_mass=0.567, cue_speed_max=6.0, max_english=0.6, max_time=math.inf,
+        rack="spots", rack_margin=0.0, rack_clearance=0.0,
+    ),
+}
+DEFAULT_PRESET = "korean_medium"
+DEFAULT_PARAMS = PRESETS[DEFAULT_PRESET]
+
+
+def get_params(physics=None) -> PhysicsParams:
+    """PhysicsParams from anything a user may pass: None (the default preset), a preset name,
+    a PhysicsParams, or a dict of fields (optionally with ``"preset"`` naming the base the other
+    fields override). Raises ValueError naming a bad preset or field."""
+    if physics is None:
+        return DEFAULT_PARAMS
+    if isinstance(physics, PhysicsParams):
+        return physics
+    if isinstance(physics, str):
+        if physics not in PRESETS:
+            raise ValueError(f"unknown physics preset {physics!r}; presets: {sorted(PRESETS)}")
+        return PRESETS[physics]
+    if isinstance(physics, dict):
+        d = dict(physics)
+        base = get_params(d.pop("preset", DEFAULT_PRESET))
+        if not d:
+            return base
+        merged = base.to_dict()
+        known = set(merged)
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown physics field(s) {unknown}; known: {sorted(known)}")
+        merged.update(d)
+        return PhysicsParams.from_dict(merged)
+    raise ValueError(f"physics must be a preset name, a PhysicsParams or a dict, got {type(physics).__name__}")

@@ -15,7 +15,7 @@ Hydra merges every YAML file and every command-line override into these typed, c
   :class:`ValidateConfig` runs *before* Hydra creates a run or sweep directory, for every job
   of a multirun. A bad command line therefore fails in about a second and writes nothing.
 
-This module imports neither torch nor the simulator, so the checks stay fast.
+This module imports neither torch nor the simulator's kernels, so the checks stay fast.
 """
 
 from __future__ import annotations
@@ -30,6 +30,8 @@ from typing import Any, List, Optional
 from hydra.core.config_store import ConfigStore
 from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
+
+from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
 
 CHECKPOINT_FILE = "checkpoint.pt"
 CONFIG_FILE = "config.yaml"  # the resolved training config, written into the run dir at start
@@ -142,9 +144,10 @@ class ShapingConfig:
 
     name: str = "none"
     foul_penalty: float = 0.0  # reward -= foul_penalty * foul
-    gentle: float = 0.0  # reward += gentle * score * (1 - p)
-    near_miss: float = 0.0  # reward += near_miss * exp(-gap / near_miss_sigma) for a one-red miss
-    near_miss_sigma: float = 0.05
+    gentle: float = 0.0  # on a score, reward += gentle * exp(-(d - 0.2)^2 / (2 0.1^2)), d the white's rest distance to the second red (the paper: 0.2)
+    gentle_kind: str = "leave"  # leave: the paper's leave-position bonus above; power: gentle * (1 - p)
+    near_miss: float = 0.0  # reward += near_miss * exp(-gap / near_miss_sigma) for a one-red miss (the paper: 0.05)
+    near_miss_sigma: float = 0.03
     rm: float = 0.0  # reward += rm * V_rm(s, a), the learned reward model's P(score | s, a)
     rm_model: str = "results/rm/model.pt"  # the reward model (python -m billiards.rm train); relative paths: cwd, then the repo
 
@@ -209,6 +212,7 @@ class CheckpointConfig:
 @dataclass
 class Config:
     algo: Any = MISSING  # SACConfig | TD3Config | PPOConfig, chosen by the algo group
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
     env: EnvConfig = field(default_factory=EnvConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
     curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
@@ -233,6 +237,12 @@ def register_configs() -> None:
     cs.store(group="schema/algo", name="td3", node=TD3Config)
     cs.store(group="schema/algo", name="ppo", node=PPOConfig)
     cs.store(group="schema", name="budget", node=BudgetConfig)
+    register_physics(cs)
+
+
+def register_physics(cs: ConfigStore) -> None:
+    """The ``physics`` option group's schema (conf/physics/*.yaml), shared by both apps."""
+    cs.store(group="schema", name="physics", node=PhysicsConfig)
 
 
 # ----------------------------------------------------------------------------- resolvers
@@ -291,6 +301,9 @@ def _errors(cfg: DictConfig) -> list[str]:
     for key in ("foul_penalty", "gentle", "near_miss"):
         positive(f"shaping.{key}", cfg.shaping[key], strict=False)
     positive("shaping.near_miss_sigma", cfg.shaping.near_miss_sigma)
+    need(cfg.shaping.gentle_kind in ("leave", "power"),
+         f"shaping.gentle_kind must be leave (the paper's leave-position bonus) or power, got {cfg.shaping.gentle_kind!r}")
+    errs.extend(physics_errors(cfg.physics))
     positive("shaping.rm", cfg.shaping.rm, strict=False)
     if cfg.shaping.rm:
         path = resolve_rm_model(cfg.shaping.rm_model)
@@ -433,6 +446,14 @@ class ValidateConfig(Callback):
                 errs.append(f"job {list(job.hydra.overrides.task)}: {err}")
         if errs:
             raise SystemExit("Error: " + "\n".join(errs))
+
+
+def with_physics(container: dict) -> dict:
+    """A saved config with its ``physics`` node; configs saved before the presets existed
+    played pooltool's international table and get ``physics.preset: international``."""
+    if "physics" in container:
+        return container
+    return {**container, "physics": {"preset": LEGACY_PHYSICS}}
 
 
 def env_paradigm(paradigm: Paradigm | str) -> str:

@@ -18,8 +18,11 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+from billiards.physics.config import params_from_config, warn_physics_mismatch
+
 from .checkpoint import CheckpointError, load_checkpoint
-from .config import CHECKPOINT_FILE
+from .config import CHECKPOINT_FILE, with_physics
 
 POLICY_FORMAT = "billiards-policy-1"
 
@@ -90,17 +93,28 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
     return out
 
 
-def load_policy_proposer(paths, name: str = "policy"):
+def policy_physics(cfg) -> PhysicsParams:
+    """The table a run trained on (runs saved before the presets existed: ``international``)."""
+    return params_from_config(OmegaConf.create(with_physics(OmegaConf.to_container(cfg)))["physics"])
+
+
+def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | None = None):
     """A :class:`billiards.search.PolicyProposer` over the policies of several runs (e.g. the
-    three seeds of one Table 5 variant); they must share the observation and action layout."""
+    three seeds of one Table 5 variant); they must share the observation and action layout.
+    ``params`` is the table it will propose for (default: the default preset); policies trained
+    on another table are used with a :class:`PhysicsMismatchWarning`."""
     from billiards.search import PolicyProposer
 
+    params = DEFAULT_PARAMS if params is None else params
     loaded = [load_policy(p) for p in paths]
     layouts = {(bool(c.env.constrain_aim), bool(c.env.extra_features)) for _, c in loaded}
     if len(layouts) != 1:
         raise ValueError(f"proposer {name!r}: checkpoints mix observation/action layouts {sorted(layouts)}")
+    for path, (_, cfg) in zip(paths, loaded):
+        warn_physics_mismatch(f"proposer {name!r} policy {path}", policy_physics(cfg), params)
     constrain_aim, extra_features = layouts.pop()
-    return PolicyProposer([p for p, _ in loaded], constrain_aim=constrain_aim, extra_features=extra_features, name=name)
+    return PolicyProposer([p for p, _ in loaded], constrain_aim=constrain_aim, extra_features=extra_features, name=name,
+                          R=params.ball_radius)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -33,6 +33,8 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from billiards.physics.config import params_from_config
+
 from .checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from .config import (
     CONFIG_FILE,
@@ -43,6 +45,7 @@ from .config import (
     env_paradigm,
     resolve_rm_model,
     validate,
+    with_physics,
 )
 from .metrics import MetricLogger, atomic_write_text, eval_row
 
@@ -83,8 +86,10 @@ def env_kwargs(cfg) -> dict[str, Any]:
         gentle=cfg.shaping.gentle,
         near_miss=cfg.shaping.near_miss,
         near_miss_sigma=cfg.shaping.near_miss_sigma,
+        gentle_kind=cfg.shaping.gentle_kind,
         rm=cfg.shaping.rm,
         rm_model=str(resolve_rm_model(cfg.shaping.rm_model)) if cfg.shaping.rm else None,
+        params=params_from_config(cfg.physics),
     )
 
 
@@ -110,6 +115,7 @@ def evaluate_policy(cfg, policy, n_innings: int, start: str):
         seed=cfg.eval.seed,
         constrain_aim=cfg.env.constrain_aim,
         extra_features=cfg.env.extra_features,
+        env_kwargs=dict(params=params_from_config(cfg.physics)),
     )
 
 
@@ -125,7 +131,7 @@ def _plain(cfg) -> dict:
 def _typed(container: dict) -> DictConfig:
     """A saved (plain) config merged back into the schema, so enums and types are checked."""
     schema = OmegaConf.structured(Config)
-    return OmegaConf.merge(schema, container)
+    return OmegaConf.merge(schema, with_physics(container))
 
 
 def _command_line_overrides() -> list[str]:
@@ -514,6 +520,8 @@ class Trainer:
             "seed": cfg.seed,
             "frames": self.frames,
             "updates": self.agent.n_updates,
+            "physics": params_from_config(cfg.physics).describe(),
+            "physics_params": params_from_config(cfg.physics).to_dict(),
             "stopped_by": "total_steps" if self.frames >= cfg.budget.total_steps else "cpu_minutes",
             "train_seconds": round(train_seconds, 2),
             "cpu_seconds": round(cpu_seconds, 2),

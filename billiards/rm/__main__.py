@@ -1,6 +1,6 @@
 """Command line of the reward model.
 
-    python -m billiards.rm generate --out DIR --n N --seed S [--chunk C] [--threads T] [--no-progress]
+    python -m billiards.rm generate --out DIR --n N --seed S [--chunk C] [--threads T] [--physics P] [--no-progress]
     python -m billiards.rm train --data DIR --out PATH.pt [--epochs E] [--hidden 128 128]
                                  [--max-rows M] [--batch-size B] [--lr LR] [--holdout F]
                                  [--seed S] [--threads T] [--no-progress]
@@ -31,6 +31,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     gen.add_argument("--seed", type=int, default=0, help="data set seed (default %(default)s)")
     gen.add_argument("--chunk", type=_positive_int, default=DEFAULT_CHUNK, help="rows per chunk (default %(default)s)")
     gen.add_argument("--threads", type=_positive_int, default=None, help="numba threads (default: numba's)")
+    gen.add_argument("--physics", default="korean_medium", help="physics preset of the table (default %(default)s)")
     gen.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     tr = sub.add_parser("train", help="train the reward model on a data set")
@@ -55,7 +56,7 @@ def main(argv: list[str] | None = None) -> None:
             from .data import generate
 
             meta = generate(args.out, n=args.n, seed=args.seed, chunk=args.chunk,
-                            progress=not args.no_progress, threads=args.threads)
+                            progress=not args.no_progress, threads=args.threads, physics=args.physics)
             rate = meta["session_shots_per_s"]
             print(f"{args.out}: {meta['rows_done']:,} of {meta['n']:,} shots "
                   f"({meta['chunks_done']}/{meta['n_chunks']} chunks{', finished' if meta['finished'] else ''})")

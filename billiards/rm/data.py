@@ -31,7 +31,8 @@ import numpy as np
 from tqdm import tqdm
 
 from billiards.domain import ACTION_HIGH, ACTION_LOW
-from billiards.physics import DEFAULT_PARAMS, random_racks, simulate_batch
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params, random_racks, simulate_batch
+from billiards.physics.config import recorded_physics
 from billiards.provenance import git_commit
 from billiards.rl.metrics import atomic_write_text
 
@@ -64,12 +65,13 @@ def chunk_rows(i: int, n: int, chunk: int) -> tuple[int, int]:
     return i * chunk, min(n, (i + 1) * chunk)
 
 
-def draw_chunk(seed: int, i: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+def draw_chunk(seed: int, i: int, size: int, params: PhysicsParams = DEFAULT_PARAMS) -> tuple[np.ndarray, np.ndarray]:
     """The float64 (positions (size, 4, 2), actions (size, 4)) of chunk i of a data set with
-    this seed: ``random_racks`` then actions uniform in [ACTION_LOW, ACTION_HIGH), both from
-    ``default_rng(SeedSequence([seed, i]))``. ``size`` is the chunk's row count."""
+    this seed: ``random_racks`` of ``params``'s table then actions uniform in [ACTION_LOW,
+    ACTION_HIGH), both from ``default_rng(SeedSequence([seed, i]))``. ``size`` is the chunk's
+    row count."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, i]))
-    positions = random_racks(rng, size, DEFAULT_PARAMS)
+    positions = random_racks(rng, size, params)
     actions = rng.uniform(ACTION_LOW, ACTION_HIGH, size=(size, 4))
     return positions, actions
 
@@ -110,7 +112,7 @@ def _create_array(out_dir: Path, name: str, n: int) -> np.memmap:
     return np.lib.format.open_memmap(out_dir / f"{name}.npy", mode="w+", dtype=dtype, shape=(n, *shape))
 
 
-def _start(out_dir: Path, n: int, seed: int, chunk: int) -> tuple[dict, dict[str, np.memmap]]:
+def _start(out_dir: Path, n: int, seed: int, chunk: int, params: PhysicsParams) -> tuple[dict, dict[str, np.memmap]]:
     """Meta and writable arrays of a new or partly generated data set in out_dir."""
     if (out_dir / META_FILE).exists():
         meta = read_meta(out_dir)
@@ -120,6 +122,12 @@ def _start(out_dir: Path, n: int, seed: int, chunk: int) -> tuple[dict, dict[str
                 f"{out_dir} already holds a data set with n={found['n']}, seed={found['seed']}, "
                 f"chunk={found['chunk']}; asked for n={n}, seed={seed}, chunk={chunk}. "
                 f"Use another directory or delete this one."
+            )
+        made_on = recorded_physics(meta.get("physics_params"))
+        if made_on != params:
+            raise DatasetError(
+                f"{out_dir} holds a data set on physics {made_on.describe()!r}; asked for {params.describe()!r}. "
+                f"Use another directory or pass --physics {made_on.describe()}."
             )
         if meta.get("chunks_done") == 0:  # nothing stored yet (killed while creating the arrays)
             return meta, {name: _create_array(out_dir, name, n) for name in ARRAYS}
@@ -140,7 +148,8 @@ def _start(out_dir: Path, n: int, seed: int, chunk: int) -> tuple[dict, dict[str
         "shots_per_s": None,
         "git_commit": git_commit(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "physics_params": dataclasses.asdict(DEFAULT_PARAMS),
+        "physics": params.describe(),
+        "physics_params": params.to_dict(),
         "action_low": ACTION_LOW.tolist(),
         "action_high": ACTION_HIGH.tolist(),
         "sessions": [],
@@ -160,6 +169,7 @@ def generate(
     progress: bool = True,
     threads: int | None = None,
     max_chunks: int | None = None,
+    physics: PhysicsParams | str | dict | None = None,
 ) -> dict:
     """Generate (or resume generating) n random shots into out_dir; returns the meta dict.
 
@@ -168,8 +178,10 @@ def generate(
     (for tests and time-boxed runs; the directory stays resumable). The returned dict is
     ``meta.json`` plus ``session_rows``, ``session_seconds`` and ``session_shots_per_s``
     for this call. A finished data set with the same parameters is a no-op.
-    Raises DatasetError if out_dir holds a data set with other (n, seed, chunk).
+    ``physics`` is the table (a preset name, PhysicsParams or dict; default korean_medium).
+    Raises DatasetError if out_dir holds a data set with other (n, seed, chunk, physics).
     """
+    params = get_params(physics)
     for name, value, low in (("n", n, 1), ("seed", seed, 0), ("chunk", chunk, 1)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -179,7 +191,7 @@ def generate(
         raise ValueError(f"threads must lie in [1, {numba.config.NUMBA_NUM_THREADS}], got {threads!r}")
     n, seed, chunk = int(n), int(seed), int(chunk)
     out_dir = Path(out_dir)
-    meta, arrays = _start(out_dir, n, seed, chunk)
+    meta, arrays = _start(out_dir, n, seed, chunk, params)
     total = meta["n_chunks"]
     first = meta["chunks_done"]
     last = total if max_chunks is None else min(total, first + max_chunks)
@@ -202,8 +214,8 @@ def generate(
     try:
         for i in range(first, last):
             start, stop = chunk_rows(i, n, chunk)
-            positions, actions = draw_chunk(seed, i, stop - start)
-            result = simulate_batch(positions, actions)
+            positions, actions = draw_chunk(seed, i, stop - start, params)
+            result = simulate_batch(positions, actions, params)
             arrays["positions"][start:stop] = positions
             arrays["actions"][start:stop] = actions
             arrays["score"][start:stop] = result.score

@@ -21,6 +21,7 @@ import torch
 from torch import nn
 
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+from billiards.physics.config import recorded_physics
 
 N_FEATURES = 13  # 8 normalised coordinates + cos(theta), sin(theta), 2p - 1, a, b
 DEFAULT_HIDDEN = (128, 128)
@@ -82,6 +83,7 @@ class RewardModel(nn.Module):
         layers.append(nn.Linear(width, 1))
         self.net = nn.Sequential(*layers)
         self.meta: dict[str, Any] = {}  # filled by load_model
+        self.params = DEFAULT_PARAMS  # the table of its training data (load_model sets it from meta)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Features (..., 13) -> logits (...,)."""
@@ -91,7 +93,7 @@ class RewardModel(nn.Module):
     def prob(self, positions, actions, batch_size: int = 65_536) -> np.ndarray:
         """P(score | s, a) as float64 of the broadcast leading shape of positions (..., 4, 2)
         and actions (..., 4); evaluated in batches of ``batch_size`` rows."""
-        x = rm_inputs(positions, actions)
+        x = rm_inputs(positions, actions, self.params)
         flat = x.reshape(-1, N_FEATURES)
         out = np.empty(flat.shape[0], dtype=np.float64)
         for start in range(0, flat.shape[0], batch_size):
@@ -125,7 +127,9 @@ def save_model(path, model: RewardModel, meta: dict | None = None) -> Path:
         "n_features": N_FEATURES,
         "hidden": list(model.hidden),
         "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
-        "meta": json.loads(json.dumps(meta or {}, default=_plain)),
+        # the table its inputs are scaled to (metadata given by the caller may restate it)
+        "meta": json.loads(json.dumps({"physics": model.params.describe(), "physics_params": model.params.to_dict(),
+                                       **(meta or {})}, default=_plain)),
     }
     tmp = path.with_name(path.name + ".tmp")
     torch.save(payload, tmp)
@@ -153,4 +157,5 @@ def load_model(path) -> RewardModel:
     if not all(math.isfinite(float(v.abs().max())) for v in model.state_dict().values() if v.numel()):
         raise RewardModelError(f"reward model file {path} has non-finite weights")
     model.meta = dict(payload.get("meta") or {})
+    model.params = recorded_physics(model.meta.get("physics_params"))
     return model.eval()

@@ -27,6 +27,8 @@ from tqdm import tqdm
 from billiards.provenance import git_commit
 from billiards.rl.metrics import atomic_write_text
 
+from billiards.physics.config import recorded_physics
+
 from .data import load_dataset, read_meta
 from .model import DEFAULT_HIDDEN, RewardModel, rm_inputs, save_model
 
@@ -149,9 +151,10 @@ def _none_if_nan(x: float) -> float | None:
     return None if math.isnan(x) else x
 
 
-def _block(data: dict, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
-    """Features (rows, 13) float32 and labels (rows,) float32 of rows [start, stop)."""
-    x = rm_inputs(data["positions"][start:stop], data["actions"][start:stop])
+def _block(data: dict, start: int, stop: int, params) -> tuple[np.ndarray, np.ndarray]:
+    """Features (rows, 13) float32 and labels (rows,) float32 of rows [start, stop) of a data
+    set on the table ``params``."""
+    x = rm_inputs(data["positions"][start:stop], data["actions"][start:stop], params)
     y = np.asarray(data["score"][start:stop], dtype=np.float32)
     return x, y
 
@@ -190,7 +193,9 @@ def train_rm(
         raise ValueError(f"holdout must lie in (0, 1), got {holdout!r}")
     data_dir, out_path = Path(data_dir), Path(out_path)
     data = load_dataset(data_dir)
-    block = int(read_meta(data_dir)["chunk"])
+    meta = read_meta(data_dir)
+    block = int(meta["chunk"])
+    physics = recorded_physics(meta.get("physics_params"))
     rows = data["score"].shape[0] if max_rows is None else min(int(max_rows), data["score"].shape[0])
     n_hold = int(round(rows * holdout))
     n_train = rows - n_hold
@@ -203,9 +208,10 @@ def train_rm(
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
             model = RewardModel(hidden)
+        model.params = physics
         rng = np.random.default_rng(seed)
         optimizer = torch.optim.Adam(model.parameters(), lr=lr)
-        x_hold, y_hold = _block(data, n_train, rows)
+        x_hold, y_hold = _block(data, n_train, rows, physics)
         base_rate = float(np.asarray(data["score"][:n_train], dtype=np.float64).mean())
         starts = np.arange(0, n_train, block)
 
@@ -216,7 +222,7 @@ def train_rm(
             model.train()
             loss_sum, seen = 0.0, 0
             for start in rng.permutation(starts):
-                x, y = _block(data, int(start), min(n_train, int(start) + block))
+                x, y = _block(data, int(start), min(n_train, int(start) + block), physics)
                 perm = rng.permutation(x.shape[0])
                 x, y = torch.from_numpy(x[perm]), torch.from_numpy(y[perm])
                 for s in range(0, x.shape[0], batch_size):
@@ -259,6 +265,8 @@ def train_rm(
         "train_rows": n_train,
         "heldout_rows": n_hold,
         "data_dir": str(data_dir.resolve()),
+        "physics": physics.describe(),
+        "physics_params": physics.to_dict(),
         "hidden": list(model.hidden),
         "epochs": epochs,
         "batch_size": batch_size,

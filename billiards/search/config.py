@@ -12,6 +12,8 @@ from typing import List, Optional
 from hydra.core.config_store import ConfigStore
 from hydra.experimental.callback import Callback
 
+from billiards.physics.config import PhysicsConfig, physics_errors
+
 
 SEARCH_KINDS = ("h2", "puct")
 PROPOSER_KINDS = ("geometric", "policy")
@@ -64,6 +66,7 @@ class ProtocolConfig:
 @dataclass
 class Config:
     proposer: ProposerConfig = field(default_factory=ProposerConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
     search: SearchConfig = field(default_factory=SearchConfig)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     seed: int = 0
@@ -101,6 +104,9 @@ def validate(cfg) -> None:
             raise ValueError(f"proposer {cfg.proposer.name!r}: no checkpoint at {', '.join(missing)}{how}")
     if cfg.threads is not None and cfg.threads < 1:
         raise ValueError(f"threads must be >= 1, got {cfg.threads}")
+    errs = physics_errors(cfg.physics)
+    if errs:
+        raise ValueError(errs[0])
 
 
 def register() -> None:
@@ -109,6 +115,7 @@ def register() -> None:
     cs.store(group="proposer", name="proposer_schema", node=ProposerConfig)
     cs.store(group="search", name="search_schema", node=SearchConfig)
     cs.store(group="protocol", name="protocol_schema", node=ProtocolConfig)
+    cs.store(group="schema", name="physics", node=PhysicsConfig)  # conf/physics/*.yaml, shared with train.py
 
 
 class ValidateSearchConfig(Callback):
