@@ -21,6 +21,7 @@ from pathlib import Path
 
 from billiards.baselines import make_policy
 from billiards.evaluation import evaluate
+from billiards.physics import DEFAULT_PRESET, PRESETS
 from billiards.provenance import git_commit
 
 # (row name, policy, start, constrain_aim)
@@ -38,6 +39,7 @@ def main() -> None:
     parser.add_argument("--n-innings", type=int, default=100)
     parser.add_argument("--max-shots", type=int, default=10)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--physics", default=DEFAULT_PRESET, choices=sorted(PRESETS), help="the table (default %(default)s)")
     parser.add_argument("--out", default="results")
     parser.add_argument("--images", action="store_true", help="render a scoring, a foul and a missed nearest-red shot to OUT/img/")
     args = parser.parse_args()
@@ -53,15 +55,17 @@ def main() -> None:
             start=start,
             seed=args.seed,
             constrain_aim=constrain_aim,
+            env_kwargs=dict(params=PRESETS[args.physics]),
         )
-        rows.append(dict(name=name, policy=policy, constrain_aim=constrain_aim, **dataclasses.asdict(result)))
+        rows.append(dict(name=name, policy=policy, constrain_aim=constrain_aim, physics=args.physics, **dataclasses.asdict(result)))
         print(f"{name:>36} | {start:>9} start | {result.summary()}")
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "baselines.json").write_text(json.dumps(dict(command=command, commit=commit, results=rows), indent=2) + "\n")
+    stem = "baselines" if args.physics == DEFAULT_PRESET else f"baselines_{args.physics}"
+    (out / f"{stem}.json").write_text(json.dumps(dict(command=command, commit=commit, physics=args.physics, results=rows), indent=2) + "\n")
     lines = [
-        "# Baseline policies, unified evaluation protocol",
+        f"# Baseline policies, unified evaluation protocol, physics `{args.physics}`",
         "",
         (
             f"{args.n_innings} continue-on-miss innings of {args.max_shots} shots, rack seed {args.seed}, "
@@ -80,14 +84,14 @@ def main() -> None:
             f"| {r['name']} | {r['start']} | {r['mean']:.3f} ± {r['std']:.3f} | {r['best']} | "
             f"{r['foul_innings_pct']:.1f} | {r['foul_per_shot_pct']:.1f} | {r['success_per_shot_pct']:.1f} |"
         )
-    (out / "baselines.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {out / 'baselines.json'} and {out / 'baselines.md'}")
+    (out / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {out / f'{stem}.json'} and {out / f'{stem}.md'}")
 
     if args.images:
-        render_examples(out / "img", args.seed)
+        render_examples(out / "img", args.seed, PRESETS[args.physics])
 
 
-def render_examples(img_dir: Path, seed: int, n_racks: int = 256) -> None:
+def render_examples(img_dir: Path, seed: int, params, n_racks: int = 256) -> None:
     """PNGs of the nearest-red baseline's first shot on the first random rack (of n_racks drawn
     from ``seed``) where it scores, fouls and misses."""
     import numpy as np
@@ -96,7 +100,7 @@ def render_examples(img_dir: Path, seed: int, n_racks: int = 256) -> None:
     from billiards.render import render_shot
 
     img_dir.mkdir(parents=True, exist_ok=True)
-    env = make_env(n_racks, seed=seed)
+    env = make_env(n_racks, seed=seed, params=params)
     td = make_policy("nearest")(env.reset())
     nxt = env.step(td)["next"]
     for outcome in ("score", "foul", "miss"):
@@ -106,7 +110,7 @@ def render_examples(img_dir: Path, seed: int, n_racks: int = 256) -> None:
         k = int(hits[0])
         path = img_dir / f"nearest_{outcome}.png"
         pos, act = td["positions"][k].numpy(), td["action"][k].numpy().astype(np.float64)
-        render_shot(pos, act, path, title=f"nearest-red baseline, rack {k} of seed {seed}", dpi=80)
+        render_shot(pos, act, path, params=params, title=f"nearest-red baseline, rack {k} of seed {seed}", dpi=80)
         print(f"{path}: rack {k}")
 
 if __name__ == "__main__":

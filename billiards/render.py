@@ -34,7 +34,9 @@ from billiards import domain
 from billiards.physics import (
     BALL_NAMES,
     DEFAULT_PARAMS,
+    DEFAULT_PRESET,
     EVENT_KINDS,
+    PRESETS,
     PhysicsParams,
     ShotResult,
     simulate_shot,
@@ -179,6 +181,7 @@ def play_inning(
     constrain_aim: bool = False,
     extra_features: bool = False,
     positions=None,
+    params: PhysicsParams = DEFAULT_PARAMS,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Play one continue-on-miss inning with ``policy`` (deterministic) in a B = 1 env.
 
@@ -191,7 +194,7 @@ def play_inning(
     from billiards.envs import make_env, reset_to
 
     env = make_env(1, start=start, on_miss="continue", max_shots=max_shots, constrain_aim=constrain_aim,
-                   extra_features=extra_features, seed=seed)
+                   extra_features=extra_features, seed=seed, params=params)
     td = reset_to(env, positions) if positions is not None else env.reset()
     shots = []
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
@@ -280,6 +283,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         p.add_argument("--start", choices=["random", "canonical"], default="random")
         p.add_argument("--constrain-aim", action="store_true", help="play the policy through the aim constraint")
         p.add_argument("--dpi", type=int, default=100 if name == "shot" else 50)
+        p.add_argument("--physics", default=DEFAULT_PRESET, choices=sorted(PRESETS), help="the table (default %(default)s)")
         if name == "inning":
             p.add_argument("--max-shots", type=int, default=10)
             p.add_argument("--fps", type=int, default=15)
@@ -287,13 +291,17 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     policy = _policy(args.policy, args.seed, args.constrain_aim)
     n_shots = 1 if args.what == "shot" else args.max_shots
-    shots = play_inning(policy, start=args.start, seed=args.seed, max_shots=n_shots, constrain_aim=args.constrain_aim)
+    params = PRESETS[args.physics]
+    shots = play_inning(policy, start=args.start, seed=args.seed, max_shots=n_shots, constrain_aim=args.constrain_aim,
+                        params=params)
     if args.what == "shot":
         pos, act = shots[0]
-        result = render_shot(pos, act, args.out, title=f"{args.policy} policy, {args.start} rack, seed {args.seed}", dpi=args.dpi)
+        result = render_shot(pos, act, args.out, params=params, dpi=args.dpi,
+                             title=f"{args.policy} policy, {args.start} rack, seed {args.seed}, {args.physics}")
         print(f"{args.out}: {outcome_text(result)}")
     else:
-        n = render_inning(shots, args.out, fps=args.fps, speed=args.speed, dpi=args.dpi, title=f"{args.policy}: ")
+        n = render_inning(shots, args.out, params=params, fps=args.fps, speed=args.speed, dpi=args.dpi,
+                          title=f"{args.policy}: ")
         print(f"{args.out}: {len(shots)} shots, {n} frames")
 
 

@@ -16,6 +16,12 @@ PAPER_TABLE6 = {
     "both": {"p1_h2": 99.77, "p1_puct": 62.84, "p3_h2": (1194, 3272), "p3_puct": (50.4, 191)},
 }
 COLUMNS = [("p1", "h2"), ("p1", "puct"), ("p3", "h2"), ("p3", "puct")]
+LEGACY_PHYSICS = "international"  # results written before the physics presets (billiards.physics.config)
+
+
+def physics_of(res: dict) -> str:
+    """The table a search result played (results from before the presets: international)."""
+    return res.get("physics") or LEGACY_PHYSICS
 
 
 def find_results(dirs) -> list[dict]:
@@ -51,7 +57,14 @@ def _paper(name: str, protocol: str, kind: str) -> str:
 
 
 def table6_markdown(results: list[dict]) -> str:
-    """The Table 6 layout; the last run found wins where a cell has several."""
+    """The Table 6 layout, one table per physics; the last run found wins where a cell has several."""
+    by_physics: dict[str, list[dict]] = {}
+    for r in results:
+        by_physics.setdefault(physics_of(r), []).append(r)
+    return "\n".join(_table6(physics, rs) for physics, rs in sorted(by_physics.items()))
+
+
+def _table6(physics: str, results: list[dict]) -> str:
     cells: dict[tuple[str, str, str], dict] = {}
     for r in results:
         cells[(r["proposer"], r["protocol"], r["search"])] = r
@@ -59,7 +72,7 @@ def table6_markdown(results: list[dict]) -> str:
     lines = [
         "Table 6: proposers at 400 simulations per shot. P1: points per 100-shot random-start inning (100 innings); "
         "P3: canonical-start chain length before the first miss or foul, mean (longest). Ours | paper. "
-        "(n inn.): fewer P1 innings; cap: chains stopped at that length.",
+        f"(n inn.): fewer P1 innings; cap: chains stopped at that length. Physics: `{physics}`.",
         "",
         "| proposer | P1 h=2 | P1 PUCT | P3 h=2 mean (max) | P3 PUCT mean (max) |",
         "|---|---|---|---|---|",
