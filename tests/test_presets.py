@@ -232,3 +232,29 @@ def test_search_app_plays_the_chosen_table(tmp_path):
     bad = subprocess.run([sys.executable, str(REPO / "search.py"), "physics.e_ball=2"], cwd=tmp_path, capture_output=True, text=True,
                          timeout=60)
     assert bad.returncode != 0 and "physics.e_ball" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_things_made_on_another_table_warn_loudly(tmp_path):
+    import warnings
+
+    from billiards.envs import make_env
+    from billiards.physics.config import PhysicsMismatchWarning
+    from billiards.rl.policy import load_policy_proposer
+    from billiards.rm import RewardModel, save_model
+
+    model = RewardModel(hidden=(4,))
+    model.params = I
+    path = save_model(tmp_path / "rm.pt", model)
+    with pytest.warns(PhysicsMismatchWarning, match="reward model was made on physics 'international'"):
+        make_env(2, rm=1.0, rm_model=path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PhysicsMismatchWarning)
+        make_env(2, rm=1.0, rm_model=path, params="international")
+
+    shipped = [str(REPO / "results/policies/base/seed0.pt")]  # trained on international (before the presets)
+    with pytest.warns(PhysicsMismatchWarning, match="proposer 'base'"):
+        load_policy_proposer(shipped, name="base")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PhysicsMismatchWarning)
+        prop = load_policy_proposer(shipped, name="base", params=I)
+    assert prop.R == I.ball_radius
