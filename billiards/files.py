@@ -3,7 +3,21 @@ reward models): one loader that turns every way such a file can be bad into one 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+
+def atomic_write_text(path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically: a temporary file beside it, flushed and fsynced,
+    then renamed over it, so a reader sees the old file or the new one, never half of one."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    return path
 
 
 def load_tagged(path, tag: str, error: type[Exception], what: str) -> dict:

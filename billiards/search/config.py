@@ -11,6 +11,7 @@ from typing import List, Optional
 
 from hydra.core.config_store import ConfigStore
 from hydra.experimental.callback import Callback
+from omegaconf import OmegaConf
 
 from billiards.physics.config import PhysicsConfig, physics_errors
 
@@ -73,6 +74,7 @@ class Config:
     threads: Optional[int] = None  # numba threads for simulate_batch (default: all cores)
     progress: bool = True
     picture: bool = True
+    resume: Optional[str] = None  # a stopped search's run dir: continue it (P3: from its next chain)
 
 
 def validate(cfg) -> None:
@@ -104,12 +106,25 @@ def validate(cfg) -> None:
             raise ValueError(f"proposer {cfg.proposer.name!r}: no checkpoint at {', '.join(missing)}{how}")
     if cfg.threads is not None and cfg.threads < 1:
         raise ValueError(f"threads must be >= 1, got {cfg.threads}")
+    if cfg.get("resume"):
+        from pathlib import Path
+
+        if not (Path(cfg.resume) / "config.yaml").is_file():
+            raise ValueError(f"resume={cfg.resume!r}: not a search run directory (no config.yaml there)")
     errs = physics_errors(cfg.physics)
     if errs:
         raise ValueError(errs[0])
 
 
+def _or(value, default: str) -> str:
+    """``${billiards.or:${resume},outputs/...}``: the value unless it is null or empty."""
+    return str(value) if value else default
+
+
 def register() -> None:
+    OmegaConf.register_new_resolver("billiards.or", _or, replace=True)
+    # a resume keeps the original .hydra and records its own beside it
+    OmegaConf.register_new_resolver("billiards.output_subdir", lambda r: ".hydra_resume" if r else ".hydra", replace=True)
     cs = ConfigStore.instance()
     cs.store(name="search_schema", node=Config)
     cs.store(group="proposer", name="proposer_schema", node=ProposerConfig)

@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -47,7 +48,11 @@ class ProtocolResult:
 
 def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int = 0,
            params: PhysicsParams = DEFAULT_PARAMS, progress: bool = True) -> ProtocolResult:
-    """P1: random-start innings of ``shots`` shots (continue-on-miss), points per inning."""
+    """P1: random-start innings of ``shots`` shots (continue-on-miss), points per inning.
+
+    All innings advance together, one shot per step. Interrupted (Ctrl-C), it returns what the
+    finished steps give, marked ``extra["partial"]`` with ``extra["shots_done"]`` per inning (a
+    P1 cannot be continued: a new run starts it again)."""
     env = BilliardsEnv(batch_size=[n_innings], start="random", on_miss="continue", max_shots=shots, seed=seed, params=params)
     actor.reseed(seed)
     collector = make_search_collector(env, actor, frames_per_batch=n_innings, total_frames=n_innings * shots)
@@ -56,26 +61,35 @@ def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int
     predicted = np.zeros((n_innings, shots))
     t0 = time.perf_counter()
     bar = tqdm(total=shots, desc="P1", unit="shot", disable=not progress, mininterval=1.0)
-    for t, batch in enumerate(collector):  # one batched step of every inning per iteration
-        score[:, t] = batch["next", "score"].reshape(n_innings).numpy()
-        foul[:, t] = batch["next", "foul"].reshape(n_innings).numpy()
-        predicted[:, t] = batch["search_r1"].reshape(n_innings).numpy()
-        bar.update(1)
-        bar.set_postfix(points=f"{score[:, : t + 1].sum(1).mean():.2f}/{t + 1}",
-                        shots_s=f"{n_innings * (t + 1) / (time.perf_counter() - t0):.0f}")
+    done = 0
+    try:
+        for t, batch in enumerate(collector):  # one batched step of every inning per iteration
+            score[:, t] = batch["next", "score"].reshape(n_innings).numpy()
+            foul[:, t] = batch["next", "foul"].reshape(n_innings).numpy()
+            predicted[:, t] = batch["search_r1"].reshape(n_innings).numpy()
+            done = t + 1
+            bar.update(1)
+            bar.set_postfix(points=f"{score[:, : t + 1].sum(1).mean():.2f}/{t + 1}",
+                            shots_s=f"{n_innings * (t + 1) / (time.perf_counter() - t0):.0f}")
+    except KeyboardInterrupt:
+        pass
     bar.close()
     collector.shutdown()
     seconds = time.perf_counter() - t0
+    score, foul, predicted = score[:, :done], foul[:, :done], predicted[:, :done]
     points = score.sum(axis=1).astype(float)
+    extra = {"foul_per_shot": float(foul.mean()) if done else float("nan"),
+             "success_per_shot": float(score.mean()) if done else float("nan"),
+             # shots whose outcome in the env differed from the search's simulation (must be 0)
+             "mispredicted_shots": int((predicted != score - actor.cfg.foul_penalty * foul).sum()),
+             "n_innings": n_innings, "shots_per_inning": shots, "seed": seed}
+    if done < shots:
+        extra.update(partial=True, shots_done=done)
     return ProtocolResult(
         protocol="p1", mean=float(points.mean()), std=float(points.std()), max=float(points.max()),
-        min=float(points.min()), values=points.tolist(), shots=n_innings * shots, seconds=seconds,
+        min=float(points.min()), values=points.tolist(), shots=n_innings * done, seconds=seconds,
         sims_per_decision=actor.n_sims / max(actor.n_decisions, 1),
-        ms_per_decision=1e3 * seconds / (n_innings * shots),
-        extra={"foul_per_shot": float(foul.mean()), "success_per_shot": float(score.mean()),
-               # shots whose outcome in the env differed from the search's simulation (must be 0)
-               "mispredicted_shots": int((predicted != score - actor.cfg.foul_penalty * foul).sum()),
-               "n_innings": n_innings, "shots_per_inning": shots, "seed": seed},
+        ms_per_decision=1e3 * seconds / max(n_innings * done, 1), extra=extra,
     )
 
 
@@ -98,38 +112,96 @@ def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int =
             break
         length += 1
         if bar is not None:
-            bar.update(1)
-            bar.set_postfix(seed=seed, chain=length)
+            bar.set_postfix(seed=seed, chain=length, refresh=False)
         if length >= cap:
             break
         td = nxt.select("positions", "shot", "observation").clone()
     return length, history
 
 
+CHAINS_FILE = "chains.jsonl"  # one finished P3 chain per line, written as each chain ends
+
+
+def read_chains(path: str | Path | None) -> dict[int, dict]:
+    """The finished chains of a P3 ledger, by seed (a line cut short by a kill is ignored)."""
+    if path is None or not Path(path).is_file():
+        return {}
+    done = {}
+    for line in Path(path).read_text().splitlines():
+        try:
+            rec = json.loads(line)
+            done[int(rec["seed"])] = rec
+        except (ValueError, KeyError, TypeError):
+            continue  # the torn last line of a killed run
+    return done
+
+
+def _append_line(path: Path, record: dict) -> None:
+    with open(path, "a") as f:
+        f.write(json.dumps(record) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
 def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: PhysicsParams = DEFAULT_PARAMS,
-           progress: bool = True, picture: str | Path | None = None) -> ProtocolResult:
-    """P3: canonical-start chains until the first miss or foul (cap ``cap``), one per seed."""
-    lengths, longest_history, longest = [], None, -1
-    t0 = time.perf_counter()
-    bar = tqdm(desc="P3", unit="shot", disable=not progress, mininterval=1.0)
-    decisions = 0
+           progress: bool = True, picture: str | Path | None = None, ledger: str | Path | None = None) -> ProtocolResult:
+    """P3: canonical-start chains until the first miss or foul (cap ``cap``), one per seed.
+
+    With a ``ledger`` file, each finished chain is appended to it as it ends, and chains already
+    in it are not played again: an interrupted P3 keeps every finished chain and continues from
+    the next seed (each chain depends only on its seed, so the result is the same as one
+    uninterrupted run)."""
+    seeds = list(seeds)
+    done = {s: r for s, r in read_chains(ledger).items() if s in seeds}
+    bar = tqdm(total=len(seeds), initial=len(done), desc="P3 chains", unit="chain", disable=not progress, mininterval=1.0)
     for seed in seeds:
+        if seed in done:
+            continue
+        t0 = time.perf_counter()
         length, history = run_chain(actor, seed, cap, params=params, bar=bar)
-        decisions += actor.n_decisions
-        lengths.append(length)
-        if length > longest:
-            longest, longest_history = length, history
+        rec = {"seed": seed, "length": length, "decisions": actor.n_decisions, "seconds": time.perf_counter() - t0,
+               "last_shots": [[pos.tolist(), act.tolist(), bool(scored)] for pos, act, scored in history]}
+        done[seed] = rec
+        if ledger is not None:
+            _append_line(Path(ledger), rec)
+        bar.update(1)
+        ms = 1e3 * rec["seconds"] / max(rec["decisions"], 1)
+        bar.set_postfix(seed=seed, chain=length, ms_shot=f"{ms:.1f}")
+        left = sum(1 for s in seeds if s not in done)
+        if progress and left and len(done) == 1:
+            bar.write(f"P3: {ms:.1f} ms per shot; the {left} chains left take at most {left * cap * ms / 6e4:.0f} min "
+                      f"(if every one reaches the {cap:,}-shot cap)")
     bar.close()
-    seconds = time.perf_counter() - t0
-    if picture is not None and longest_history:
-        draw_last_shots(longest_history, picture, params, title=f"last shots of the longest chain ({longest} points)")
-    arr = np.asarray(lengths, dtype=float)
+    recs = [done[s] for s in seeds]
+    if picture is not None:
+        best = max(recs, key=lambda r: r["length"])
+        history = [(np.asarray(p), np.asarray(a), s) for p, a, s in best["last_shots"]]
+        if history:
+            draw_last_shots(history, picture, params, title=f"last shots of the longest chain ({best['length']} points)")
+    return _p3_result(recs, cap, actor.cfg.sims_per_decision)
+
+
+def _p3_result(recs: list[dict], cap: int, sims_per_decision: float, partial: bool = False) -> ProtocolResult:
+    arr = np.asarray([r["length"] for r in recs], dtype=float)
+    seconds = sum(r["seconds"] for r in recs)
+    decisions = sum(r["decisions"] for r in recs)
+    extra = {"cap": cap, "seeds": [r["seed"] for r in recs], "reached_cap": int((arr >= cap).sum())}
+    if partial:
+        extra["partial"] = True
+    if not recs:
+        return ProtocolResult("p3", float("nan"), float("nan"), float("nan"), float("nan"), [], 0, 0.0,
+                              sims_per_decision, float("nan"), extra)
     return ProtocolResult(
         protocol="p3", mean=float(arr.mean()), std=float(arr.std()), max=float(arr.max()), min=float(arr.min()),
-        values=lengths, shots=int(arr.sum() + len(lengths)), seconds=seconds,
-        sims_per_decision=actor.cfg.sims_per_decision, ms_per_decision=1e3 * seconds / max(decisions, 1),
-        extra={"cap": cap, "seeds": list(seeds), "reached_cap": int((arr >= cap).sum())},
+        values=[int(v) for v in arr], shots=int(arr.sum() + len(recs)), seconds=seconds,
+        sims_per_decision=sims_per_decision, ms_per_decision=1e3 * seconds / max(decisions, 1), extra=extra,
     )
+
+
+def partial_p3(ledger: str | Path, seeds, cap: int, sims_per_decision: float) -> ProtocolResult:
+    """The result of the chains a ledger holds so far, marked ``extra["partial"]``."""
+    done = read_chains(ledger)
+    return _p3_result([done[s] for s in seeds if s in done], cap, sims_per_decision, partial=True)
 
 
 def draw_last_shots(history, path: str | Path, params: PhysicsParams = DEFAULT_PARAMS, title: str = "") -> None:
@@ -152,4 +224,4 @@ def draw_last_shots(history, path: str | Path, params: PhysicsParams = DEFAULT_P
     plt.close(fig)
 
 
-__all__ = ["ProtocolResult", "draw_last_shots", "run_chain", "run_p1", "run_p3"]
+__all__ = ["CHAINS_FILE", "ProtocolResult", "draw_last_shots", "partial_p3", "read_chains", "run_chain", "run_p1", "run_p3"]

@@ -11,13 +11,14 @@ from omegaconf import OmegaConf
 
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import params_from_config
+from billiards.files import atomic_write_text
 from billiards.provenance import ROOT, git_commit
 
 from .actors import LookaheadActor, PUCTActor, SearchActor
 from .config import validate
 from .lookahead import H2Config
 from .proposers import GeometricProposer
-from .protocols import ProtocolResult, run_p1, run_p3
+from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, read_chains, run_p1, run_p3
 from .puct import PUCTConfig
 
 RESULTS_FILE = "results.json"
@@ -43,21 +44,64 @@ def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchA
     return PUCTActor(proposer, puct, seed=cfg.seed, params=params)
 
 
+CONFIG_FILE = "config.yaml"  # the resolved search config, written at start (what resume= continues)
+RUNTIME_KEYS = ("threads", "progress", "picture")  # taken from the command line when resuming
+
+
+def describe(cfg, params) -> str:
+    """What a search run will do, in one line (printed before it starts)."""
+    s, p = cfg.search, cfg.protocol
+    what = (f"P1: {p.n_innings} random-start innings x {p.shots} shots" if p.name == "p1"
+            else f"P3: {p.seeds} chains from the opening rack, each up to {p.cap:,} shots")
+    return f"{what}; {s.kind} search, {s.budget} simulations per shot, proposer {cfg.proposer.name}, physics {params.describe()}"
+
+
+def resume_config(out_dir: Path, current):
+    """A stopped search's own config, with this command line's runtime keys."""
+    path = out_dir / CONFIG_FILE
+    if not path.is_file():
+        raise ValueError(f"resume={out_dir}: no {CONFIG_FILE} there (not a search run directory)")
+    saved = OmegaConf.load(path)
+    for key in RUNTIME_KEYS:
+        saved[key] = current[key]
+    saved.resume = str(out_dir)
+    return saved
+
+
 def run(cfg, out_dir: str | Path) -> ProtocolResult:
-    validate(cfg)
+    """Run the configured protocol into ``out_dir``: ``config.yaml`` at start, each finished P3
+    chain in ``chains.jsonl`` as it ends, ``results.json`` at the end. Ctrl-C writes
+    ``results.json`` from what finished, marked ``partial``; ``resume=<out_dir>`` continues a
+    stopped P3 from its next chain."""
     out_dir = Path(out_dir)
+    if cfg.get("resume"):
+        cfg = resume_config(out_dir, cfg)
+    validate(cfg)
     out_dir.mkdir(parents=True, exist_ok=True)
+    if not cfg.get("resume"):
+        atomic_write_text(out_dir / CONFIG_FILE, OmegaConf.to_yaml(cfg, resolve=True))
     if cfg.threads is not None:
         numba.set_num_threads(cfg.threads)
     params = params_from_config(cfg.physics)
+    print(f"search: {describe(cfg, params)}\noutput: {out_dir}", flush=True)
     actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
     proto = cfg.protocol.name
+    seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
+    ledger = out_dir / CHAINS_FILE
+    interrupted = False
     if proto == "p1":
         result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress)
+        interrupted = bool(result.extra.get("partial"))
     else:
-        seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
+        if cfg.get("resume"):
+            print(f"resume: {len(read_chains(ledger))} of {cfg.protocol.seeds} chains already finished", flush=True)
         picture = out_dir / "longest_chain.png" if cfg.picture else None
-        result = run_p3(actor, seeds, cfg.protocol.cap, params=params, progress=cfg.progress, picture=picture)
+        try:
+            result = run_p3(actor, seeds, cfg.protocol.cap, params=params, progress=cfg.progress, picture=picture,
+                            ledger=ledger)
+        except KeyboardInterrupt:
+            interrupted = True
+            result = partial_p3(ledger, seeds, cfg.protocol.cap, actor.cfg.sims_per_decision)
     summary = json.loads(result.to_json())
     summary.update(
         proposer=cfg.proposer.name,
@@ -67,7 +111,14 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         config=OmegaConf.to_container(cfg, resolve=True),
         commit=git_commit(),
     )
-    (out_dir / RESULTS_FILE).write_text(json.dumps(summary, indent=2) + "\n")
+    atomic_write_text(out_dir / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
+    if interrupted:
+        kept = (f"{len(result.values)} of {cfg.protocol.seeds} chains" if proto == "p3"
+                else f"{result.extra['shots_done']} of {cfg.protocol.shots} shots per inning")
+        more = f"; continue with: python search.py resume={out_dir}" if proto == "p3" else " (a P1 restarts from scratch)"
+        print(f"interrupted: {kept} finished, written to {out_dir / RESULTS_FILE} (partial){more}", flush=True)
+        raise SystemExit(130)
     print(f"{proto} {summary['search']} proposer={cfg.proposer.name}: mean {result.mean:.2f} ± {result.std:.2f}, "
-          f"max {result.max:.0f}, {result.ms_per_decision:.1f} ms/shot, {result.sims_per_decision:.0f} sims/shot -> {out_dir}")
+          f"max {result.max:.0f}, {result.ms_per_decision:.1f} ms/shot, {result.sims_per_decision:.0f} sims/shot\n"
+          f"results: {out_dir / RESULTS_FILE}", flush=True)
     return result

@@ -1,0 +1,82 @@
+"""search.py's run directory: what it says up front, what it keeps when interrupted, and
+``resume=`` continuing a stopped P3 to the same result as an uninterrupted run."""
+
+import json
+
+import pytest
+from omegaconf import OmegaConf
+
+from billiards.search import run as search_run
+from billiards.search.config import Config
+from billiards.search.proposers import GeometricProposer
+
+
+def small_cfg(**protocol):
+    cfg = OmegaConf.structured(Config)
+    cfg.protocol.name = protocol.get("name", "p3")
+    cfg.protocol.seeds, cfg.protocol.cap = 4, 12
+    cfg.protocol.n_innings, cfg.protocol.shots = 3, 3
+    cfg.search.budget, cfg.search.k1, cfg.search.m1 = 90, 60, 3
+    cfg.progress, cfg.picture = False, False
+    return cfg
+
+
+def interrupt_after(monkeypatch, n_calls):
+    """Make the proposer raise KeyboardInterrupt (a Ctrl-C) on its n-th call."""
+    original, calls = GeometricProposer.propose, [0]
+
+    def propose(self, *args, **kwargs):
+        calls[0] += 1
+        if calls[0] == n_calls:
+            raise KeyboardInterrupt
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(GeometricProposer, "propose", propose)
+    return calls
+
+
+def test_p3_interrupted_keeps_finished_chains_and_resumes_to_the_same_result(tmp_path, monkeypatch, capsys):
+    whole = search_run.run(small_cfg(), tmp_path / "whole")
+    assert len(whole.values) == 4 and (tmp_path / "whole" / "config.yaml").is_file()
+    out = capsys.readouterr().out
+    assert "P3: 4 chains from the opening rack, each up to 12 shots" in out and f"output: {tmp_path / 'whole'}" in out
+    assert f"results: {tmp_path / 'whole' / 'results.json'}" in out
+
+    lengths = whole.values
+    # interrupt inside the third chain: two proposer calls per decision (depth 1 and 2)
+    decisions_before = lengths[0] + 1 + lengths[1] + 1
+    interrupt_after(monkeypatch, 2 * decisions_before + 1)
+    stopped = tmp_path / "stopped"
+    with pytest.raises(SystemExit) as exit_info:
+        search_run.run(small_cfg(), stopped)
+    assert exit_info.value.code == 130
+    partial = json.loads((stopped / "results.json").read_text())
+    assert partial["extra"]["partial"] and partial["values"] == lengths[:2]
+    assert "continue with: python search.py resume=" in capsys.readouterr().out
+    monkeypatch.undo()
+
+    resumed_cfg = small_cfg()
+    resumed_cfg.resume = str(stopped)
+    resumed = search_run.run(resumed_cfg, stopped)
+    assert "resume: 2 of 4 chains already finished" in capsys.readouterr().out
+    assert resumed.values == lengths and resumed.mean == whole.mean
+    final = json.loads((stopped / "results.json").read_text())
+    assert "partial" not in final["extra"] and final["values"] == lengths
+
+
+def test_p1_interrupted_writes_a_partial_result(tmp_path, monkeypatch, capsys):
+    interrupt_after(monkeypatch, 5)  # two proposer calls per batched step, after the collector's first probe
+    with pytest.raises(SystemExit) as exit_info:
+        search_run.run(small_cfg(name="p1"), tmp_path)
+    assert exit_info.value.code == 130
+    res = json.loads((tmp_path / "results.json").read_text())
+    done = res["extra"]["shots_done"]
+    assert res["extra"]["partial"] and 1 <= done < 3 and len(res["values"]) == 3 and res["shots"] == 3 * done
+    assert f"{done} of 3 shots per inning finished" in capsys.readouterr().out
+
+
+def test_resume_of_a_directory_that_is_no_search_run_fails_clearly(tmp_path):
+    cfg = small_cfg()
+    cfg.resume = str(tmp_path)
+    with pytest.raises(ValueError, match="no config.yaml there"):
+        search_run.run(cfg, tmp_path)
