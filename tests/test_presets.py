@@ -258,3 +258,17 @@ def test_things_made_on_another_table_warn_loudly(tmp_path):
         warnings.simplefilter("error", PhysicsMismatchWarning)
         prop = load_policy_proposer(shipped, name="base", params=I)
     assert prop.R == I.ball_radius
+
+
+def test_warm_up_says_when_it_compiles(tmp_path, monkeypatch):
+    from billiards.physics import warmup
+
+    said = []
+    monkeypatch.setattr(warmup, "CACHE_DIR", tmp_path)  # an empty cache: the kernels count as not compiled
+    assert not warmup.kernels_cached()
+    seconds = warmup.warm_up(log=said.append)
+    assert seconds >= 0 and said[0].startswith("compiling the simulator") and said[1].startswith("simulator ready")
+    monkeypatch.undo()
+    said.clear()
+    warmup.warm_up(log=said.append)  # cached and already loaded: silent
+    assert warmup.kernels_cached() and said == []

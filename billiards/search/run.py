@@ -10,6 +10,7 @@ import numba
 from omegaconf import OmegaConf
 
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+from billiards.physics.warmup import warm_up
 from billiards.physics.config import params_from_config
 from billiards.files import atomic_write_text
 from billiards.provenance import ROOT, git_commit
@@ -84,6 +85,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         numba.set_num_threads(cfg.threads)
     params = params_from_config(cfg.physics)
     print(f"search: {describe(cfg, params)}\noutput: {out_dir}", flush=True)
+    warm_up(params, log=lambda msg: print(msg, flush=True))
     actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
     proto = cfg.protocol.name
     seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
