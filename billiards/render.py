@@ -13,6 +13,8 @@ Command line::
 
     python -m billiards.render shot --out shot.png --seed 0 --policy nearest
     python -m billiards.render inning --out inning.gif --seed 0 --policy nearest --max-shots 5
+    python -m billiards.render inning --out inning.gif --policy results/policies/base/seed0.pt   # a trained policy
+    python -m billiards.render shot --out shot.png --policy outputs/search/<date>/<run>             # a search run
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ from billiards.physics import (
 )
 
 BALL_COLORS = ("#f7f7f2", "#f2c400", "#d7261e", "#9c0d2b")  # white, yellow, red1, red2 (darker)
+# each path is drawn over a wider edge line: dark under the light balls' paths, white under the reds'
+PATH_EDGES = ("#222222", "#222222", "#ffffff", "#ffffff")
 CLOTH, RAIL, PATH_EDGE = "#1f6e43", "#5a3a1e", "#222222"
 EV_BALL_BALL, EV_CUSHION = EVENT_KINDS.index("ball_ball"), EVENT_KINDS.index("cushion")
 
@@ -51,10 +55,11 @@ EV_BALL_BALL, EV_CUSHION = EVENT_KINDS.index("ball_ball"), EVENT_KINDS.index("cu
 # ----------------------------------------------------------------------------- drawing blocks
 
 
-def _figure(params: PhysicsParams, scale: float = 2.2, dpi: int = 100):
+def _figure(params: PhysicsParams, scale: float = 3.0, dpi: int = 100):
+    """A portrait figure: the table, a title band above it and a legend band below."""
     w, l = params.table_width, params.table_length
-    fig = plt.figure(figsize=(scale * (w + 0.3), scale * (l + 0.55)), dpi=dpi)
-    ax = fig.add_axes((0.0, 0.0, 1.0, (l + 0.3) / (l + 0.55)))
+    fig = plt.figure(figsize=(scale * (w + 0.3), scale * (l + 0.75)), dpi=dpi)
+    ax = fig.add_axes((0.0, 0.2 / (l + 0.75), 1.0, (l + 0.3) / (l + 0.75)))
     return fig, ax
 
 
@@ -116,8 +121,8 @@ def draw_shot(ax, positions, action, params: PhysicsParams = DEFAULT_PARAMS, dt:
     _, xy = trajectory(result, dt, params)
     draw_table(ax, params)
     for k in (1, 2, 3, 0):  # the white's path on top
-        ax.plot(xy[:, k, 0], xy[:, k, 1], color=PATH_EDGE, lw=2.2, zorder=3, solid_capstyle="round")
-        ax.plot(xy[:, k, 0], xy[:, k, 1], color=BALL_COLORS[k], lw=1.3, zorder=3, solid_capstyle="round")
+        ax.plot(xy[:, k, 0], xy[:, k, 1], color=PATH_EDGES[k], lw=3.0, zorder=3, solid_capstyle="round")
+        ax.plot(xy[:, k, 0], xy[:, k, 1], color=BALL_COLORS[k], lw=1.6, zorder=3, solid_capstyle="round")
     draw_balls(ax, positions, params, alpha=0.35, zorder=4)
     draw_balls(ax, result.positions, params, zorder=6)
     aim = 0.15 * np.array([math.cos(action[0]), math.sin(action[0])])
@@ -129,6 +134,18 @@ def draw_shot(ax, positions, action, params: PhysicsParams = DEFAULT_PARAMS, dt:
     for p in cushions:
         ax.plot(*p, marker="^", ms=4, color="#ffdd88", markeredgecolor="black", mew=0.4, zorder=8)
     return result
+
+
+def draw_legend(fig) -> None:
+    """A one-line key under the table: the balls' colours, contacts and the aim."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], marker="o", ls="-", color=BALL_COLORS[k], markeredgecolor="black", lw=1.6, label=name)
+               for k, name in enumerate(BALL_NAMES)]
+    handles += [Line2D([], [], marker="o", ls="", mfc="none", mec="#d7261e", label="white's contact (n)"),
+                Line2D([], [], marker="^", ls="", color="#ffdd88", mec="black", label="cushion")]
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=7, frameon=False, handlelength=1.5,
+               columnspacing=1.0, labelcolor="black")
 
 
 # ----------------------------------------------------------------------------- one shot
@@ -149,6 +166,7 @@ def render_shot(
     """
     fig, ax = _figure(params, dpi=dpi)
     result = draw_shot(ax, positions, action, params)
+    draw_legend(fig)
     theta, p, a, b = np.asarray(action, dtype=np.float64)
     text = outcome_text(result) + f"\ntheta={math.degrees(theta) % 360:.1f}°  p={p:.2f}  a={a:+.2f}  b={b:+.2f}"
     fig.text(0.5, 0.995, (title + "\n" if title else "") + text, ha="center", va="top", fontsize=7)
@@ -217,7 +235,7 @@ def render_inning(
     fps: int = 15,
     speed: float = 2.0,
     pause: float = 0.6,
-    dpi: int = 50,
+    dpi: int = 80,
     title: str = "",
 ) -> int:
     """Animated GIF of a sequence of shots (positions, raw action); returns the frame count.
@@ -245,6 +263,7 @@ def render_inning(
 
     fig, ax = _figure(params, dpi=dpi)
     draw_table(ax, params)
+    draw_legend(fig)
     trails = [ax.plot([], [], color=BALL_COLORS[k], lw=1.0, alpha=0.8, zorder=3)[0] for k in range(4)]
     balls = draw_balls(ax, shots[0][0], params)
     text = fig.text(0.5, 0.99, "", ha="center", va="top", fontsize=8)
@@ -266,10 +285,35 @@ def render_inning(
 # ----------------------------------------------------------------------------- command line
 
 
-def _policy(name: str, seed: int, constrain_aim: bool):
-    from billiards.baselines import make_policy
+def load_player(spec: str, seed: int = 0, constrain_aim: bool = False):
+    """What plays the inning of a picture: ``"nearest"`` or ``"random"`` (the baselines), a
+    trained policy (a training run dir, its checkpoint.pt or an exported policy file), or a
+    search run dir (``search.py``'s output: its proposer and search, rebuilt from its config).
 
-    return make_policy(name, constrain_aim=constrain_aim, seed=seed)
+    Returns ``(policy, constrain_aim, extra_features, physics)``: a TensorDict module reading
+    the env's keys and writing ``"action"``, the layers it needs, and the table it was made on
+    (None for the baselines, which play on any table)."""
+    if spec in ("nearest", "random"):
+        from billiards.baselines import make_policy
+
+        return make_policy(spec, constrain_aim=constrain_aim, seed=seed), constrain_aim, False, None
+    path = Path(spec)
+    if not path.exists():
+        raise SystemExit(f"Error: --policy {spec!r}: not nearest, random, or an existing run dir / policy file")
+    if path.is_dir() and (path / "config.yaml").is_file() and "proposer" in (path / "config.yaml").read_text():
+        from omegaconf import OmegaConf
+
+        from billiards.physics.config import params_from_config
+        from billiards.search.run import make_actor, make_proposer
+
+        cfg = OmegaConf.load(path / "config.yaml")
+        params = params_from_config(cfg.physics)
+        actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
+        return actor, False, False, params
+    from billiards.rl.policy import load_policy, policy_physics
+
+    policy, cfg = load_policy(path)
+    return policy, bool(cfg.env.constrain_aim), bool(cfg.env.extra_features), policy_physics(cfg)
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -279,29 +323,36 @@ def main(argv: Sequence[str] | None = None) -> None:
         p = sub.add_parser(name, help=help_)
         p.add_argument("--out", required=True, help="output file (.png for shot, .gif for inning)")
         p.add_argument("--seed", type=int, default=0, help="rack seed (and the random policy's seed)")
-        p.add_argument("--policy", choices=["nearest", "random"], default="nearest")
+        p.add_argument("--policy", default="nearest",
+                       help="nearest | random | a training run dir, checkpoint or exported policy | a search run dir")
         p.add_argument("--start", choices=["random", "canonical"], default="random")
         p.add_argument("--constrain-aim", action="store_true", help="play the policy through the aim constraint")
-        p.add_argument("--dpi", type=int, default=100 if name == "shot" else 50)
-        p.add_argument("--physics", default=DEFAULT_PRESET, choices=sorted(PRESETS), help="the table (default %(default)s)")
+        p.add_argument("--dpi", type=int, default=100 if name == "shot" else 80)
+        p.add_argument("--physics", default=None, choices=sorted(PRESETS),
+                       help=f"the table (default: the policy's own, else {DEFAULT_PRESET})")
         if name == "inning":
             p.add_argument("--max-shots", type=int, default=10)
             p.add_argument("--fps", type=int, default=15)
             p.add_argument("--speed", type=float, default=2.0, help="simulated seconds per second of GIF")
     args = parser.parse_args(argv)
-    policy = _policy(args.policy, args.seed, args.constrain_aim)
+    policy, constrain_aim, extra_features, made_on = load_player(args.policy, args.seed, args.constrain_aim)
+    params = PRESETS[args.physics] if args.physics else (made_on or DEFAULT_PARAMS)
+    if made_on is not None:
+        from billiards.physics.config import warn_physics_mismatch
+
+        warn_physics_mismatch(f"--policy {args.policy}", made_on, params)
     n_shots = 1 if args.what == "shot" else args.max_shots
-    params = PRESETS[args.physics]
-    shots = play_inning(policy, start=args.start, seed=args.seed, max_shots=n_shots, constrain_aim=args.constrain_aim,
-                        params=params)
+    shots = play_inning(policy, start=args.start, seed=args.seed, max_shots=n_shots, constrain_aim=constrain_aim,
+                        extra_features=extra_features, params=params)
+    name = Path(args.policy).name if made_on is not None else f"{args.policy} policy"
     if args.what == "shot":
         pos, act = shots[0]
         result = render_shot(pos, act, args.out, params=params, dpi=args.dpi,
-                             title=f"{args.policy} policy, {args.start} rack, seed {args.seed}, {args.physics}")
+                             title=f"{name}, {args.start} rack, seed {args.seed}, {params.describe()}")
         print(f"{args.out}: {outcome_text(result)}")
     else:
         n = render_inning(shots, args.out, params=params, fps=args.fps, speed=args.speed, dpi=args.dpi,
-                          title=f"{args.policy}: ")
+                          title=f"{name}: ")
         print(f"{args.out}: {len(shots)} shots, {n} frames")
 
 

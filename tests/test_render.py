@@ -1,6 +1,7 @@
 """Pictures: shot PNG, inning GIF, rgb_array, command line."""
 
 import numpy as np
+import pytest
 from PIL import Image
 
 from billiards import render
@@ -55,3 +56,24 @@ def test_command_line(tmp_path, capsys):
     render.main(["shot", "--out", str(out), "--seed", "0", "--policy", "nearest", "--dpi", "40"])
     assert out.stat().st_size > 1000
     assert str(out) in capsys.readouterr().out
+
+
+def test_render_draws_a_trained_policys_shots_on_its_own_table(tmp_path, capsys):
+    from pathlib import Path
+
+    from billiards.physics import PRESETS
+
+    shipped = Path(__file__).resolve().parents[1] / "results" / "policies" / "base" / "seed0.pt"
+    policy, constrain_aim, extra_features, made_on = render.load_player(str(shipped))
+    assert constrain_aim and extra_features and made_on == PRESETS["international"]
+    out = tmp_path / "policy.png"
+    render.main(["shot", "--out", str(out), "--policy", str(shipped), "--seed", "2", "--dpi", "40"])
+    assert out.is_file() and "first contact" in capsys.readouterr().out
+    image = np.asarray(Image.open(out).convert("RGB"))
+    # played on the international table: the cloth is 1.42 m wide at 3 inches per metre and 40 dpi
+    # (the default table's would be 1.27 m)
+    cloth = (np.abs(image.astype(int) - [0x1F, 0x6E, 0x43]).sum(-1) < 30)
+    cols = np.flatnonzero(cloth.any(0))
+    assert cols[-1] - cols[0] + 1 == pytest.approx(1.42 * 3.0 * 40, rel=0.03)
+    with pytest.raises(SystemExit, match="not nearest, random, or an existing"):
+        render.main(["shot", "--out", str(out), "--policy", "no/such/run"])
