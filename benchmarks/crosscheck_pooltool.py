@@ -55,6 +55,7 @@ def shot_limit(params, ours_limited, ref) -> dict:
         "note": "pooltool has no shot limit: our side ran with max_time = inf; every shot is compared",
         "shots_over_limit_ours": int(ours_limited.timed_out.sum()),
         "shots_over_limit_pooltool": int((ref["sim_time"] > params.max_time).sum()),
+        "longest_shot_s_pooltool": float(np.nanmax(ref["sim_time"])),
     }
 
 
@@ -113,6 +114,7 @@ def main(argv=None) -> None:
         "share_same_outcome": float(same_outcome.mean()),
         "position_error_quantiles_m": dict(zip(["p50", "p90", "p99", "p99.9", "max"], map(float, quantiles))),
         "mean_events_ours": float(ours.n_events.mean()),
+        "longest_shot_s_ours": float(ours.duration.max()),
         "score_rate_ours": float(ours.score.mean()),
         "disagreements": {k: {"count": len(v), "examples": v[:10]} for k, v in classes.items()},
         "pooltool_wall_seconds": t_pt,
