@@ -108,7 +108,7 @@ def main(argv=None) -> None:
         "seed": args.seed,
         "actions": (f"racks: random_racks of the preset; theta U[0, 2pi), p U[0.05, 1], (a, b) U[-1, 1]^2 "
                     f"projected onto the unit disk, times max_english = {params.max_english} R"),
-        "tip_offsets_on_rim": int((tip >= 1.0).sum()),
+        "shots_at_max_english": int((tip >= 1.0).sum()),  # (a, b) projected onto the rim: offset = max_english R
         "tip_offsets_pulled_in_for_pooltool": int(ref["offset_pulled_in"].sum()),
         "tolerance_m": args.tol,
         "pooltool_failed": int((~ok).sum()),
