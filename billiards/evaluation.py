@@ -21,6 +21,7 @@ import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from billiards.envs import make_env
+from billiards.files import atomic_write_text
 
 
 @dataclasses.dataclass
@@ -41,7 +42,8 @@ class EvalResult:
     points: list[int] = dataclasses.field(default_factory=list)  # per inning
 
     def to_json(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(dataclasses.asdict(self), indent=2) + "\n")
+        """Write the result as JSON, atomically (:func:`billiards.files.atomic_write_text`)."""
+        atomic_write_text(path, json.dumps(dataclasses.asdict(self), indent=2) + "\n")
 
     @classmethod
     def from_json(cls, path: str | Path) -> EvalResult:

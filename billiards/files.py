@@ -1,23 +1,54 @@
-"""Small files the package writes with ``torch.save`` and a format tag (exported policies,
-reward models): one loader that turns every way such a file can be bad into one clear error."""
+"""Files the package writes and reads back: one atomic writer for every result file, and one
+loader for the small ``torch.save`` files with a format tag (exported policies, reward models)
+that turns every way such a file can be bad into one clear error.
+
+Atomic means a reader (or a kill at any moment) sees either the old file or the new one,
+never half of one: the content goes to a temporary file in the same directory, is flushed and
+fsynced, and then :func:`os.replace`\\ s the old file (an atomic rename on POSIX and Windows).
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
+from typing import IO, Iterator
+
+TMP_SUFFIX = ".tmp"
+
+
+@contextlib.contextmanager
+def atomic_open(path, mode: str = "w", **kwargs) -> Iterator[IO]:
+    """Open ``path + ".tmp"`` for writing (``mode`` "w" or "wb", ``kwargs`` as for
+    :func:`open`); when the block ends normally the file is flushed, fsynced and renamed over
+    ``path``. If the block raises, the temporary file is removed and ``path`` is untouched."""
+    if mode not in ("w", "wb"):
+        raise ValueError(f"atomic_open writes whole files: mode must be 'w' or 'wb', got {mode!r}")
+    path = Path(path)
+    tmp = path.with_name(path.name + TMP_SUFFIX)
+    try:
+        with open(tmp, mode, **kwargs) as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_bytes(path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (see the module docstring); returns the path."""
+    with atomic_open(path, "wb") as f:
+        f.write(data)
+    return Path(path)
 
 
 def atomic_write_text(path, text: str) -> Path:
-    """Write ``text`` to ``path`` atomically: a temporary file beside it, flushed and fsynced,
-    then renamed over it, so a reader sees the old file or the new one, never half of one."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w") as f:
+    """Write ``text`` (UTF-8) to ``path`` atomically (see the module docstring); returns the path."""
+    with atomic_open(path, "w", encoding="utf-8", newline="") as f:
         f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    return path
+    return Path(path)
 
 
 def load_tagged(path, tag: str, error: type[Exception], what: str) -> dict:

@@ -201,6 +201,38 @@ def test_finished_dataset_is_a_noop_and_mismatch_raises(dataset, tmp_path):
         load_dataset(tmp_path / "nothing")
 
 
+def test_truncated_array_file_is_regenerated_not_zero_filled(dataset, tmp_path, capsys):
+    """A finished data set whose positions.npy lost its tail (e.g. an interrupted copy):
+    load_dataset refuses it, and re-running generate goes back to the last chunk every file
+    holds and redraws the rest, ending bit-identical to the uninterrupted set."""
+    import shutil
+
+    full, _ = dataset
+    out = tmp_path / "copy"
+    shutil.copytree(full, out)
+    path = out / "positions.npy"
+    header = len(path.read_bytes()) - N * 4 * 2 * 4
+    cut = chunk_rows(3, N, CHUNK)[0] + 100  # 100 rows into chunk 3: chunks 0-2 are intact
+    with path.open("r+b") as f:
+        f.truncate(header + cut * 4 * 2 * 4)
+    with pytest.raises(DatasetError, match=r"positions.npy is truncated: it holds 1,636 of 3,000 rows.*regenerates"):
+        load_dataset(out)
+    with pytest.warns(UserWarning, match=r"positions.npy \(1,636 rows\) truncated.*regenerating from chunk 3 of 6"):
+        main(["generate", "--out", str(out), "--n", str(N), "--seed", str(SEED), "--chunk", str(CHUNK), "--no-progress"])
+    assert "3,000 of 3,000 shots (6/6 chunks, finished)" in capsys.readouterr().out
+    assert file_bytes(out) == file_bytes(full)  # redrawn, not zeros
+    assert read_meta(out)["sessions"][-1]["chunks"] == [3, 6]
+    load_dataset(out)
+
+    # a file cut inside its header, or longer than the data set, is refused outright
+    (out / "score.npy").write_bytes((full / "score.npy").read_bytes()[:20])
+    with pytest.raises(DatasetError, match="cannot open .*score.npy"):
+        generate(out, n=N, seed=SEED, chunk=CHUNK, progress=False)
+    (out / "score.npy").write_bytes((full / "score.npy").read_bytes() + b"\0" * 7)
+    with pytest.raises(DatasetError, match="score.npy is 3,135 bytes, longer than its 3,000 rows"):
+        generate(out, n=N, seed=SEED, chunk=CHUNK, progress=False)
+
+
 def test_stored_rows_match_the_draw_and_the_simulator(dataset):
     full, _ = dataset
     data = load_dataset(full)

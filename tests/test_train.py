@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 import subprocess
 import sys
@@ -17,6 +18,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from omegaconf import OmegaConf
 
 from billiards.evaluation import EvalResult
 
@@ -203,6 +205,11 @@ def test_report_loads_without_torch_or_the_simulator(tmp_path):
     ok(subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=180))
 
 
+def run_files(run_dir: Path) -> dict[str, tuple[bytes, int]]:
+    """Content and mtime of every file the run wrote (Hydra's own invocation records aside)."""
+    return {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in run_dir.iterdir() if p.is_file() and p.suffix != ".log"}
+
+
 def test_killed_run_resumes_and_finishes(tmp_path):
     run_dir = tmp_path / "run"
     proc = train(tmp_path, "budget=smoke", "budget.kill_after_checkpoint=1", f"hydra.run.dir={run_dir}")
@@ -217,11 +224,169 @@ def test_killed_run_resumes_and_finishes(tmp_path):
     assert (run_dir / ".hydra" / "overrides.yaml").read_text().count("kill_after_checkpoint") == 1
     assert (run_dir / ".hydra_resume").is_dir()
 
+    # resuming the finished run says so and changes none of its files (no second final evaluation)
+    before = run_files(run_dir)
+    proc = ok(train(tmp_path, f"resume={run_dir}"))
+    assert "is already finished (2048 frames" in proc.stdout + proc.stderr
+    assert run_files(run_dir) == before
+
     # a corrupt checkpoint is reported as such
     (run_dir / "checkpoint.pt").write_bytes(b"not a checkpoint")
     proc = train(tmp_path, f"resume={run_dir}")
     assert proc.returncode != 0 and "corrupt or truncated" in proc.stderr
     assert EvalResult.from_json(run_dir / "eval.json") == result  # untouched
+
+
+def compose_cfg(*overrides: str):
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base=None):
+        return compose("config", list(overrides))
+
+
+def same(a, b) -> bool:
+    """Bit-for-bit equality of nested dicts / lists of tensors and plain values."""
+    import torch
+
+    if isinstance(a, torch.Tensor):
+        return isinstance(b, torch.Tensor) and a.dtype == b.dtype and a.shape == b.shape and torch.equal(a, b)
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return isinstance(b, (list, tuple)) and len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    return type(a) is type(b) and a == b
+
+
+def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_stay_put(tmp_path, monkeypatch, caplog):
+    """In process, on a short SAC run: (1) what a resume restores from a checkpoint -- networks,
+    optimizers, replay buffer, counters, every RNG -- is bit-identical to the state saved;
+    (2) a checkpoint whose config predates algo.actor_ema and budget.cpu_minutes resumes with
+    their defaults; (3) resuming a finished run says so, evaluates nothing and writes nothing."""
+    import copy
+    import logging
+    import shutil
+
+    import billiards.rl.train as train_module
+    from billiards.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint
+    from billiards.rl.train import Trainer, rack_rng
+
+    saved = []
+
+    def save_and_keep(run_dir, state):  # the first (periodic) checkpoint: copy the run dir a kill would leave
+        path = save_checkpoint(run_dir, state)
+        if not saved:
+            saved.append(copy.deepcopy(state))
+            for name in ("killed", "old"):
+                shutil.copytree(run_dir, tmp_path / name)
+        return path
+
+    monkeypatch.setattr(train_module, "save_checkpoint", save_and_keep)
+    cfg = compose_cfg("budget=smoke", "budget.total_steps=1024", "budget.init_random_steps=256", "budget.eval_every=512",
+                      "budget.checkpoint_every=768", "budget.eval_innings=2", "budget.final_eval_innings=2", "progress=false")
+    Trainer(cfg, tmp_path / "run").run()
+    (state,) = saved
+    assert state["counters"]["frames"] == 768 and state["buffer"]["rows"] == 768 and state["agent_extra"]["n_updates"] > 0
+
+    # (1) save -> load -> restore is bit-identical
+    killed = tmp_path / "killed"
+    resumed = Trainer(OmegaConf.merge(cfg, {"resume": str(killed)}), tmp_path / "unused")
+    assert same(resumed.agent.state_dict(), state["agent"])
+    assert same(resumed.agent.state_dict_extra(), state["agent_extra"])
+    assert same(resumed.rb.storage[: len(resumed.rb)].to_dict(), state["buffer"]["data"])
+    assert same(resumed.rb.writer.state_dict(), state["buffer"]["writer"])
+    assert same(rng_state(rack_rng(resumed.env)), state["rng"])
+    assert (resumed.frames, resumed.owed, resumed.next_eval) == tuple(state["counters"][k] for k in ("frames", "owed", "next_eval"))
+    assert resumed.eval_history == state["eval_history"] and len(state["eval_history"]) == 1
+    resumed.run()
+    check_finished(killed, frames=1024, innings=2)
+
+    # (2) a config written before algo.actor_ema and budget.cpu_minutes existed
+    old = tmp_path / "old"
+    ckpt = load_checkpoint(old)
+    del ckpt["config"]["algo"]["actor_ema"], ckpt["config"]["budget"]["cpu_minutes"]
+    save_checkpoint(old, ckpt)
+    trainer = Trainer(OmegaConf.merge(cfg, {"resume": str(old)}), tmp_path / "unused")
+    assert trainer.cfg.algo.actor_ema == 0.0 and trainer.cfg.budget.cpu_minutes == 0.0 and trainer.agent.actor_avg is None
+    trainer.run()
+    check_finished(old, frames=1024, innings=2)
+
+    # (3) the finished run again: nothing evaluated, nothing written
+    before = run_files(killed)
+    final = EvalResult.from_json(killed / "eval.json").mean
+    monkeypatch.setattr(train_module, "evaluate_policy", lambda *a, **k: pytest.fail("evaluated a finished run"))
+    with caplog.at_level(logging.WARNING, logger="billiards.rl.train"):
+        assert Trainer(OmegaConf.merge(cfg, {"resume": str(killed)}), killed).run() == final
+    assert f"{killed} is already finished (1024 frames, final evaluation in eval.json: {final:.3f}" in caplog.text
+    assert run_files(killed) == before
+
+
+def test_checkpoint_never_runs_code_and_refuses_any_changed_byte(tmp_path):
+    """load_checkpoint reads tensors and plain data only: a crafted pickle -- as a bare
+    torch.save (the old format), behind a valid header and checksum, or raw -- is refused
+    with a clear error and never executed; and every single changed byte of a checkpoint
+    (header, digest or payload) or a truncation is refused as corrupt."""
+    import hashlib
+    import io
+    import pickle
+
+    import numpy as np
+    import torch
+
+    from billiards.rl.checkpoint import CheckpointError, load_checkpoint, rng_state, save_checkpoint
+
+    marker = tmp_path / "pwned"
+
+    class Payload:
+        def __init__(self, path):
+            self.path = path
+
+        def __reduce__(self):
+            return open, (str(self.path), "w")
+
+    # the payload is live: plain unpickling creates its file
+    pickle.loads(pickle.dumps(Payload(tmp_path / "live")))
+    assert (tmp_path / "live").exists()
+
+    raw = io.BytesIO()
+    torch.save({"config": {}, "agent": Payload(marker)}, raw)
+    first = b"billiards-checkpoint 2\n"
+    crafted = {
+        "old": (raw.getvalue(), "older version of billiards in an unsafe format"),
+        "signed": (first + b"sha256 " + hashlib.sha256(first + raw.getvalue()).hexdigest().encode() + b"\n" + raw.getvalue(),
+                   "holds objects other than tensors and plain data"),
+        "pickle": (pickle.dumps({"agent": Payload(marker)}), "corrupt or truncated"),
+    }
+    for name, (data, message) in crafted.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "checkpoint.pt").write_bytes(data)
+        with pytest.raises(CheckpointError, match=message) as err:
+            load_checkpoint(tmp_path / name)
+        assert str(tmp_path / name / "checkpoint.pt") in str(err.value)
+        assert not marker.exists(), f"loading the {name} file ran its code"
+
+    # a small real checkpoint round-trips exactly ...
+    run = tmp_path / "run"
+    run.mkdir()
+    state = {"config": {"seed": 3, "algo": {"name": "sac"}}, "agent": {"w": torch.randn(4, 3)},
+             "agent_extra": {"optimizer": {"state": {0: {"step": torch.tensor(2.0)}}, "param_groups": [{"lr": 1e-3, "params": [0]}]}},
+             "counters": {"frames": 5, "owed": 0.25, "next_eval": math.inf}, "rng": rng_state(np.random.default_rng(9))}
+    path = save_checkpoint(run, state)
+    assert same(load_checkpoint(run), {"format_version": 2, **state})
+    # ... and any changed byte or a truncation is refused
+    good = path.read_bytes()
+    for i in range(len(good)):
+        path.write_bytes(good[:i] + bytes([good[i] ^ 0xFF]) + good[i + 1:])
+        with pytest.raises(CheckpointError, match="corrupt or truncated"):
+            load_checkpoint(run)
+    for size in (0, 50, len(good) // 2, len(good) - 1):
+        path.write_bytes(good[:size])
+        with pytest.raises(CheckpointError, match="corrupt or truncated"):
+            load_checkpoint(run)
+    # what cannot be loaded safely is never written
+    with pytest.raises(TypeError, match=r"checkpoint\['rng'\]\['numpy'\] is a numpy.ndarray"):
+        save_checkpoint(run, {**state, "rng": {"numpy": np.zeros(3)}})
+    path.write_bytes(good)
+    load_checkpoint(run)
 
 
 def test_resume_takes_a_cpu_limit_only_when_given(caplog):
@@ -258,6 +423,7 @@ def test_averaged_actor_is_what_a_run_evaluates_checkpoints_and_exports(tmp_path
     from tensordict import TensorDict
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+    from billiards.rl.checkpoint import load_checkpoint
     from billiards.rl.policy import export_policy, load_policy
     from billiards.rl.train import Trainer
 
@@ -297,7 +463,7 @@ def test_averaged_actor_is_what_a_run_evaluates_checkpoints_and_exports(tmp_path
             return policy(obs.clone())["action"]
 
         loaded, _ = load_policy(run_dir)  # the checkpoint written at the end of run()
-        agent.load_state_dict(torch.load(run_dir / "checkpoint.pt", weights_only=False)["agent"])
+        agent.load_state_dict(load_checkpoint(run_dir)["agent"])
         expected = act(agent.eval_policy)
         assert not torch.allclose(expected, act(agent.policy))
         torch.testing.assert_close(act(loaded), expected)
@@ -316,6 +482,9 @@ BAD = [
     (["budget.cpu_minutes=-1"], "budget.cpu_minutes must be >= 0, got -1.0"),
     (["algo.actor_ema=1.5"], "algo.actor_ema must lie in [0, 1) (0 = off), got 1.5"),
     (["resume=nowhere"], "resume='nowhere': no such run directory"),
+    (["eval.seed=-1"], "eval.seed must be an integer >= 0 (a numpy seed), got -1"),
+    (["seed=-1"], "seed must be an integer in [0, 2**32 - 1] (a numpy seed), got -1"),
+    (["seed=4294967296"], "seed must be an integer in [0, 2**32 - 1] (a numpy seed), got 4294967296"),
     (["-m", "seed=0,1", "budget.eval_innings=0"], "budget.eval_innings must be > 0"),
     (["experiment=table4", "budget.total_steps=-1"], "budget.total_steps must be > 0, got -1"),
     (["curriculum=staged", "curriculum.switch_at=[0.5]"], "curriculum.switch_at needs one fraction per stage boundary (2)"),

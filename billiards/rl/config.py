@@ -229,13 +229,16 @@ class Config:
     resume: Optional[str] = None  # a run dir to continue from its last checkpoint
 
 
+# algo.name -> its schema (the algo group's options)
+ALGO_SCHEMAS = {"sac": SACConfig, "td3": TD3Config, "ppo": PPOConfig}
+
+
 def register_configs() -> None:
     cs = ConfigStore.instance()
     # Outside the option groups, so `algo=...` lists only sac, td3, ppo.
     cs.store(name="schema", node=Config)
-    cs.store(group="schema/algo", name="sac", node=SACConfig)
-    cs.store(group="schema/algo", name="td3", node=TD3Config)
-    cs.store(group="schema/algo", name="ppo", node=PPOConfig)
+    for name, node in ALGO_SCHEMAS.items():
+        cs.store(group="schema/algo", name=name, node=node)
     cs.store(group="schema", name="budget", node=BudgetConfig)
     register_physics(cs)
 
@@ -296,6 +299,10 @@ def _errors(cfg: DictConfig) -> list[str]:
     positive("env.max_shots", e.max_shots)
     positive("eval.max_shots", cfg.eval.max_shots)
     need(len(cfg.eval.starts) > 0, "eval.starts must list at least one start (random, canonical)")
+    # seed: random.seed, np.random.seed (which takes [0, 2**32)) and torch; eval.seed: the racks'
+    # np.random.default_rng (any integer >= 0). Checked here, not at the final evaluation.
+    need(0 <= cfg.seed < 2**32, f"seed must be an integer in [0, 2**32 - 1] (a numpy seed), got {cfg.seed!r}")
+    need(cfg.eval.seed >= 0, f"eval.seed must be an integer >= 0 (a numpy seed), got {cfg.eval.seed!r}")
     positive("threads", cfg.threads)
     positive("paper_steps", cfg.paper_steps)
     for key in ("foul_penalty", "gentle", "near_miss"):

@@ -4,9 +4,10 @@ Weights & Biases (offline by default: no login, no prompt, no network)."""
 from __future__ import annotations
 
 import csv
-import os
 from pathlib import Path
 from typing import Any
+
+from billiards.files import atomic_open
 
 from .config import METRICS_FILE, LoggerBackend, wandb_env_defaults
 
@@ -41,15 +42,18 @@ class MetricLogger:
             self._init_wandb(cfg, run_dir, wandb_id)
 
     def _open_csv(self, resume_step: int | None) -> None:
+        """Write the header (and on resume the rows kept) atomically, so a kill while a resume
+        rewrites the file leaves the old file, never an empty one; then append to it."""
         rows = []
         if resume_step is not None and self.path.is_file():
             with self.path.open(newline="") as f:
                 rows = [r for r in csv.DictReader(f) if r.get("step") and int(float(r["step"])) <= resume_step]
-        self._file = self.path.open("w", newline="")
+        with atomic_open(self.path, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=self.columns, extrasaction="ignore")
+            writer.writeheader()
+            writer.writerows(rows)
+        self._file = self.path.open("a", newline="")
         self._csv = csv.DictWriter(self._file, fieldnames=self.columns, extrasaction="ignore")
-        self._csv.writeheader()
-        self._csv.writerows(rows)
-        self._file.flush()
 
     def _init_wandb(self, cfg, run_dir: Path, wandb_id: str | None) -> None:
         wandb_env_defaults()
@@ -97,9 +101,3 @@ def eval_row(result) -> dict[str, float]:
         "eval_foul_pct": result.foul_per_shot_pct,
         "eval_success_pct": result.success_per_shot_pct,
     }
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)

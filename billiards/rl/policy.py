@@ -18,6 +18,7 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 
+from billiards.files import atomic_open
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import params_from_config, warn_physics_mismatch
 
@@ -87,9 +88,8 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
         "source": str(run_dir),
     }
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    torch.save(payload, tmp)
-    tmp.replace(out)
+    with atomic_open(out, "wb") as f:
+        torch.save(payload, f)
     return out
 
 

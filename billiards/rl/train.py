@@ -33,10 +33,12 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from billiards.files import atomic_write_text
 from billiards.physics.config import params_from_config
 
-from .checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from .checkpoint import CheckpointError, load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from .config import (
+    ALGO_SCHEMAS,
     CONFIG_FILE,
     EVAL_FILE,
     EVAL_HISTORY_FILE,
@@ -47,7 +49,7 @@ from .config import (
     validate,
     with_physics,
 )
-from .metrics import MetricLogger, atomic_write_text, eval_row
+from .metrics import MetricLogger, eval_row
 
 log = logging.getLogger(__name__)
 
@@ -129,9 +131,15 @@ def _plain(cfg) -> dict:
 
 
 def _typed(container: dict) -> DictConfig:
-    """A saved (plain) config merged back into the schema, so enums and types are checked."""
+    """A saved (plain) config merged back into the schema, so enums and types are checked and
+    keys added to the schema after the run started (e.g. ``algo.actor_ema``) take their
+    documented defaults."""
     schema = OmegaConf.structured(Config)
-    return OmegaConf.merge(schema, with_physics(container))
+    container = with_physics(container)
+    algo = (container.get("algo") or {}).get("name")
+    if algo in ALGO_SCHEMAS:
+        schema.algo = OmegaConf.structured(ALGO_SCHEMAS[algo])
+    return OmegaConf.merge(schema, container)
 
 
 def _command_line_overrides() -> list[str]:
@@ -165,6 +173,19 @@ def resume_config(saved: dict, current: DictConfig, overrides: list[str] | None 
     return cfg
 
 
+def finished_result(ckpt: dict[str, Any], cfg: DictConfig, run_dir: Path) -> tuple[float, int] | None:
+    """``(final mean points per inning, frames)`` if the checkpoint is that of a finished run
+    -- its budget (budget.total_steps, or budget.cpu_minutes as now configured) spent, its
+    final evaluation at that step recorded, and ``eval.json`` in ``run_dir`` -- else None."""
+    c, b = ckpt["counters"], cfg.budget
+    frames = int(c["frames"])
+    spent = frames >= b.total_steps or (b.cpu_minutes > 0 and float(c["cpu_seconds"]) >= 60.0 * b.cpu_minutes)
+    finals = [h for h in ckpt.get("eval_history") or [] if h.get("final") and h.get("step") == frames]
+    if spent and finals and (Path(run_dir) / EVAL_FILE).is_file():
+        return float(finals[0]["eval_mean"]), frames  # the first start is the primary one
+    return None
+
+
 # ----------------------------------------------------------------------------- the trainer
 
 
@@ -185,6 +206,10 @@ class Trainer:
         self.cfg = cfg
         self.algo = cfg.algo.name
         self.off_policy = self.algo in ("sac", "td3")
+        # Resuming a finished run builds and writes nothing: run() says so and returns its result.
+        self.finished = finished_result(ckpt, cfg, self.run_dir) if ckpt is not None else None
+        if self.finished is not None:
+            return
         set_threads(cfg.threads)
         seed_everything(cfg.seed)
         self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -259,7 +284,8 @@ class Trainer:
     def _state(self) -> dict[str, Any]:
         buffer = None
         if self.rb is not None and self.cfg.checkpoint.save_buffer and len(self.rb):
-            buffer = {"data": self.rb.storage[: len(self.rb)].clone(), "writer": self.rb.writer.state_dict()}
+            n = len(self.rb)  # a TensorDict is no plain type: its nested dict of tensors and its length
+            buffer = {"data": self.rb.storage[:n].clone().to_dict(), "rows": n, "writer": self.rb.writer.state_dict()}
         return {
             "config": _plain(self.cfg),
             "agent": self.agent.state_dict(),
@@ -275,12 +301,7 @@ class Trainer:
                 "next_ckpt": self.next_ckpt,
             },
             "eval_history": self.eval_history,
-            "rng": {
-                "torch": torch.get_rng_state(),
-                "numpy": np.random.get_state(),
-                "python": random.getstate(),
-                "env": rack_rng(self.env).bit_generator.state,
-            },
+            "rng": rng_state(rack_rng(self.env)),
             "wandb_id": self.logger.wandb_id,
             "stage_log": self.stage_log,
         }
@@ -300,15 +321,13 @@ class Trainer:
             self.latest_eval = self.eval_history[-1]["eval_mean"]
         buffer = ckpt.get("buffer")
         if self.rb is not None and buffer is not None:
-            self.rb.extend(buffer["data"])
+            from tensordict import TensorDict
+
+            self.rb.extend(TensorDict(buffer["data"], batch_size=[buffer["rows"]]))
             self.rb.writer.load_state_dict(buffer["writer"])
         elif self.rb is not None:
             log.warning("resume: the checkpoint has no replay buffer (checkpoint.save_buffer=false); refilling from scratch")
-        rng = ckpt["rng"]
-        torch.set_rng_state(rng["torch"])
-        np.random.set_state(rng["numpy"])
-        random.setstate(rng["python"])
-        rack_rng(self.env).bit_generator.state = rng["env"]
+        set_rng_state(ckpt["rng"], rack_rng(self.env))
         log.info("resumed from %s at %d frames, %d updates", self.run_dir, self.frames, self.agent.n_updates)
         return ckpt.get("wandb_id")
 
@@ -487,6 +506,12 @@ class Trainer:
             collector.shutdown()
 
     def run(self) -> float:
+        if self.finished is not None:
+            mean, frames = self.finished
+            log.warning("resume: %s is already finished (%d frames, final evaluation in %s: %.3f points per inning); "
+                        "nothing to do, nothing changed. Start a new run to train further.",
+                        self.run_dir, frames, EVAL_FILE, mean)
+            return mean
         cfg, b = self.cfg, self.cfg.budget
         self._t0, self._c0 = time.perf_counter(), time.process_time()
         interactive = sys.stderr.isatty()
@@ -510,9 +535,7 @@ class Trainer:
             results.append(result)
             if live is not None:
                 lives[start] = eval_row(live)
-            name = EVAL_FILE if i == 0 else f"eval_{start}.json"
-            result.to_json(self.run_dir / (name + ".tmp"))
-            os.replace(self.run_dir / (name + ".tmp"), self.run_dir / name)
+            result.to_json(self.run_dir / (EVAL_FILE if i == 0 else f"eval_{start}.json"))
         train_seconds, cpu_seconds = self._times()
         summary = {
             "algo": self.algo,

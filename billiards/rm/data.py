@@ -14,7 +14,10 @@ pure function of (n, seed, chunk), however many runs or resumes produced it.
 
 Generation is resumable: after each chunk is written and flushed, ``meta.json``'s
 ``chunks_done`` is updated atomically, and re-running :func:`generate` on the same directory
-with the same (n, seed, chunk) continues from there.
+with the same (n, seed, chunk) continues from there. An array file found shorter than the
+chunks done (truncated, e.g. by a disk full or an interrupted copy) is never zero-filled:
+generation goes back to the last chunk every file holds and redraws the rest, and
+:func:`load_dataset` refuses it.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import dataclasses
 import json
 import math
 import time
+import warnings
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -31,10 +35,10 @@ import numpy as np
 from tqdm import tqdm
 
 from billiards.domain import ACTION_HIGH, ACTION_LOW
+from billiards.files import atomic_write_text
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params, random_racks, simulate_batch
 from billiards.physics.config import recorded_physics
 from billiards.provenance import git_commit
-from billiards.rl.metrics import atomic_write_text
 
 META_FILE = "meta.json"
 DEFAULT_N = 10_000_000
@@ -94,17 +98,62 @@ def _write_meta(out_dir: Path, meta: dict) -> None:
     atomic_write_text(out_dir / META_FILE, json.dumps(meta, indent=2) + "\n")
 
 
-def _open_array(out_dir: Path, name: str, n: int, mode: str) -> np.memmap:
-    """Open ``name.npy`` as a memmap in ``mode`` ("r" or "r+"), checking shape and dtype."""
+def _layout(path: Path, name: str, n: int) -> tuple[int, int]:
+    """``(header bytes, rows stored)`` of the array file ``path`` of a data set of n rows, from
+    its header and its size. DatasetError if it is unreadable, of another shape or dtype, or
+    longer than n rows. Fewer rows than n means the file was truncated."""
     shape, dtype = ARRAYS[name]
-    path = out_dir / f"{name}.npy"
     try:
-        arr = np.lib.format.open_memmap(path, mode=mode)
+        with path.open("rb") as f:
+            version = np.lib.format.read_magic(f)
+            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            found_shape, fortran, found_dtype = read_header(f)
+            header = f.tell()
+        size = path.stat().st_size
     except (OSError, ValueError) as err:
         raise DatasetError(f"cannot open {path}: {err}") from None
-    if arr.shape != (n, *shape) or arr.dtype != dtype:
-        raise DatasetError(f"{path} has shape {arr.shape} {arr.dtype}, expected {(n, *shape)} {np.dtype(dtype)}")
-    return arr
+    if found_shape != (n, *shape) or found_dtype != dtype or fortran:
+        raise DatasetError(f"{path} has shape {found_shape} {found_dtype}, expected {(n, *shape)} {np.dtype(dtype)}")
+    row_bytes = math.prod(shape) * np.dtype(dtype).itemsize
+    if size - header > n * row_bytes:
+        raise DatasetError(f"{path} is {size:,} bytes, longer than its {n:,} rows ({header + n * row_bytes:,} bytes)")
+    return header, (size - header) // row_bytes
+
+
+def _open_array(out_dir: Path, name: str, n: int, mode: str) -> np.memmap:
+    """Open ``name.npy`` as a memmap in ``mode`` ("r" or "r+"), checking shape, dtype and that
+    the file holds all n rows (numpy would silently zero-fill a truncated file opened "r+")."""
+    path = out_dir / f"{name}.npy"
+    _, rows = _layout(path, name, n)
+    if rows < n:
+        raise DatasetError(f"{path} is truncated: it holds {rows:,} of {n:,} rows")
+    try:
+        return np.lib.format.open_memmap(path, mode=mode)
+    except (OSError, ValueError) as err:
+        raise DatasetError(f"cannot open {path}: {err}") from None
+
+
+def _regenerate_truncated(out_dir: Path, meta: dict) -> None:
+    """If an array file holds fewer rows than the chunks done, set ``chunks_done`` back to the
+    chunks every file holds in full (meta.json first), then restore the files' length, so that
+    generation redraws and rewrites the lost chunks -- the data are a pure function of
+    (n, seed, chunk) -- instead of keeping zeros."""
+    n, chunk, done = meta["n"], meta["chunk"], meta["chunks_done"]
+    layouts = {name: _layout(out_dir / f"{name}.npy", name, n) for name in ARRAYS}
+    held = min(rows for _, rows in layouts.values())
+    needed = chunk_rows(done - 1, n, chunk)[1]
+    if held >= needed:
+        return
+    keep = held // chunk
+    short = [f"{name}.npy ({rows:,} rows)" for name, (_, rows) in layouts.items() if rows < needed]
+    warnings.warn(f"{out_dir}: {', '.join(short)} truncated below the {needed:,} rows generated; "
+                  f"regenerating from chunk {keep} of {meta['n_chunks']}", stacklevel=3)
+    meta.update(chunks_done=keep, rows_done=chunk_rows(keep, n, chunk)[0], finished=False)
+    _write_meta(out_dir, meta)  # first: a kill after it leaves a directory that resumes correctly
+    for name, (header, _) in layouts.items():
+        shape, dtype = ARRAYS[name]
+        with (out_dir / f"{name}.npy").open("r+b") as f:
+            f.truncate(header + n * math.prod(shape) * np.dtype(dtype).itemsize)
 
 
 def _create_array(out_dir: Path, name: str, n: int) -> np.memmap:
@@ -131,6 +180,7 @@ def _start(out_dir: Path, n: int, seed: int, chunk: int, params: PhysicsParams) 
             )
         if meta.get("chunks_done") == 0:  # nothing stored yet (killed while creating the arrays)
             return meta, {name: _create_array(out_dir, name, n) for name in ARRAYS}
+        _regenerate_truncated(out_dir, meta)
         return meta, {name: _open_array(out_dir, name, n, "r+") for name in ARRAYS}
     stale = [f"{name}.npy" for name in ARRAYS if (out_dir / f"{name}.npy").exists()]
     if stale:
@@ -261,4 +311,12 @@ def load_dataset(out_dir) -> dict[str, np.memmap]:
             f"data set {out_dir} is unfinished ({done} of {total} chunks); resume it with "
             f"`python -m billiards.rm generate --out {out_dir} --n {n} --seed {meta.get('seed')} --chunk {meta.get('chunk')}`"
         )
+    for name in ARRAYS:
+        path = out_dir / f"{name}.npy"
+        rows = _layout(path, name, n)[1]
+        if rows < n:
+            raise DatasetError(
+                f"{path} is truncated: it holds {rows:,} of {n:,} rows; `python -m billiards.rm generate --out {out_dir} "
+                f"--n {n} --seed {meta.get('seed')} --chunk {meta.get('chunk')}` regenerates the missing rows"
+            )
     return {name: _open_array(out_dir, name, n, "r") for name in ARRAYS}

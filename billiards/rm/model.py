@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -20,6 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from billiards.files import atomic_open
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import recorded_physics
 
@@ -117,8 +117,8 @@ def _plain(value: Any) -> Any:
 
 
 def save_model(path, model: RewardModel, meta: dict | None = None) -> Path:
-    """Write the model (weights, layer sizes, ``meta``) to ``path`` atomically: a temporary
-    file next to it, then :func:`os.replace`. ``meta`` must be JSON-serialisable (numpy
+    """Write the model (weights, layer sizes, ``meta``) to ``path`` atomically
+    (:func:`billiards.files.atomic_open`). ``meta`` must be JSON-serialisable (numpy
     scalars/arrays are converted). Returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -131,9 +131,8 @@ def save_model(path, model: RewardModel, meta: dict | None = None) -> Path:
         "meta": json.loads(json.dumps({"physics": model.params.describe(), "physics_params": model.params.to_dict(),
                                        **(meta or {})}, default=_plain)),
     }
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
+    with atomic_open(path, "wb") as f:
+        torch.save(payload, f)
     return path
 
 

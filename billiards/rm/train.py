@@ -24,8 +24,8 @@ import torch
 from torch.nn import functional as F
 from tqdm import tqdm
 
+from billiards.files import atomic_write_text
 from billiards.provenance import git_commit
-from billiards.rl.metrics import atomic_write_text
 
 from billiards.physics.config import recorded_physics
 
