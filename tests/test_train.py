@@ -320,6 +320,32 @@ def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_st
     assert run_files(killed) == before
 
 
+def test_metrics_csv_is_rewritten_atomically_on_resume(tmp_path, monkeypatch):
+    """A resume rewrites metrics.csv without the rows logged after the checkpoint; a failure
+    (here: a full disk) in the middle of that rewrite leaves the old file whole, not empty."""
+    from billiards.rl.metrics import MetricLogger
+
+    cfg = compose_cfg("budget=smoke", "logger=csv")
+    logger = MetricLogger(cfg, tmp_path, ())
+    for step in (256, 512, 768):
+        logger.log({"step": step, "updates": step // 8})
+    logger.close()
+    before = (tmp_path / "metrics.csv").read_bytes()
+
+    def disk_full(self, rows):
+        raise OSError(28, "No space left on device")
+
+    with monkeypatch.context() as m:
+        m.setattr(csv.DictWriter, "writerows", disk_full)
+        with pytest.raises(OSError, match="No space left"):
+            MetricLogger(cfg, tmp_path, (), resume_step=512)
+    assert (tmp_path / "metrics.csv").read_bytes() == before and not list(tmp_path.glob("*.tmp"))
+    logger = MetricLogger(cfg, tmp_path, (), resume_step=512)
+    logger.log({"step": 768, "updates": 1})
+    logger.close()
+    assert [(r["step"], r["updates"]) for r in metric_rows(tmp_path)] == [("256", "32"), ("512", "64"), ("768", "1")]
+
+
 def test_checkpoint_never_runs_code_and_refuses_any_changed_byte(tmp_path):
     """load_checkpoint reads tensors and plain data only: a crafted pickle -- as a bare
     torch.save (the old format), behind a valid header and checksum, or raw -- is refused
