@@ -16,7 +16,7 @@ Contents
 * the carom features: :func:`carom_features`;
 * reward shaping: :func:`foul_penalty`, :func:`gentle_bonus` (the paper's leave-position
   bonus) or :func:`gentle_power_bonus` (a power-based alternative), :func:`near_miss_bonus`,
-  summed by :func:`shaped_reward`.
+  summed by :func:`shaped_reward`; :func:`check_coefficient` checks their coefficients.
 
 The constants are the paper's as its authors configured them (``physics_reference.md`` §10):
 the aim window capped at 80 degrees, the gentle bonus 0.2 exp(-(d - 0.2)^2 / (2 0.1^2)), the
@@ -159,9 +159,23 @@ def carom_features(positions: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------- reward shaping
 
 
+def check_coefficient(name: str, value: float, strict: bool = False) -> float:
+    """A shaping coefficient as a float, or a ValueError naming it if it is not a number, NaN,
+    inf or negative (or zero when ``strict``, for length scales). Every shaping entry point --
+    the functions below, make_env, the gymnasium env and the transforms -- checks with it, so
+    no such value reaches a reward."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(x) or x < 0 or (strict and x == 0):
+        raise ValueError(f"{name} must be a finite number {'> 0' if strict else '>= 0'}, got {value!r}")
+    return x
+
+
 def foul_penalty(foul: np.ndarray, c: float) -> np.ndarray:
     """Foul penalty term: ``-c * foul`` (foul in {0, 1})."""
-    return -float(c) * np.asarray(foul, dtype=np.float64)
+    return -check_coefficient("foul penalty c", c) * np.asarray(foul, dtype=np.float64)
 
 
 def gentle_bonus(
@@ -182,27 +196,22 @@ def gentle_bonus(
     far from that red; a score is never a foul, so no foul check is needed. The paper uses
     beta = 0.2, center 0.2 m, width 0.1 m.
     """
+    beta = check_coefficient("gentle beta", beta)
     score = np.asarray(score, dtype=bool)
     positions = np.asarray(positions, dtype=np.float64)
     red = np.where(np.asarray(second_red) >= RED1, second_red, RED1).astype(np.int64)
     d = np.linalg.norm(_take_ball(positions, red) - positions[..., WHITE, :], axis=-1)
-    return np.where(score, float(beta) * np.exp(-((d - center) ** 2) / (2.0 * width * width)), 0.0)
+    return np.where(score, beta * np.exp(-((d - center) ** 2) / (2.0 * width * width)), 0.0)
 
 
 def gentle_power_bonus(score: np.ndarray, power: np.ndarray, beta: float) -> np.ndarray:
     """A power-based alternative to :func:`gentle_bonus`: ``beta * score * (1 - p)``, p in
     [0, 1] the shot's power (``shaping.gentle_kind=power``; the project's gentle bonus before
     the paper's constants were adopted)."""
-    return float(beta) * np.asarray(score, dtype=np.float64) * (1.0 - np.asarray(power, dtype=np.float64))
+    beta = check_coefficient("gentle beta", beta)
+    return beta * np.asarray(score, dtype=np.float64) * (1.0 - np.asarray(power, dtype=np.float64))
 
 
-def check_coefficient(name: str, value: float, strict: bool = False) -> float:
-    """A shaping coefficient as a float, or a ValueError naming it if it is NaN, inf or
-    negative (or zero when ``strict``)."""
-    value = float(value)
-    if not math.isfinite(value) or value < 0 or (strict and value == 0):
-        raise ValueError(f"{name} must be a finite number {'> 0' if strict else '>= 0'}, got {value!r}")
-    return value
 
 
 def near_miss_bonus(
@@ -225,13 +234,13 @@ def near_miss_bonus(
     (the paper: beta = 0.05, sigma = 0.03 m). hits (..., 3) = (yellow, red1, red2), closest
     (..., 2) gaps to red1, red2.
     """
-    if sigma <= 0:
-        raise ValueError(f"near-miss sigma must be > 0, got {sigma!r}")
+    beta = check_coefficient("near-miss beta", beta)
+    sigma = check_coefficient("near-miss sigma", sigma, strict=True)
     hits = np.asarray(hits, dtype=bool)
     one_red = hits[..., 1] ^ hits[..., 2]
     eligible = one_red & ~np.asarray(score, dtype=bool) & ~np.asarray(foul, dtype=bool)
     gap = unhit_red_gap(hits, closest)
-    return np.where(eligible, float(beta) * np.exp(-gap / sigma), 0.0)
+    return np.where(eligible, beta * np.exp(-gap / sigma), 0.0)
 
 
 def shaped_reward(
@@ -250,7 +259,12 @@ def shaped_reward(
 ) -> np.ndarray:
     """Total reward: ``score + foul_penalty + gentle + near_miss_bonus`` (terms with a zero
     coefficient are skipped). With all coefficients 0 this is the raw carom score. The
-    leave-position gentle bonus needs the rest ``positions`` and ``second_red`` of the shot."""
+    leave-position gentle bonus needs the rest ``positions`` and ``second_red`` of the shot.
+    Coefficients must be finite and >= 0, sigma > 0 (:func:`check_coefficient`)."""
+    foul_c = check_coefficient("foul penalty c", foul_c)
+    gentle_beta = check_coefficient("gentle beta", gentle_beta)
+    near_miss_beta = check_coefficient("near-miss beta", near_miss_beta)
+    near_miss_sigma = check_coefficient("near-miss sigma", near_miss_sigma, strict=True)
     reward = np.asarray(score, dtype=np.float64).copy()
     if foul_c:
         reward += foul_penalty(foul, foul_c)

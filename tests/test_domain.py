@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from billiards import domain
-from billiards.physics import DEFAULT_PARAMS
+from billiards.physics import DEFAULT_PARAMS, canonical_rack
 
 R = DEFAULT_PARAMS.ball_radius
 
@@ -141,6 +141,32 @@ def test_near_miss_bonus_formula():
     np.testing.assert_allclose(bonus, [0.3 * math.exp(-0.02 / 0.05), 0.3 * math.exp(-0.10 / 0.05), 0, 0, 0])
     with pytest.raises(ValueError):
         domain.near_miss_bonus(score, foul, hits, closest, beta=1.0, sigma=0.0)
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, -0.5, "x", None])
+def test_shaping_coefficients_must_be_finite_and_non_negative(bad):
+    """NaN, inf, a negative or a non-number never reaches a reward: every shaping function
+    refuses it with a ValueError naming the coefficient (and a length scale must be > 0)."""
+    score, foul = np.array([True, False]), np.array([False, True])
+    hits, closest, power = np.array([[False, True, True], [True, False, False]]), np.zeros((2, 2)), np.array([0.5, 0.5])
+    positions, second_red = np.stack([canonical_rack()] * 2), np.array([3, -1])
+    with pytest.raises(ValueError, match="foul penalty c must be a"):
+        domain.foul_penalty(foul, bad)
+    with pytest.raises(ValueError, match="gentle beta must be a"):
+        domain.gentle_bonus(score, positions, second_red, bad)
+    with pytest.raises(ValueError, match="gentle beta must be a"):
+        domain.gentle_power_bonus(score, power, bad)
+    with pytest.raises(ValueError, match="near-miss beta must be a"):
+        domain.near_miss_bonus(score, foul, hits, closest, bad)
+    with pytest.raises(ValueError, match="near-miss sigma must be a"):
+        domain.near_miss_bonus(score, foul, hits, closest, 1.0, sigma=bad)
+    for key in ("foul_c", "gentle_beta", "near_miss_beta", "near_miss_sigma"):
+        for kind in domain.GENTLE_KINDS:
+            with pytest.raises(ValueError, match="must be a"):
+                domain.shaped_reward(score, foul, power, hits, closest, positions, second_red, gentle_kind=kind, **{key: bad})
+    assert domain.check_coefficient("c", 0) == 0.0 and domain.check_coefficient("c", np.float32(2.5)) == 2.5
+    with pytest.raises(ValueError, match="sigma must be a finite number > 0, got 0.0"):
+        domain.check_coefficient("sigma", 0.0, strict=True)
 
 
 def test_shaped_reward_sums_the_terms():

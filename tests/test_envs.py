@@ -344,6 +344,26 @@ def test_shaping_terms_equal_their_formulas(transform_kwargs):
     np.testing.assert_array_equal(bare["next", "reward"][..., 0].numpy(), score.astype(np.float32))
 
 
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -1.0])
+def test_bad_shaping_coefficients_are_refused_where_they_enter(bad):
+    """The Python API refuses NaN, inf and negative shaping coefficients at construction --
+    make_env, the gymnasium env and each transform -- naming the argument."""
+    from billiards.envs import RewardModelBonus
+    from billiards.rm import RewardModel
+
+    for key in ("foul_penalty", "gentle", "near_miss", "near_miss_sigma", "rm"):
+        with pytest.raises(ValueError, match=f"^{key} must be a finite number"):
+            make_env(2, **{key: bad})
+        if key != "rm":
+            with pytest.raises(ValueError, match=f"^{key} must be a finite number"):
+                Billiards4BallInningEnv(**{key: bad})
+    for make, name in ((lambda: FoulPenalty(bad), "foul penalty c"), (lambda: GentleShotBonus(bad), "gentle beta"),
+                       (lambda: NearMissBonus(bad), "near-miss beta"), (lambda: NearMissBonus(1.0, bad), "near-miss sigma"),
+                       (lambda: RewardModelBonus(RewardModel([4]), bad), "reward-model beta")):
+        with pytest.raises(ValueError, match=f"^{name} must be a finite number"):
+            make()
+
+
 def test_transform_classes_compose_by_hand():
     from torchrl.envs import Compose, TransformedEnv
 

@@ -191,10 +191,10 @@ class RewardModelBonus(_RewardTerm):
         super().__init__()
         from billiards.rm import load_model
 
+        self.beta = domain.check_coefficient("reward-model beta", beta)  # before loading anything
         self.model = model if hasattr(model, "prob") else load_model(model)
         if params is not None and hasattr(self.model, "params"):
             warn_physics_mismatch("the reward model", self.model.params, params)
-        self.beta = domain.check_coefficient("reward-model beta", beta)
 
     def _term(self, tensordict, next_tensordict):
         positions = _np(tensordict.get("positions")).astype(np.float64)
@@ -249,8 +249,15 @@ def make_env(
         ``TransformedEnv(BilliardsEnv(...), Compose(...))`` with batch_size [B], always a
         TransformedEnv (possibly with no transforms). Policies and losses should use
         ``env.action_spec_unbatched`` / ``env.observation_spec_unbatched``.
+
+    Raises:
+        ValueError: a shaping coefficient (foul_penalty, gentle, near_miss, rm) that is NaN,
+            inf or negative, or near_miss_sigma <= 0, named as passed.
     """
     start, on_miss = resolve_paradigm(paradigm, start, on_miss)
+    for name, value in (("foul_penalty", foul_penalty), ("gentle", gentle), ("near_miss", near_miss), ("rm", rm)):
+        domain.check_coefficient(name, value)  # before anything is built, named as passed
+    domain.check_coefficient("near_miss_sigma", near_miss_sigma, strict=True)
     params = get_params(params)
     base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=max_shots, params=params, seed=seed)
     transforms: list[Transform] = []
