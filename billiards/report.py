@@ -142,6 +142,13 @@ class Run:
         config's preset."""
         return self.summary.get("physics") or self.config["physics"]["preset"]
 
+    @property
+    def frames(self) -> int:
+        """Env frames trained: summary.json's, else the configured budget."""
+        if "frames" in self.summary:
+            return int(self.summary["frames"])
+        return int(self.config["budget"]["total_steps"])
+
     def variant(self) -> str:
         c, env = self.config, self.config.get("env", {})
         table = self.table
@@ -217,32 +224,95 @@ def generic_label(c: dict) -> str:
     return f"{c['algo']['name']}, {env.get('paradigm')}, {knowledge}, shaping={c.get('shaping', {}).get('name', 'none')}"
 
 
-def find_runs(dirs: list[Path]) -> tuple[list[Run], list[Path]]:
-    """Finished runs under dirs, and run dirs without an eval.json (unfinished)."""
-    runs, unfinished = [], []
-    seen = set()
+# Files a training run writes into its directory: any of them marks a run directory.
+RUN_FILES = ("config.yaml", "eval.json", "summary.json", "eval_history.jsonl", "metrics.csv", "checkpoint.pt")
+EVAL_KEYS = ("mean", "best", "foul_innings_pct", "foul_per_shot_pct", "success_per_shot_pct")
+
+
+def warn(message: str) -> None:
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def run_dirs(d: Path) -> list[Path]:
+    """Every directory under ``d`` (``d`` included) holding a file a training run writes,
+    Hydra's own ``.hydra*`` directories excluded."""
+    found = {p.parent for name in RUN_FILES for p in d.rglob(name)}
+    return sorted(r for r in found if not any(part.startswith(".hydra") for part in r.relative_to(d).parts))
+
+
+def _json_object(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path.name} is not valid JSON ({err})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path.name} is not a JSON object")
+    return data
+
+
+def read_config(run_dir: Path) -> dict:
+    """The run's ``config.yaml`` as a dict; ValueError saying what is wrong if it is missing,
+    unparsable or lacks an integer seed."""
+    path = run_dir / "config.yaml"
+    if not path.is_file():
+        raise ValueError("no config.yaml (the run's settings)")
+    try:
+        config = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as err:
+        raise ValueError(f"config.yaml is not valid YAML ({err})") from None
+    if not isinstance(config, dict) or not isinstance(config.get("seed"), int):
+        raise ValueError("config.yaml is not a training config (no integer seed)")
+    config.setdefault("physics", {"preset": LEGACY_PHYSICS})
+    return config
+
+
+def read_run(run_dir: Path) -> Run | None:
+    """The finished run in ``run_dir``, or None if it has no eval.json yet (unfinished).
+    Raises ValueError (or OSError) saying what is wrong with a broken one."""
+    config = read_config(run_dir)
+    eval_path = run_dir / "eval.json"
+    if not eval_path.is_file():
+        return None
+    result = _json_object(eval_path)
+    missing = [k for k in EVAL_KEYS if not isinstance(result.get(k), (int, float))]
+    if missing:
+        raise ValueError(f"eval.json lacks {missing}")
+    extra = {p.stem[len("eval_"):]: _json_object(p) for p in run_dir.glob("eval_*.json")}
+    summary_path = run_dir / "summary.json"
+    summary = _json_object(summary_path) if summary_path.is_file() else {}
+    run = Run(run_dir, config, result, extra, summary)
+    _check_config(lambda: (run.variant(), run.frames, run.physics))
+    return run
+
+
+def _check_config(read) -> None:
+    """Call ``read`` (what the report reads from a run's config), so that a config lacking it
+    fails while the run is loaded, as a ValueError saying so, not in the middle of a table."""
+    try:
+        read()
+    except (KeyError, TypeError, AttributeError) as err:
+        raise ValueError(f"config.yaml lacks what the report reads ({type(err).__name__}: {err})") from None
+
+
+def find_runs(dirs: list[Path]) -> tuple[list[Run], list[Path], list[str]]:
+    """Finished runs under dirs, run dirs without an eval.json (unfinished), and the broken
+    run dirs (``"<dir>: <what is wrong>"``), each also warned about on stderr and skipped."""
+    runs, unfinished, broken = [], [], []
     for d in dirs:
         if not d.exists():
             raise SystemExit(f"Error: {d} does not exist")
-        for cfg_path in sorted(d.rglob("config.yaml")):
-            run_dir = cfg_path.parent
-            if run_dir.name.startswith(".hydra") or run_dir in seen:
-                continue
-            seen.add(run_dir)
-            eval_path = run_dir / "eval.json"
-            if not eval_path.is_file():
-                if (run_dir / "metrics.csv").exists() or (run_dir / "checkpoint.pt").exists():
-                    unfinished.append(run_dir)
-                continue
-            config = yaml.safe_load(cfg_path.read_text())
-            config.setdefault("physics", {"preset": LEGACY_PHYSICS})
-            extra = {}
-            for p in run_dir.glob("eval_*.json"):
-                extra[p.stem[len("eval_"):]] = json.loads(p.read_text())
-            summary_path = run_dir / "summary.json"
-            summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
-            runs.append(Run(run_dir, config, json.loads(eval_path.read_text()), extra, summary))
-    return runs, unfinished
+    for run_dir in dict.fromkeys(r for d in dirs for r in run_dirs(d)):
+        try:
+            run = read_run(run_dir)
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+            broken.append(f"{run_dir}: {err}")
+            warn(f"skipping run directory {broken[-1]}")
+            continue
+        if run is None:
+            unfinished.append(run_dir)
+        else:
+            runs.append(run)
+    return runs, unfinished, broken
 
 
 def aggregate(runs: list[Run]) -> dict:
@@ -252,7 +322,7 @@ def aggregate(runs: list[Run]) -> dict:
         canonical = [r.eval["mean"] for r in runs if r.eval.get("start") == "canonical"]
     seconds = [r.summary["train_seconds"] for r in runs if "train_seconds" in r.summary]
     cpu = [r.summary["cpu_seconds"] for r in runs if "cpu_seconds" in r.summary]
-    frames = sorted({int(r.summary.get("frames", r.config["budget"]["total_steps"])) for r in runs})
+    frames = sorted({r.frames for r in runs})
     return {
         "n": len(runs),
         "mean": float(means.mean()),
@@ -336,7 +406,7 @@ def render_table(table: str | None, groups: dict[str, list[Run]]) -> str:
 def report(dirs: list[Path]) -> str:
     from billiards.search.report import find_results, table6_markdown
 
-    runs, unfinished = find_runs(dirs)
+    runs, unfinished, broken = find_runs(dirs)
     searches = find_results(dirs)
     if not runs and not searches:
         raise SystemExit(
@@ -369,6 +439,9 @@ def report(dirs: list[Path]) -> str:
     if unfinished:
         parts.append(f"Unfinished runs (no eval.json), skipped: {', '.join(str(p) for p in unfinished)}")
         parts.append("")
+    if broken:
+        parts.append(f"Broken run directories, skipped: {'; '.join(broken)}")
+        parts.append("")
     if searches:
         parts += ["## Search results", "", table6_markdown(searches)]
     return "\n".join(parts)
@@ -399,25 +472,44 @@ class Curve:
         return inside[-1] if inside else None
 
 
-def find_curves(dirs: list[Path]) -> list[Curve]:
-    """Every run dir under ``dirs`` with a ``config.yaml`` and an ``eval_history.jsonl``
-    (finished or not)."""
+def read_curve(run_dir: Path) -> Curve | None:
+    """The learning curve of the run in ``run_dir``, or None without evaluations yet. Raises
+    ValueError (or OSError) saying what is wrong with a broken one."""
     from billiards.rl.config import EVAL_HISTORY_FILE
 
+    config = read_config(run_dir)
+    hist = run_dir / EVAL_HISTORY_FILE
+    if not hist.is_file():
+        return None
+    try:
+        rows = [json.loads(line) for line in hist.read_text().splitlines() if line.strip()]
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{EVAL_HISTORY_FILE} has a line that is not JSON ({err})") from None
+    if not rows:
+        return None
+    start = rows[0].get("start", "random")
+    points = sorted((r for r in rows if r.get("start", "random") == start), key=lambda r: r["step"])
+    for p in points:
+        missing = [k for k in ("step", "cpu_time", "wall_time", "eval_mean", "eval_best") if k not in p]
+        if missing:
+            raise ValueError(f"{EVAL_HISTORY_FILE} has an evaluation without {missing}")
+    curve = Curve(run_dir, config, points)
+    _check_config(lambda: curve.variant)
+    return curve
+
+
+def find_curves(dirs: list[Path]) -> list[Curve]:
+    """Every run dir under ``dirs`` with a ``config.yaml`` and an ``eval_history.jsonl``
+    (finished or not); broken ones are warned about on stderr and skipped."""
     curves = []
-    for d in dirs:
-        for hist in sorted(d.rglob(EVAL_HISTORY_FILE)):
-            run_dir = hist.parent
-            cfg_path = run_dir / "config.yaml"
-            if not cfg_path.is_file():
-                continue
-            config = yaml.safe_load(cfg_path.read_text())
-            rows = [json.loads(line) for line in hist.read_text().splitlines() if line.strip()]
-            if not rows:
-                continue
-            start = rows[0].get("start", "random")
-            points = sorted((r for r in rows if r.get("start", "random") == start), key=lambda r: r["step"])
-            curves.append(Curve(run_dir, config, points))
+    for run_dir in dict.fromkeys(r for d in dirs for r in run_dirs(d)):
+        try:
+            curve = read_curve(run_dir)
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+            warn(f"skipping run directory {run_dir}: {err}")
+            continue
+        if curve is not None:
+            curves.append(curve)
     return curves
 
 
@@ -515,7 +607,7 @@ def copy_runs(dirs: list[Path], dest: Path) -> list[Path]:
     ``dest/<run dir name>/``; the report reads the copies like the originals."""
     import shutil
 
-    runs, _ = find_runs(dirs)
+    runs, _, _ = find_runs(dirs)
     copied = []
     for run in runs:
         target = dest / run.path.name

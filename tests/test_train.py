@@ -193,6 +193,44 @@ def test_report_never_merges_runs_with_different_settings(tmp_path):
     assert titles == ["### table4: + extra feat. (algo.lr=0.0003) (seeds 0, 1, 2)", "### table4: + extra feat. (algo.lr=0.001) (seeds 0)"]
 
 
+def test_report_skips_broken_run_dirs_with_a_warning_naming_them(tmp_path, capsys):
+    """A run dir without config.yaml, with unparsable YAML or JSON, or with a config lacking
+    what its row needs is skipped with a warning naming it; the other runs are reported."""
+    from billiards.report import main as report_main
+
+    config = {"seed": 0, "budget": {"total_steps": 1000}, "algo": {"name": "sac"},
+              "env": {"paradigm": "random_continue"}, "shaping": {"name": "none"}}
+    result = {"mean": 2.5, "best": 6, "start": "random", "foul_innings_pct": 50.0, "foul_per_shot_pct": 10.0,
+              "success_per_shot_pct": 25.0}
+    point = {"step": 1000, "updates": 1, "cpu_time": 6.0, "wall_time": 6.0, "eval_mean": 2.5, "eval_best": 6}
+    runs = {"good": (yaml.safe_dump(config), json.dumps(result)), "no_config": (None, json.dumps(result)),
+            "bad_yaml": ("algo: [sac", json.dumps(result)), "bad_json": (yaml.safe_dump(config), '{"mean": 2.'),
+            "no_algo": (yaml.safe_dump({"seed": 1, "budget": {"total_steps": 1000}}), json.dumps(result))}
+    for name, (cfg_text, eval_text) in runs.items():
+        d = tmp_path / "runs" / name
+        d.mkdir(parents=True)
+        if cfg_text is not None:
+            (d / "config.yaml").write_text(cfg_text)
+        (d / "eval.json").write_text(eval_text)
+        (d / "eval_history.jsonl").write_text(json.dumps(point) + "\n" + ("{oops\n" if name == "bad_json" else ""))
+    out = tmp_path / "report.md"
+    report_main([str(tmp_path / "runs"), "--out", str(out)])
+    err = capsys.readouterr().err
+    text = out.read_text()
+    assert "| sac, random_continue, plain, shaping=none | 1 | 1k |" in text and "2.500 ± 0.000" in text
+    reasons = {"no_config": "no config.yaml", "bad_yaml": "config.yaml is not valid YAML",
+               "bad_json": "eval.json is not valid JSON", "no_algo": "config.yaml lacks what the report reads (KeyError: 'algo')"}
+    for name, reason in reasons.items():
+        line = next(line for line in err.splitlines() if f"runs/{name}:" in line)
+        assert line.startswith("warning: skipping run directory") and f"runs/{name}: {reason}" in line, line
+        assert f"runs/{name}: {reason}" in text  # listed in the report too
+    report_main([str(tmp_path / "runs"), "--curves", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert "### sac, random_continue, plain, shaping=none (seeds 0)" in out.read_text()
+    assert "runs/bad_json: eval_history.jsonl has a line that is not JSON" in err
+    assert all(f"runs/{name}: {reasons[name]}" in err for name in ("no_config", "bad_yaml", "no_algo")), err
+
+
 def test_report_loads_without_torch_or_the_simulator(tmp_path):
     """`billiards.report` (and the search tables it reads) is file work: it must not pay for
     importing torch, TorchRL or numba, so it stays instant on a loaded cluster node."""

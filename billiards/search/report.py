@@ -7,6 +7,7 @@ and PUCT (mean chain length, longest in brackets), with the paper's figures besi
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 PAPER_TABLE6 = {
@@ -25,13 +26,19 @@ def physics_of(res: dict) -> str:
 
 
 def find_results(dirs) -> list[dict]:
+    """Every search result (a JSON object with protocol, search and proposer) under ``dirs``;
+    unreadable JSON files are warned about on stderr and skipped."""
     found = []
     for d in dirs:
         d = Path(d)
         files = [d] if d.is_file() else sorted(d.rglob("*.json"))
         for f in files:
-            data = json.loads(f.read_text())
-            if {"protocol", "search", "proposer"} <= data.keys():
+            try:
+                data = json.loads(f.read_text())
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+                print(f"warning: skipping {f}: not readable JSON ({err})", file=sys.stderr)
+                continue
+            if isinstance(data, dict) and {"protocol", "search", "proposer"} <= data.keys():
                 data["_path"] = str(f)
                 found.append(data)
     return found
