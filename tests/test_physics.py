@@ -19,6 +19,7 @@ from billiards.physics import core
 P = PRESETS["international"]
 action_to_cue = partial(api.action_to_cue, params=P)
 canonical_rack = partial(api.canonical_rack, params=P)
+check_positions = partial(api.check_positions, params=P)
 random_rack = partial(api.random_rack, params=P)
 random_racks = partial(api.random_racks, params=P)
 simulate_batch = partial(api.simulate_batch, params=P)
@@ -390,6 +391,24 @@ def test_bad_positions_raise():
         simulate_shot(nan, [0.0, 0.5, 0.0, 0.0])
     with pytest.raises(ValueError, match=r"shape \(4, 2\)"):
         simulate_shot(rack[:3], [0.0, 0.5, 0.0, 0.0])
+
+
+def test_check_positions_takes_one_rack_or_a_batch():
+    """check_positions accepts what its message says: one (4, 2) rack or (N, 4, 2) racks;
+    a single rack's errors name no row, a batch's name the row."""
+    rack = canonical_rack()
+    check_positions(rack)
+    check_positions(rack.tolist())
+    check_positions(np.stack([rack, rack]))
+    off = rack.copy()
+    off[1] = [-0.01, 0.5]
+    with pytest.raises(ValueError, match=r"^positions: ball 1 \(yellow\).*off the table"):
+        check_positions(off)
+    with pytest.raises(ValueError, match=r"^positions\[1\]: ball 1 \(yellow\).*off the table"):
+        check_positions(np.stack([rack, off]))
+    for shape in [(4,), (3, 2), (2, 3, 2), (1, 4, 3)]:
+        with pytest.raises(ValueError, match=r"must have shape \(4, 2\) or \(N, 4, 2\)"):
+            check_positions(np.zeros(shape))
 
 
 def test_bad_batch_input_names_the_row():

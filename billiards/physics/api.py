@@ -149,7 +149,11 @@ def check_actions(actions: np.ndarray, name: str = "action") -> None:
 
 
 def check_positions(positions: np.ndarray, params: PhysicsParams = DEFAULT_PARAMS, name: str = "positions") -> None:
-    """Raise ValueError unless positions is (N, 4, 2) of finite, on-table, non-overlapping balls."""
+    """Raise ValueError unless positions is one rack (4, 2) or N racks (N, 4, 2) of finite,
+    on-table, non-overlapping balls."""
+    positions = _as_float_array(positions, name)
+    if positions.shape == (4, 2):
+        positions = positions[None]
     if positions.ndim != 3 or positions.shape[1:] != (4, 2):
         raise ValueError(f"{name} must have shape (4, 2) or (N, 4, 2) (white, yellow, red1, red2 × x, y); got {positions.shape}")
     code, n, k, j = core.check_positions(np.ascontiguousarray(positions, dtype=np.float64), params.array, POSITION_TOL)
