@@ -4,7 +4,8 @@ that turns every way such a file can be bad into one clear error.
 
 Atomic means a reader (or a kill at any moment) sees either the old file or the new one,
 never half of one: the content goes to a temporary file in the same directory, is flushed and
-fsynced, and then :func:`os.replace`\\ s the old file (an atomic rename on POSIX and Windows).
+fsynced, and then replaces the old file by :func:`os.replace` (an atomic rename on POSIX and
+Windows); the directory is fsynced too, so the rename survives a power loss.
 """
 
 from __future__ import annotations
@@ -35,6 +36,21 @@ def atomic_open(path, mode: str = "w", **kwargs) -> Iterator[IO]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    _fsync_dir(path.parent)
+
+
+def _fsync_dir(directory: Path) -> None:
+    """Make a rename in ``directory`` durable (POSIX; a no-op where directories cannot be opened)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def atomic_write_bytes(path, data: bytes) -> Path:
