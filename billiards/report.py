@@ -1,7 +1,9 @@
 """Aggregate training runs into the paper's tables: ``python -m billiards.report DIR...``.
 
 Every directory under the given ones that holds a finished run (``config.yaml`` and
-``eval.json`` written by ``train.py``) is read; runs are grouped by the paper table their
+``eval.json`` written by ``train.py``) is read; a run directory that cannot be read (no
+``config.yaml``, unparsable YAML or JSON, a config lacking what its row needs) is skipped with
+a warning naming it and listed at the end of the report. Runs are grouped by the paper table their
 experiment preset names (``table`` in the config), then by the table's variant (algorithm
 for Table 1, training paradigm for Table 2, aid for Table 3, domain knowledge for Table 4,
 reward shaping for Table 5), and aggregated over seeds:
