@@ -359,8 +359,9 @@ def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_st
 
 
 def test_metrics_csv_is_rewritten_atomically_on_resume(tmp_path, monkeypatch):
-    """A resume rewrites metrics.csv without the rows logged after the checkpoint; a failure
-    (here: a full disk) in the middle of that rewrite leaves the old file whole, not empty."""
+    """A resume rewrites metrics.csv without the rows logged after the checkpoint or cut short
+    by the kill; a failure (here: a full disk) in the middle of that rewrite leaves the old
+    file whole, not empty."""
     from billiards.rl.metrics import MetricLogger
 
     cfg = compose_cfg("budget=smoke", "logger=csv")
@@ -368,6 +369,8 @@ def test_metrics_csv_is_rewritten_atomically_on_resume(tmp_path, monkeypatch):
     for step in (256, 512, 768):
         logger.log({"step": step, "updates": step // 8})
     logger.close()
+    with (tmp_path / "metrics.csv").open("a") as f:
+        f.write("10")  # the row a killed process was writing, cut short: never kept
     before = (tmp_path / "metrics.csv").read_bytes()
 
     def disk_full(self, rows):

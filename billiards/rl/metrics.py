@@ -4,6 +4,7 @@ Weights & Biases (offline by default: no login, no prompt, no network)."""
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +48,7 @@ class MetricLogger:
         rows = []
         if resume_step is not None and self.path.is_file():
             with self.path.open(newline="") as f:
-                rows = [r for r in csv.DictReader(f) if r.get("step") and int(float(r["step"])) <= resume_step]
+                rows = [r for r in csv.DictReader(f) if _row_step(r) <= resume_step]
         with atomic_open(self.path, "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=self.columns, extrasaction="ignore")
             writer.writeheader()
@@ -89,6 +90,17 @@ class MetricLogger:
         if self.wandb is not None:
             self.wandb.finish()
             self.wandb = None
+
+
+def _row_step(row: dict) -> float:
+    """A metrics.csv row's step; inf (never kept on resume) for a row cut short -- the last
+    line a killed process was writing -- or without a numeric step."""
+    if None in row.values() or None in row:
+        return math.inf
+    try:
+        return float(row["step"])
+    except (KeyError, TypeError, ValueError):
+        return math.inf
 
 
 def eval_row(result) -> dict[str, float]:
