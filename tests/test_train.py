@@ -69,8 +69,11 @@ def check_finished(run_dir: Path, frames: int, innings: int = 10) -> EvalResult:
 def test_smoke_run_writes_eval_json(tmp_path, algo):
     run_dir = tmp_path / "run"
     extra = ["logger=wandb"] if algo == "ppo" else []  # wandb offline: never a login prompt
-    ok(train(tmp_path, f"algo={algo}", "budget=smoke", f"hydra.run.dir={run_dir}", *extra))
+    proc = ok(train(tmp_path, f"algo={algo}", "budget=smoke", f"hydra.run.dir={run_dir}", *extra))
     check_finished(run_dir, frames=2048)
+    # the run says where its output goes before it starts and where it went at the end
+    assert f"output: {run_dir} ({algo}, 2,048 steps, physics korean_medium)" in proc.stdout
+    assert f"done: eval.json, summary.json and checkpoint.pt in {run_dir}" in proc.stdout
     if extra:
         assert list((run_dir / "wandb").glob("offline-run-*")), "no offline wandb run"
     # the report reads the run (no paper table: grouped by settings)
@@ -105,11 +108,16 @@ def check_learning_curves(run_dir: Path, tmp_path: Path) -> None:
 
 def test_joblib_multirun_and_report(tmp_path):
     sweep = tmp_path / "sweep"
-    ok(train(
+    proc = ok(train(
         tmp_path, "-m", "hydra/launcher=local_parallel", "seed=0,1", "env=aim_features", "table=table4",
         "budget=smoke", "budget.total_steps=1024", "budget.eval_every=0", "budget.checkpoint_every=0",
         f"hydra.sweep.dir={sweep}",
     ))
+    assert proc.stdout.startswith(f"sweep: {sweep}\n")
+    # the parallel jobs' log lines say which job they come from (job logs: train.log of each run)
+    for n in (0, 1):
+        log_lines = next(sweep.glob(f"{n}_*/train.log")).read_text().splitlines()
+        assert log_lines and all(line.startswith(f"[job {n}] ") for line in log_lines if line.startswith("["))
     runs = sorted(p.parent for p in sweep.glob("*/eval.json"))
     assert len(runs) == 2
     # run dir names are valid unquoted override values (no "=" or ","), so `resume=<dir>` parses

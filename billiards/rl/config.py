@@ -261,8 +261,19 @@ def _output_subdir(resume: Optional[str]) -> str:
     return ".hydra_resume" if resume else ".hydra"
 
 
+def _job_tag() -> str:
+    """``[job N] `` inside a multirun job (prefixes its log lines), empty otherwise."""
+    from hydra.core.hydra_config import HydraConfig
+
+    if not HydraConfig.initialized():
+        return ""
+    num = OmegaConf.select(HydraConfig.get(), "job.num", default=None, throw_on_missing=False)
+    return "" if num is None else f"[job {num}] "
+
+
 def register_resolvers() -> None:
     OmegaConf.register_new_resolver("billiards.or", _or, replace=True)
+    OmegaConf.register_new_resolver("billiards.job_tag", _job_tag, replace=True)
     OmegaConf.register_new_resolver("billiards.output_subdir", _output_subdir, replace=True)
 
 
@@ -439,6 +450,7 @@ class ValidateConfig(Callback):
             raise SystemExit(f"Error: {err}") from None
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        print(f"sweep: {config.hydra.sweep.dir}", flush=True)
         if config.hydra.sweeper._target_ != "hydra._internal.core_plugins.basic_sweeper.BasicSweeper":
             return  # another sweeper composes its own jobs; each job still validates in the task
         errs = []

@@ -35,6 +35,7 @@ from tqdm import tqdm
 
 from billiards.files import atomic_write_text
 from billiards.physics.config import params_from_config
+from billiards.physics.warmup import warm_up
 
 from .checkpoint import CheckpointError, load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from .config import (
@@ -513,6 +514,9 @@ class Trainer:
                         self.run_dir, frames, EVAL_FILE, mean)
             return mean
         cfg, b = self.cfg, self.cfg.budget
+        log.info("output: %s (%s, %s steps, physics %s)", self.run_dir, self.algo, f"{b.total_steps:,}",
+                 params_from_config(cfg.physics).describe())
+        warm_up(params_from_config(cfg.physics), log=log.info)
         self._t0, self._c0 = time.perf_counter(), time.process_time()
         interactive = sys.stderr.isatty()
         with tqdm(total=b.total_steps, initial=self.frames, unit="shot", unit_scale=True, dynamic_ncols=True,
@@ -521,8 +525,10 @@ class Trainer:
             if not self._finished():
                 (self._off_policy if self.off_policy else self._ppo)(bar)
             results = self._final_eval()
+            bar.set_postfix(eval=f"{results[0].mean:.2f}")  # the final evaluation, not the last periodic one
             save_checkpoint(self.run_dir, self._state())
         self.logger.close()
+        log.info("done: %s, summary.json and checkpoint.pt in %s", EVAL_FILE, self.run_dir)
         return results[0].mean
 
     def _final_eval(self):
