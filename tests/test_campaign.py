@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import threading
 import time
 from contextlib import redirect_stderr, redirect_stdout
@@ -59,7 +60,8 @@ def test_paper_campaign_lists_every_table_at_its_budget():
     assert {e.key for e in c.select(["table2"])} >= {"table1/sac/seed0", "table1/sac/seed2"}
 
 
-def _compose(overrides):
+def _compose_all(overrides_lists):
+    """The training configs of several command lines, composed in one Hydra context."""
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
@@ -67,7 +69,7 @@ def _compose(overrides):
 
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
-        return compose("config", overrides=list(overrides))
+        return [compose("config", overrides=list(o)) for o in overrides_lists]
 
 
 def test_paper_training_runs_compose_and_validate():
@@ -76,10 +78,16 @@ def test_paper_training_runs_compose_and_validate():
     from billiards.rl.config import validate
 
     c = paper_campaign()
-    for e in c.entries:
-        if e.kind != "train" or e.same_as:
-            continue
-        cfg = _compose(e.args)
+    runs = [e for e in c.entries if e.kind == "train" and not e.same_as]
+    # the seeds of a variant differ in nothing but the seed, so composing seed 0 checks them all
+    for e in runs:
+        seed0 = c.by_key()[f"{e.table}/{e.variant}/seed0"]
+        assert [a for a in e.args if not a.startswith("seed=")] == [a for a in seed0.args if not a.startswith("seed=")]
+    firsts = [e for e in runs if e.seed == 0]
+    shared_check = [c.by_key()["table4/aim/seed1"].args,
+                    ["table=table3", "paper_steps=1000000", "budget=paper", "physics=korean_medium", "algo=sac", "variant=aim", "seed=1"]]
+    *configs, t4, t3 = _compose_all([e.args for e in firsts] + shared_check)
+    for e, cfg in zip(firsts, configs):
         validate(cfg)
         assert (cfg.table, cfg.seed, cfg.budget.total_steps, cfg.physics.preset) == (e.table, e.seed, e.steps, "korean_medium"), e.key
         env, shaping = cfg.env, cfg.shaping
@@ -99,10 +107,8 @@ def test_paper_training_runs_compose_and_validate():
                                                                "aim_features": (True, True)}[e.variant]
         if e.table == "table5":
             assert env.constrain_aim and env.extra_features and shaping.name == e.variant and shaping.foul_penalty == 1.0
-    # a shared row is the same training config as its source, only the table label differs
-    t4 = _compose(c.by_key()["table4/aim/seed1"].args)
-    t3 = _compose(["table=table3", "paper_steps=1000000", "budget=paper", "physics=korean_medium", "algo=sac",
-                   "variant=aim", "seed=1"])
+    # a shared row is the same training config as its source (Table 3's own preset, variant=aim),
+    # only the table label differs
     t3.table = t4.table
     assert t3 == t4
 
@@ -198,6 +204,7 @@ def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
         time.sleep(0.1)
     rc2, out2 = cli("run", *common)  # a second runner on the same root is refused
     assert rc2 == 2 and "another runner" in out2
+    assert f"a runner is active (pid {os.getpid()})" in cli("status", *common)[1]
     assert cli("stop", *common)[0] == 0
     runner.join(timeout=240)
     assert not runner.is_alive() and result["left"] == 2, log.getvalue()
@@ -232,7 +239,7 @@ def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
 
     # status: t1 done, its shared row in t2 done, t3 (not selected) left; CPU from the summary
     rc, out = cli("status", "--spec", str(spec), "--root", str(root))
-    assert rc == 0
+    assert rc == 0 and "no runner active" in out
     assert "| t1 | 1 | 1 (0) | 0 | 0 (0, 0, 0) |" in out and "| t2 | 1 | 1 (1) | 0 | 0 (0, 0, 0) |" in out
     assert "| t3 | 1 | 0 (0) | 0 | 1 (0, 0, 0) |" in out
     assert f"{summary['cpu_seconds'] / 3600:.2f}" in out.split("| t1 |")[1].split("\n")[0]
@@ -251,3 +258,93 @@ def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     assert "stale         t1/a/seed0" in out
     rc, out = cli("run", *common)
     assert rc == 3 and "start " not in out and len(_ledger(root)["runs"]["t1/a/seed0"]["starts"]) == 2
+
+
+def test_search_runs_compose_with_the_exported_policies(tmp_path):
+    """Table 6's search.py overrides compose through conf/search.yaml; a policy proposer gets
+    the three policy files its export entry writes."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from billiards.campaign.ledger import fill
+    from billiards.search.config import register, validate
+
+    register()
+    c = paper_campaign()
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        searches = [x for x in c.entries if x.kind == "search"]
+        for e in searches:  # the policy proposers' entries differ only in the proposer's name
+            assert [a.replace(e.variant.split("/")[0], "P") for a in e.args] == \
+                [a.replace("base", "P") for a in c.by_key()[f"table6/base/{e.variant.split('/')[1]}"].args] or \
+                e.variant.startswith("geometric")
+        for e in (x for x in searches if x.variant.split("/")[0] in ("base", "geometric")):
+            cfg = compose("search", overrides=[fill(a, tmp_path) for a in e.args])
+            proposer, rest = e.variant.split("/")
+            assert (cfg.proposer.name, f"{cfg.search.kind}_{cfg.protocol.name}", cfg.search.budget) == (proposer, rest, 400)
+            assert cfg.physics.preset == "korean_medium"
+            if proposer == "geometric":
+                validate(cfg)
+            else:
+                export = tmp_path.resolve() / "table6" / "export" / proposer
+                assert list(cfg.proposer.checkpoints) == [str(export / f"seed{s}.pt") for s in range(3)]
+
+
+def test_a_failing_run_is_retried_then_left_alone(tmp_path):
+    """A run whose command fails (here an unknown config key) is tried MAX_FAILURES times,
+    each failure recorded with its exit status; then runs leave it alone until --retry-failed."""
+    from billiards.campaign.runner import MAX_FAILURES
+
+    spec = tmp_path / "bad.yaml"
+    spec.write_text(yaml.safe_dump({"name": "bad", "runs": [
+        {"table": "t", "variant": "x", "seed": 0, "steps": 10, "args": ["budget=smoke", "algo.lrr=1"]}]}))
+    root = tmp_path / "state"
+    rc, out = cli("run", "--spec", str(spec), "--root", str(root), "--poll", "0.1")
+    assert rc == 3 and f"see {root / 't' / 'x' / 'seed0' / 'train.log'}" in out
+    rec = _ledger(root)["runs"]["t/x/seed0"]
+    assert rec["failures"] == MAX_FAILURES and all(s["outcome"] == "failed (exit 1)" for s in rec["starts"])
+    assert "algo.lrr" in (root / "t" / "x" / "seed0" / "train.log").read_text()
+    rc, out = cli("status", "--spec", str(spec), "--root", str(root))
+    assert "| t | 1 | 0 (0) | 0 | 1 (0, 1, 0) |" in out
+    rc, out = cli("run", "--spec", str(spec), "--root", str(root))
+    assert rc == 3 and "start " not in out
+
+
+def test_a_run_left_by_a_killed_runner_is_adopted_not_started_twice(tmp_path):
+    """The ledger names a live process running the entry (its runner was killed, it was not):
+    status counts it as running; a new runner waits for it instead of starting a duplicate."""
+    import subprocess
+    import sys
+
+    spec = _tiny_spec(tmp_path / "tiny.yaml")
+    root = tmp_path / "state"
+    run_dir = (root / "t1" / "a" / "seed0").resolve()
+    run_dir.mkdir(parents=True)
+    # a process standing in for the orphaned training run: its command line names the run dir
+    orphan = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", f"hydra.run.dir={run_dir}"],
+                              start_new_session=True)
+    try:
+        (root / LEDGER).write_text(json.dumps({"campaign": "tiny", "runs": {"t1/a/seed0": {
+            "args": TINY_ARGS, "starts": [{"commit": "abc1234", "started": "x", "mode": "fresh", "frames": 0}],
+            "commits": ["abc1234"], "pid": orphan.pid, "failures": 0}}}))
+        rc, out = cli("status", "--spec", str(spec), "--root", str(root), "--only", "t1")
+        assert "| t1 | 1 | 0 (0) | 1 | 0 (0, 0, 0) |" in out
+        log = io.StringIO()
+        runner = Runner(load_spec(spec), root, only=["t1"], poll=0.1, out=log)
+        thread = threading.Thread(target=runner.run)
+        thread.start()
+        until = time.time() + 20
+        while "adopt  t1/a/seed0" not in log.getvalue() and time.time() < until:
+            time.sleep(0.05)
+        (root / "STOP").touch()  # drain: nothing may start once the orphan ends (set after the runner cleared it)
+        time.sleep(0.5)
+        assert thread.is_alive() and "adopt  t1/a/seed0" in log.getvalue() and "start " not in log.getvalue()
+        orphan.kill()
+        orphan.wait()
+        thread.join(timeout=30)
+        assert not thread.is_alive()
+    finally:
+        orphan.kill()
+    rec = _ledger(root)["runs"]["t1/a/seed0"]
+    assert rec["pid"] is None and rec["starts"][-1]["outcome"] == "ended (adopted, exit status unknown)"
+    assert len(rec["starts"]) == 1 and "start " not in log.getvalue()

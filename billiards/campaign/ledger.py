@@ -160,9 +160,9 @@ def pid_alive(pid: int | None, run_dir: Path) -> bool:
     if not pid:
         return False
     try:
-        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        args = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace").split("\0")
     except OSError:
         return False
-    if not cmdline.strip():  # a zombie: exited, not yet reaped
-        return False
-    return str(run_dir) in cmdline
+    # (a zombie, exited but not reaped, has an empty command line)
+    target = str(run_dir)
+    return any(a == target or a.endswith("=" + target) for a in args)

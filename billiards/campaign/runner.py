@@ -13,8 +13,8 @@ runner *drains* instead of killing where it can: from ``deadline - grace`` on (`
 ``--hours``, ``--grace-minutes``), on a first Ctrl-C / SIGTERM, or when ``<root>/STOP``
 appears (``python -m billiards.campaign stop``), it starts nothing new and stops each
 training run right after its next checkpoint (or lets it finish); at the deadline itself, on
-a second Ctrl-C, it stops whatever still runs (SIGTERM to the run's process group, SIGKILL 10
-s later) and that loss is bounded as above. A search run has no checkpoint: stopped, it
+a second Ctrl-C, it stops whatever still runs (SIGTERM to the run's process group 20 s before
+the deadline, SIGKILL 10 s later, so nothing runs past it) and that loss is bounded as above. A search run has no checkpoint: stopped, it
 starts over next time; an export takes seconds.
 
 Restarts. All state lives on disk under the campaign root (:mod:`.ledger`); a second runner on
@@ -49,6 +49,7 @@ from .spec import Campaign, Entry, SpecError
 
 MAX_FAILURES = 3  # starts that ended in an error before an entry is left alone (--retry-failed resets)
 KILL_WAIT = 10.0  # seconds between SIGTERM and SIGKILL
+HARD_STOP = 20.0  # seconds before the deadline at which whatever still runs is stopped, so all is gone by then
 
 
 def runtime_args(kind: str) -> list[str]:
@@ -214,6 +215,7 @@ class Runner:
         if mode == "fresh":
             (run_dir / "eval_history.jsonl").unlink(missing_ok=True)  # a killed first attempt's, before any checkpoint
         frames = progress(run_dir).frames if entry.kind == "train" else 0
+        self.commit = git_commit()  # the checkout may have moved since the last start
         start = {"commit": self.commit, "started": utc_now(), "mode": mode, "frames": frames}
         log = (run_dir / LOGS[entry.kind]).open("a")
         log.write(f"\n===== campaign {self.campaign.name}: {entry.key}, {mode} at commit {self.commit}, {start['started']}\n"
@@ -266,7 +268,8 @@ class Runner:
         rec["pid"] = None
         self.ledger.save()
         with (slot.run_dir / STARTS).open("a") as f:
-            f.write(json.dumps({"ended": utc_now(), "outcome": outcome, "exit": rc, "cpu_seconds": cpu}) + "\n")
+            f.write(json.dumps({"ended": utc_now(), "outcome": outcome, "exit": rc,
+                                "cpu_seconds": None if cpu is None else round(cpu, 2)}) + "\n")
         log = slot.run_dir / LOGS[entry.kind]
         self.say(f"{'done' if done else 'end'}   {entry.key}: {outcome}"
                  + ("" if done or outcome == "stopped" else f" -- see {log}"))
@@ -324,7 +327,7 @@ class Runner:
 
     def step(self) -> None:
         """One round: reap ended processes, stop what must stop, start what may start."""
-        past = self.deadline is not None and time.time() >= self.deadline
+        past = self.deadline is not None and time.time() >= self.deadline - HARD_STOP
         if past and not self.stop_now:
             self.stop_now = True
             self.say("deadline reached: stopping every run now")

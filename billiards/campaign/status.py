@@ -25,13 +25,12 @@ from .runner import MAX_FAILURES
 from .spec import Campaign, Entry
 
 # CPU seconds per step (training) or per decision (search) before a campaign has measured its
-# own. Sources: sac -- 7.3 CPU min per 100k steps with evaluations (results/training/table4.md,
-# budget=quick, international table); td3 -- assumed equal to sac (same networks, batch and
-# UTD); sac_paper, td3_paper -- 5.7 CPU-h per 1M steps (physics_reference.md §10);
-# ppo_paper -- see the README paragraph of the campaign (measured with budget=smoke);
-# h2, puct -- results/search/*.json (400 simulations, international table): h2 6-116 ms,
-# PUCT 250-1,600 ms per decision.
-PRIORS = {"sac": 4.4e-3, "td3": 4.4e-3, "sac_paper": 2.05e-2, "td3_paper": 2.05e-2, "ppo_paper": 4.4e-3,
+# own. sac, td3, ppo_paper: measured on the paper's table, 16,384 steps each (budget=smoke
+# based, final evaluation of 10 innings), results/campaign/priors.md; the periodic
+# evaluations of budget=paper (100 innings every 50k steps) come on top. sac_paper, td3_paper: 5.7
+# CPU-h per 1M steps (physics_reference.md §10). h2, puct: results/search/*.json (400
+# simulations, international table): h2 6-116 ms, PUCT 250-1,600 ms per decision.
+PRIORS = {"sac": 2.75e-3, "td3": 1.93e-3, "sac_paper": 2.05e-2, "td3_paper": 2.05e-2, "ppo_paper": 2.22e-3,
           "h2": 0.05, "puct": 1.0}
 
 
@@ -145,12 +144,12 @@ def status_text(campaign: Campaign, root: Path, selected: list[Entry] | None = N
                 verbose: bool = False) -> str:
     states = entry_states(campaign, root, selected)
     tables = summarize(states)
-    lines = [f"campaign {campaign.name} in {Path(root).resolve()}", "",
+    lines = [f"campaign {campaign.name} in {Path(root).resolve()}: {runner_state(Path(root))}", "",
              "| table | entries | done (shared) | running | left (waiting, failed, stale) | CPU-h spent | "
              "CPU-h in processes | CPU-h left, training | CPU-h left, search (bound) |",
              "|---|---|---|---|---|---|---|---|---|"]
     total = defaultdict(float)
-    for name, t in tables.items():
+    for name, t in sorted(tables.items()):
         for k, v in t.items():
             total[k] += v
         lines.append(_row(name, t))
@@ -170,6 +169,22 @@ def status_text(campaign: Campaign, root: Path, selected: list[Entry] | None = N
             lines.append(f"| {s.entry.key} | {s.state}{f' = {s.entry.same_as}' if s.entry.same_as else ''} | "
                          f"{s.frames:,} / {s.entry.steps:,} | {s.cpu_seconds / 60:.1f} | {', '.join(s.commits)} |")
     return "\n".join(lines) + "\n"
+
+
+def runner_state(root: Path) -> str:
+    """Whether a runner holds the campaign's lock (it is released when the runner exits)."""
+    import fcntl
+
+    path = root / "campaign.lock"
+    if not path.is_file():
+        return "no runner active"
+    with path.open() as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return f"a runner is active (pid {f.read().strip() or '?'})"
+        fcntl.flock(f, fcntl.LOCK_UN)
+    return "no runner active"
 
 
 def _row(name: str, t: dict) -> str:
