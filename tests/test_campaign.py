@@ -250,6 +250,14 @@ def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     assert rc == 0 and "start " not in out and "2 of 2 entries done" in out and time.time() - t0 < 10
     assert len(_ledger(root)["runs"]["t1/a/seed0"]["starts"]) == 2
 
+    # --check-config: the run's config.yaml is what its arguments compose to now; an edited one is not
+    rc, out = cli("status", *common, "--check-config")
+    assert rc == 0 and "the 1 started training runs match" in out
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+    (run_dir / "config.yaml").write_text(yaml.safe_dump({**saved, "algo": {**saved["algo"], "lr": 0.5}}))
+    rc, out = cli("status", *common, "--check-config")
+    assert rc == 4 and "t1/a/seed0: algo.lr = 0.5 in the run, 0.001 now" in out
+
     # the definition changes: the finished run is stale, not re-run without --restart-stale
     _tiny_spec(spec, [a if a != "algo.batch_size=32" else "algo.batch_size=16" for a in TINY_ARGS])
     rc, out = cli("status", "--spec", str(spec), "--root", str(root))
@@ -258,6 +266,16 @@ def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     assert "stale         t1/a/seed0" in out
     rc, out = cli("run", *common)
     assert rc == 3 and "start " not in out and len(_ledger(root)["runs"]["t1/a/seed0"]["starts"]) == 2
+
+    # --restart-stale: the old dir is moved aside, the run starts over under the new definition
+    rc, out = cli("run", *common, "--restart-stale", "--poll", "0.1")
+    assert rc == 0 and "start  t1/a/seed0 (fresh)" in out, out
+    moved = list(run_dir.parent.glob("seed0.stale-*"))
+    assert len(moved) == 1 and json.loads((moved[0] / "summary.json").read_text())["frames"] == 1024
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["algo"]["batch_size"] == 16
+    rec = _ledger(root)["runs"]["t1/a/seed0"]
+    assert rec["args"][-2] == "algo.batch_size=16" and len(rec["archived"]) == 1
+    assert [s["outcome"] for s in rec["starts"]] == ["stopped", "finished", "finished"]
 
 
 def test_search_runs_compose_with_the_exported_policies(tmp_path):

@@ -47,6 +47,8 @@ def _parser() -> argparse.ArgumentParser:
             p.add_argument("--poll", type=float, default=2.0, help=argparse.SUPPRESS)
         if name == "status":
             p.add_argument("-v", "--verbose", action="store_true", help="one line per entry")
+            p.add_argument("--check-config", action="store_true",
+                           help="compare each started training run's config.yaml with what its arguments compose to now")
     return parser
 
 
@@ -85,6 +87,15 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "status":
             Ledger(root, campaign.name)  # a ledger of another campaign fails here, clearly
             sys.stdout.write(status_text(campaign, root, campaign.select(only), args.jobs, args.verbose))
+            if args.check_config:
+                from .drift import config_drift, drift_text
+
+                entries = campaign.select(only)
+                drift = config_drift(campaign, root, entries)
+                checked = sum((entry_dir(root, campaign, e) / "config.yaml").is_file()
+                              for e in entries if e.kind == "train" and not e.same_as)
+                sys.stdout.write(drift_text(drift, checked))
+                return 4 if drift else 0
             return 0
         if args.command == "stop":
             if not root.is_dir():
