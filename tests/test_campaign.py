@@ -366,3 +366,22 @@ def test_a_run_left_by_a_killed_runner_is_adopted_not_started_twice(tmp_path):
     rec = _ledger(root)["runs"]["t1/a/seed0"]
     assert rec["pid"] is None and rec["starts"][-1]["outcome"] == "ended (adopted, exit status unknown)"
     assert len(rec["starts"]) == 1 and "start " not in log.getvalue()
+
+
+def test_a_stopped_search_is_not_done_and_p3_resumes(tmp_path):
+    """A search stopped by the runner leaves a results.json marked partial: not done; a P3
+    continues with `search.py resume=<dir>`, a P1 starts over."""
+    c, root = paper_campaign(), tmp_path / "state"
+    p3, p1 = (root / "table6" / "geometric" / f"h2_{p}" for p in ("p3", "p1"))
+    for run_dir, proto in ((p3, "p3"), (p1, "p1")):
+        run_dir.mkdir(parents=True)
+        (run_dir / "config.yaml").write_text(yaml.safe_dump({"protocol": {"name": proto}}))
+        (run_dir / "results.json").write_text(json.dumps({"shots": 120, "seconds": 6.0, "extra": {"partial": True}}))
+    rc, out = cli("run", "--root", str(root), "--only", "table6", "--dry-run")
+    assert f"resume        table6/geometric/h2_p3: search.py resume={p3.resolve()} threads=1" in out
+    assert "fresh         table6/geometric/h2_p1: search.py proposer=geometric" in out
+    states = {s.entry.key: s.state for s in entry_states(c, root, c.select(["table6"]))}
+    assert states["table6/geometric/h2_p3"] == "resumable" and states["table6/geometric/h2_p1"] == "new"
+    (p3 / "results.json").write_text(json.dumps({"shots": 900, "seconds": 30.0, "extra": {}}))
+    states = {s.entry.key: s for s in entry_states(c, root, c.select(["table6"]))}
+    assert states["table6/geometric/h2_p3"].state == "done" and states["table6/geometric/h2_p3"].frames == 900

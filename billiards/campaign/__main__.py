@@ -2,7 +2,7 @@
 
     python -m billiards.campaign run paper [--jobs 2] [--hours H | --until HH:MM] [--only table1,table2] [--dry-run]
     python -m billiards.campaign status paper [--only ...] [-v]
-    python -m billiards.campaign stop paper      # the running runner drains and exits
+    python -m billiards.campaign stop paper [--now]   # the active runner drains (or stops all now) and exits
     python -m billiards.campaign run --spec tiny.yaml --root /tmp/tiny
 
 ``paper`` is the built-in campaign (billiards/campaign/spec.py); ``--spec FILE`` reads another
@@ -18,7 +18,7 @@ from pathlib import Path
 
 from billiards.provenance import ROOT
 
-from .ledger import STOP, Ledger, entry_dir
+from .ledger import STOP, STOP_NOW, Ledger, entry_dir
 from .runner import Runner, command, parse_deadline
 from .spec import SpecError, campaign_named, load_spec
 from .status import entry_states, status_text
@@ -45,6 +45,9 @@ def _parser() -> argparse.ArgumentParser:
                            help="re-run from scratch entries whose arguments changed since they started")
             p.add_argument("--retry-failed", action="store_true", help="try entries that failed repeatedly again")
             p.add_argument("--poll", type=float, default=2.0, help=argparse.SUPPRESS)
+        if name == "stop":
+            p.add_argument("--now", action="store_true",
+                           help="stop every process at once (training loses up to budget.checkpoint_every steps)")
         if name == "status":
             p.add_argument("-v", "--verbose", action="store_true", help="one line per entry")
             p.add_argument("--check-config", action="store_true",
@@ -100,9 +103,13 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "stop":
             if not root.is_dir():
                 raise SpecError(f"{root} does not exist: no runner to stop")
+            if args.now:
+                (root / STOP_NOW).touch()
+                print(f"asked the runner of {root} to stop every process now")
+                return 0
             (root / STOP).touch()
-            print(f"asked the runner of {root} to drain: it starts nothing new and stops each training run "
-                  f"after its next checkpoint")
+            print(f"asked the runner of {root} to drain: it starts nothing new, stops each training run "
+                  f"after its next checkpoint and waits for running searches (stop --now stops them)")
             return 0
         if args.dry_run:
             campaign.select(only)

@@ -29,6 +29,7 @@ from .spec import PLACEHOLDER, Campaign, Entry, SpecError
 LEDGER = "campaign.json"
 STARTS = "campaign_starts.jsonl"
 STOP = "STOP"  # `python -m billiards.campaign stop`: the runner drains (see runner.py)
+STOP_NOW = "STOP_NOW"  # `... stop --now`: the runner stops every process at once
 LOGS = {"train": "train.log", "export": "export.log", "search": "search.log"}
 
 
@@ -112,8 +113,9 @@ def is_done(entry: Entry, run_dir: Path, root: Path) -> bool:
     """True when the entry's results exist (see the module docstring)."""
     if entry.kind == "train":
         return (run_dir / "eval.json").is_file() and (run_dir / "summary.json").is_file()
-    if entry.kind == "search":
-        return (run_dir / "results.json").is_file()
+    if entry.kind == "search":  # a stopped search writes a results.json marked partial
+        result = search_result(run_dir)
+        return result is not None and not (result.get("extra") or {}).get("partial")
     seeds = [_seed_of(src) for src in export_sources(entry, root)]
     return all(s is not None and (run_dir / f"seed{s}.pt").is_file() for s in seeds)
 
@@ -145,13 +147,33 @@ def progress(run_dir: Path) -> Progress:
     return p
 
 
-def search_seconds(run_dir: Path) -> tuple[int, float] | None:
-    """(decisions, seconds) of a finished search run, from its results.json."""
+def search_result(run_dir: Path) -> dict | None:
+    """A search run's results.json (None if absent or unreadable: a run to do again)."""
     path = run_dir / "results.json"
-    if not path.is_file():
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
         return None
-    r = json.loads(path.read_text())
-    return int(r.get("shots", 0)), float(r.get("seconds", 0.0))
+
+
+def search_seconds(run_dir: Path) -> tuple[int, float] | None:
+    """(decisions, seconds) of a search run's results.json, finished or partial."""
+    r = search_result(run_dir)
+    return None if r is None else (int(r.get("shots", 0)), float(r.get("seconds", 0.0)))
+
+
+def search_resumable(run_dir: Path) -> bool:
+    """A stopped P3 search continues from its next chain (``search.py resume=``); a P1 starts over."""
+    import yaml
+
+    path = run_dir / "config.yaml"
+    if not path.is_file():
+        return False
+    try:
+        cfg = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError:
+        return False
+    return (cfg.get("protocol") or {}).get("name") == "p3"
 
 
 def pid_alive(pid: int | None, run_dir: Path) -> bool:

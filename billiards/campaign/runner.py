@@ -12,10 +12,13 @@ last checkpoint (at most ``budget.checkpoint_every`` steps, 50k at ``budget=pape
 runner *drains* instead of killing where it can: from ``deadline - grace`` on (``--until`` /
 ``--hours``, ``--grace-minutes``), on a first Ctrl-C / SIGTERM, or when ``<root>/STOP``
 appears (``python -m billiards.campaign stop``), it starts nothing new and stops each
-training run right after its next checkpoint (or lets it finish); at the deadline itself, on
-a second Ctrl-C, it stops whatever still runs (SIGTERM to the run's process group 20 s before
-the deadline, SIGKILL 10 s later, so nothing runs past it) and that loss is bounded as above. A search run has no checkpoint: stopped, it
-starts over next time; an export takes seconds.
+training run right after its next checkpoint (or lets it finish). 20 s before the deadline,
+on a second Ctrl-C or on ``stop --now`` (``<root>/STOP_NOW``) it stops whatever still runs
+(SIGTERM to the run's process group, SIGKILL 10 s later, so nothing runs past the deadline);
+that loss is bounded as above. A search run gets SIGINT instead: it writes the chains it
+finished as a partial ``results.json`` (not counted as done); a P3 then continues from its
+next chain (``search.py resume=<dir>``), losing the chain in progress, a P1 starts over.
+Searches are not drained (they have no checkpoint to wait for). An export takes seconds.
 
 Restarts. All state lives on disk under the campaign root (:mod:`.ledger`); a second runner on
 the same root is refused (an ``flock`` on ``campaign.lock``, released by the kernel when the
@@ -43,8 +46,8 @@ from pathlib import Path
 
 from billiards.provenance import ROOT, git_commit
 
-from .ledger import (LOGS, STARTS, STOP, Ledger, entry_dir, entry_done, fill, is_done, is_stale, pid_alive, progress,
-                     utc_now)
+from .ledger import (LOGS, STARTS, STOP, STOP_NOW, Ledger, entry_dir, entry_done, fill, is_done, is_stale, pid_alive,
+                     progress, search_resumable, utc_now)
 from .spec import Campaign, Entry, SpecError
 
 MAX_FAILURES = 3  # starts that ended in an error before an entry is left alone (--retry-failed resets)
@@ -68,6 +71,8 @@ def command(entry: Entry, run_dir: Path, root: Path) -> tuple[list[str], str]:
         sources = [fill(a, root) for a in entry.args]
         return [py, "-m", "billiards.rl.policy", "export", *sources, "--out", str(run_dir)], "export"
     if entry.kind == "search":
+        if search_resumable(run_dir):
+            return [py, "search.py", f"resume={run_dir}", *runtime_args("search"), f"hydra.run.dir={run_dir}"], "resume"
         return [py, "search.py", *(fill(a, root) for a in entry.args), *runtime_args("search"),
                 f"hydra.run.dir={run_dir}"], "fresh"
     if (run_dir / "checkpoint.pt").is_file():
@@ -292,11 +297,13 @@ class Runner:
     # ---------------------------------------------------------- stopping
 
     def terminate(self, slot: Slot) -> None:
+        """SIGINT to a search (it writes its finished chains as a partial result), SIGTERM to
+        the rest; :meth:`_escalate` sends SIGKILL KILL_WAIT seconds later."""
         if slot.term_at is not None:
             return
         slot.term_at = time.time()
         try:
-            os.killpg(slot.pid, signal.SIGTERM)
+            os.killpg(slot.pid, signal.SIGINT if slot.entry.kind == "search" else signal.SIGTERM)
         except ProcessLookupError:
             pass
 
@@ -331,6 +338,9 @@ class Runner:
         if past and not self.stop_now:
             self.stop_now = True
             self.say("deadline reached: stopping every run now")
+        if (self.root / STOP_NOW).exists() and not self.stop_now:
+            self.stop_now = True
+            self.say("stop --now: stopping every run now")
         drain = self.draining()
         for slot in list(self.slots):
             ended = self._reap(slot)
@@ -366,7 +376,8 @@ class Runner:
         lock.truncate()
         lock.write(f"{os.getpid()}\n")
         lock.flush()
-        (self.root / STOP).unlink(missing_ok=True)  # a new start is a new wish to run
+        for name in (STOP, STOP_NOW):  # a new start is a new wish to run
+            (self.root / name).unlink(missing_ok=True)
         handlers = {}
         if _main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -386,7 +397,8 @@ class Runner:
         finally:
             for sig, old in handlers.items():
                 signal.signal(sig, old)
-            (self.root / STOP).unlink(missing_ok=True)
+            for name in (STOP, STOP_NOW):
+                (self.root / name).unlink(missing_ok=True)
             fcntl.flock(lock, fcntl.LOCK_UN)
             lock.close()
         left = [e for e in self.selected if not self.done(e)]

@@ -20,7 +20,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
-from .ledger import Ledger, entry_dir, entry_done, is_stale, pid_alive, progress, search_seconds
+from .ledger import Ledger, entry_dir, entry_done, is_stale, pid_alive, progress, search_resumable, search_seconds
 from .runner import MAX_FAILURES
 from .spec import Campaign, Entry
 
@@ -79,7 +79,8 @@ def entry_states(campaign: Campaign, root: Path, selected: list[Entry] | None = 
         elif not all(done(by_key[k]) for k in e.needs()):
             state = "waiting"
         else:
-            state = "resumable" if p and p.checkpoint else "new"
+            resumable = p.checkpoint if p else src.kind == "search" and search_resumable(run_dir)
+            state = "resumable" if resumable else "new"
         proc = sum(s.get("cpu_seconds") or 0.0 for s in rec.get("starts", [])) if not e.same_as else 0.0
         out.append(EntryState(e, state, frames, cpu, proc, tuple(rec.get("commits", ()))))
     return out
