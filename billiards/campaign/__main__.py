@@ -115,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
             campaign.select(only)
             sys.stdout.write(dry_run(campaign, root, only))
             return 0
+        if not args.grace_minutes >= 0:
+            raise SpecError(f"--grace-minutes must be >= 0, got {args.grace_minutes}")
         deadline = parse_deadline(args.hours, args.until)
         runner = Runner(campaign, root, jobs=args.jobs, deadline=deadline, grace=60.0 * args.grace_minutes,
                         only=only, restart_stale=args.restart_stale, retry_failed=args.retry_failed, poll=args.poll)
