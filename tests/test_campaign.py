@@ -1,0 +1,387 @@
+"""The campaign runner (billiards.campaign): the paper's declarative run list, spec checks,
+and one tiny campaign run for real -- drained after its first checkpoint, resumed to the end,
+skipped once finished, flagged stale when its definition changes -- with status and --dry-run
+read off the same state. The training processes are real ``train.py`` runs of a few hundred
+steps; the whole file takes about a minute on one core."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import threading
+import time
+from contextlib import redirect_stderr, redirect_stdout
+from pathlib import Path
+
+import pytest
+import yaml
+
+from billiards.campaign import Campaign, Entry, SpecError, load_spec, paper_campaign
+from billiards.campaign.__main__ import main
+from billiards.campaign.ledger import LEDGER, STARTS
+from billiards.campaign.runner import Runner, parse_deadline
+from billiards.campaign.status import entry_states, summarize
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+# ----------------------------------------------------------------------------- the paper's list
+
+
+def test_paper_campaign_lists_every_table_at_its_budget():
+    c = paper_campaign()
+    by_table = {}
+    for e in c.select(None):
+        by_table.setdefault(e.table, []).append(e)
+    assert {t: len(v) for t, v in by_table.items()} == {
+        "table1": 15, "table2": 12, "table4": 9, "table3": 15, "table5": 15, "table6": 24}
+    runs = [e for e in c.select(None) if e.kind == "train" and not e.same_as]
+    assert len(runs) == 15 + 9 + 9 + 9 + 12
+    for e in runs:
+        assert "physics=korean_medium" in e.args and f"seed={e.seed}" in e.args and "budget=paper" in e.args
+        assert e.steps == (400_000 if e.table in ("table1", "table2") else 1_000_000)
+        assert f"paper_steps={e.steps}" in e.args and f"table={e.table}" in e.args
+    ppo = [e for e in runs if e.variant == "ppo"]
+    assert len(ppo) == 5 and all("algo=ppo_paper" in e.args for e in ppo)
+    assert all("algo=sac" in e.args for e in runs if e.table != "table1")
+    shared = {e.key: e.same_as for e in c.entries if e.same_as}
+    assert shared["table2/random_continue/seed2"] == "table1/sac/seed2"
+    assert shared["table3/aim/seed0"] == "table4/aim/seed0" and shared["table5/aim_features/seed1"] == "table4/aim_features/seed1"
+    searches = [e for e in c.entries if e.kind == "search"]
+    assert len(searches) == 5 * 2 * 2 and all("search.budget=400" in e.args for e in searches)
+    base = c.by_key()["table6/base/puct_p3"]
+    assert base.needs() == ["table6/export/base"] and "protocol.cap=10000" in base.args
+    assert c.by_key()["table6/export/base"].needs() == [f"table5/foul_penalty/seed{s}" for s in range(3)]
+    # the optional run of the authors' SAC runs only when asked for
+    assert "extra/sac_paper/seed0" not in {e.key for e in c.select(None)}
+    assert [e.key for e in c.select(["extra"])] == ["extra/sac_paper/seed0"]
+    # --only table2 brings the Table 1 SAC runs its random_continue row shares
+    assert {e.key for e in c.select(["table2"])} >= {"table1/sac/seed0", "table1/sac/seed2"}
+
+
+def _compose_all(overrides_lists):
+    """The training configs of several command lines, composed in one Hydra context."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    import billiards.rl.config  # noqa: F401  (schema and resolvers)
+
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        return [compose("config", overrides=list(o)) for o in overrides_lists]
+
+
+def test_paper_training_runs_compose_and_validate():
+    """Every training run's overrides compose through the real Hydra config and pass the
+    trainer's validation, with the table, seed, budget, table physics and variant intended."""
+    from billiards.rl.config import validate
+
+    c = paper_campaign()
+    runs = [e for e in c.entries if e.kind == "train" and not e.same_as]
+    # the seeds of a variant differ in nothing but the seed, so composing seed 0 checks them all
+    for e in runs:
+        seed0 = c.by_key()[f"{e.table}/{e.variant}/seed0"]
+        assert [a for a in e.args if not a.startswith("seed=")] == [a for a in seed0.args if not a.startswith("seed=")]
+    firsts = [e for e in runs if e.seed == 0]
+    shared_check = [c.by_key()["table4/aim/seed1"].args,
+                    ["table=table3", "paper_steps=1000000", "budget=paper", "physics=korean_medium", "algo=sac", "variant=aim", "seed=1"]]
+    *configs, t4, t3 = _compose_all([e.args for e in firsts] + shared_check)
+    for e, cfg in zip(firsts, configs):
+        validate(cfg)
+        assert (cfg.table, cfg.seed, cfg.budget.total_steps, cfg.physics.preset) == (e.table, e.seed, e.steps, "korean_medium"), e.key
+        env, shaping = cfg.env, cfg.shaping
+        if e.table in ("table1", "table2"):
+            assert [str(getattr(s, "value", s)) for s in cfg.eval.starts] == ["random", "canonical"]
+            assert not env.constrain_aim and shaping.name == "none"
+        if e.table == "table1":
+            assert cfg.algo.name == e.variant and env.paradigm.value == "random_continue"
+        if e.table == "table2":
+            assert env.paradigm.value == e.variant and cfg.algo.name == "sac"
+        if e.table == "table3":
+            assert (shaping.rm > 0, cfg.curriculum.name) == {"staged": (False, "staged"), "rm": (True, "none"),
+                                                            "rm_aim": (True, "none")}[e.variant]
+            assert env.constrain_aim == (e.variant == "rm_aim")
+        if e.table == "table4":
+            assert (env.constrain_aim, env.extra_features) == {"plain": (False, False), "aim": (True, False),
+                                                               "aim_features": (True, True)}[e.variant]
+        if e.table == "table5":
+            assert env.constrain_aim and env.extra_features and shaping.name == e.variant and shaping.foul_penalty == 1.0
+    # a shared row is the same training config as its source (Table 3's own preset, variant=aim),
+    # only the table label differs
+    t3.table = t4.table
+    assert t3 == t4
+
+
+# ----------------------------------------------------------------------------- spec checks
+
+
+@pytest.mark.parametrize("entries, message", [
+    ([Entry("t", "a", seed=0, steps=1), Entry("t", "a", seed=0, steps=1)], "listed twice"),
+    ([Entry("t", "a", seed=0, steps=1, after=("t/b",))], "refers to 't/b'"),
+    ([Entry("t", "a", kind="train", steps=0)], "budget in steps"),
+    ([Entry("t", "a", kind="fit", steps=1)], "kind must be one of"),
+    ([Entry("t", "../a", steps=1)], "plain path names"),
+    ([Entry("t", "a", steps=1, after=("t/b",)), Entry("t", "b", steps=1, after=("t/a",))], "cycle"),
+    ([Entry("t", "a", steps=1), Entry("t", "b", same_as="t/a"), Entry("t", "c", same_as="t/b")], "itself shared"),
+])
+def test_bad_campaigns_are_refused_naming_the_entry(entries, message):
+    with pytest.raises(SpecError, match=message):
+        Campaign("bad", entries)
+
+
+def test_spec_files_are_checked(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nruns:\n  - {table: t, variant: a, steps: 5, sede: 1}\n")
+    with pytest.raises(SpecError, match="unknown: sede"):
+        load_spec(bad)
+    bad.write_text("!!python/object/apply:os.system ['echo hacked']\n")
+    with pytest.raises(SpecError, match="cannot be read"):
+        load_spec(bad)
+    with pytest.raises(SpecError, match="does not exist"):
+        load_spec(tmp_path / "missing.yaml")
+    with pytest.raises(SpecError, match="no such table"):
+        paper_campaign().select(["table7"])
+
+
+def test_deadline_parsing():
+    now = time.mktime((2026, 1, 1, 20, 0, 0, 0, 0, -1))
+    assert parse_deadline(1.5, None, now) == now + 5400
+    assert parse_deadline(None, "21:30", now) == now + 5400
+    assert parse_deadline(None, "19:00", now) == now + 23 * 3600  # tomorrow
+    assert parse_deadline(None, None, now) is None
+    for hours, until, msg in ((0.0, None, "--hours"), (None, "25:00", "HH:MM"), (None, "9", "HH:MM"), (1.0, "10:00", "not both")):
+        with pytest.raises(SpecError, match=msg):
+            parse_deadline(hours, until, now)
+
+
+# ----------------------------------------------------------------------------- a tiny campaign, for real
+
+TINY_ARGS = ["table=t1", "budget=smoke", "budget.total_steps=1024", "budget.checkpoint_every=256", "budget.eval_every=0",
+             "budget.init_random_steps=128", "budget.log_every=128", "budget.final_eval_innings=4", "env.num_envs=16",
+             "algo=sac", "algo.hidden_sizes=[32,32]", "algo.batch_size=32", "seed=0"]
+
+
+def _tiny_spec(path: Path, args=TINY_ARGS) -> Path:
+    path.write_text(yaml.safe_dump({"name": "tiny", "runs": [
+        {"table": "t1", "variant": "a", "seed": 0, "steps": 1024, "cost": "sac", "args": list(args)},
+        {"table": "t2", "variant": "shared", "seed": 0, "same_as": "t1/a/seed0"},
+        {"table": "t3", "variant": "b", "seed": 0, "steps": 1024, "cost": "sac", "args": list(args)},
+    ]}))
+    return path
+
+
+def cli(*argv: str) -> tuple[int, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        rc = main(list(argv))
+    return rc, out.getvalue() + err.getvalue()
+
+
+def _ledger(root: Path) -> dict:
+    return json.loads((root / LEDGER).read_text())
+
+
+def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
+    spec, root = _tiny_spec(tmp_path / "tiny.yaml"), tmp_path / "state"
+    common = ("--spec", str(spec), "--root", str(root), "--only", "t1,t2")
+    run_dir = root / "t1" / "a" / "seed0"
+
+    # --dry-run: the command that would run; nothing written
+    rc, out = cli("run", *common, "--dry-run")
+    assert rc == 0 and f"fresh         t1/a/seed0: train.py {' '.join(TINY_ARGS)}" in out
+    assert f"hydra.run.dir={run_dir}" in out and "left (shared) t2/shared/seed0 = t1/a/seed0" in out
+    assert "t3/b" not in out and not root.exists()
+
+    # first invocation, drained (`stop`) while the run trains: stopped right after its first checkpoint
+    log = io.StringIO()
+    first = Runner(load_spec(spec), root, only=["t1", "t2"], poll=0.1, out=log)
+    result = {}
+    runner = threading.Thread(target=lambda: result.update(left=first.run()))
+    runner.start()
+    deadline = time.time() + 120
+    while time.time() < deadline and not ((root / LEDGER).is_file() and _ledger(root)["runs"].get("t1/a/seed0", {}).get("pid")):
+        time.sleep(0.1)
+    rc2, out2 = cli("run", *common)  # a second runner on the same root is refused
+    assert rc2 == 2 and "another runner" in out2
+    assert f"a runner is active (pid {os.getpid()})" in cli("status", *common)[1]
+    assert cli("stop", *common)[0] == 0
+    runner.join(timeout=240)
+    assert not runner.is_alive() and result["left"] == 2, log.getvalue()
+    rec = _ledger(root)["runs"]["t1/a/seed0"]
+    assert [s["outcome"] for s in rec["starts"]] == ["stopped"] and rec["starts"][0]["mode"] == "fresh"
+    assert rec["starts"][0]["cpu_seconds"] > 0 and rec["pid"] is None and len(rec["commits"]) == 1
+    assert (run_dir / "checkpoint.pt").is_file() and not (run_dir / "eval.json").exists()
+    assert log.getvalue().count("drain  t1/a/seed0") == 1 and "end   t1/a/seed0: stopped" in log.getvalue()
+
+    states = {s.entry.key: s for s in entry_states(load_spec(spec), root)}
+    assert states["t1/a/seed0"].state == "resumable" and 0 < states["t1/a/seed0"].frames < 1024
+    tables = summarize(list(states.values()))
+    assert (tables["t1"]["done"], tables["t1"]["left"], tables["t2"]["left"], tables["t3"]["left"]) == (0, 1, 1, 1)
+    rc, out = cli("run", *common, "--dry-run")
+    assert f"resume        t1/a/seed0: train.py resume={run_dir} threads=1" in out
+
+    # second invocation: resumes from the checkpoint and finishes
+    rc, out = cli("run", *common, "--poll", "0.1")
+    assert rc == 0, out
+    rec = _ledger(root)["runs"]["t1/a/seed0"]
+    assert [(s["mode"], s["outcome"]) for s in rec["starts"]] == [("fresh", "stopped"), ("resume", "finished")]
+    assert rec["starts"][1]["frames"] > 0
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["frames"] == 1024 and (run_dir / "eval.json").is_file()
+    lines = [json.loads(x) for x in (run_dir / STARTS).read_text().splitlines()]
+    assert [x.get("mode") or x["outcome"] for x in lines] == ["fresh", "stopped", "resume", "finished"]
+    assert lines[0]["commit"] == rec["commits"][0] and "resume=" in " ".join(lines[2]["command"])
+    assert "start  t1/a/seed0 (resume at" in out
+    train_log = (run_dir / "train.log").read_text()
+    assert "t1/a/seed0, fresh at commit" in train_log and "t1/a/seed0, resume at commit" in train_log
+    assert "final eval (random start)" in train_log  # the trainer's own log lines land there too
+
+    # status: t1 done, its shared row in t2 done, t3 (not selected) left; CPU from the summary
+    rc, out = cli("status", "--spec", str(spec), "--root", str(root))
+    assert rc == 0 and "no runner active" in out
+    assert "| t1 | 1 | 1 (0) | 0 | 0 (0, 0, 0) |" in out and "| t2 | 1 | 1 (1) | 0 | 0 (0, 0, 0) |" in out
+    assert "| t3 | 1 | 0 (0) | 0 | 1 (0, 0, 0) |" in out
+    assert f"{summary['cpu_seconds'] / 3600:.2f}" in out.split("| t1 |")[1].split("\n")[0]
+
+    # third invocation: everything selected is done, nothing starts
+    t0 = time.time()
+    rc, out = cli("run", *common)
+    assert rc == 0 and "start " not in out and "2 of 2 entries done" in out and time.time() - t0 < 10
+    assert len(_ledger(root)["runs"]["t1/a/seed0"]["starts"]) == 2
+
+    # --check-config: the run's config.yaml is what its arguments compose to now; an edited one is not
+    rc, out = cli("status", *common, "--check-config")
+    assert rc == 0 and "the 1 started training runs match" in out
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+    (run_dir / "config.yaml").write_text(yaml.safe_dump({**saved, "algo": {**saved["algo"], "lr": 0.5}}))
+    rc, out = cli("status", *common, "--check-config")
+    assert rc == 4 and "t1/a/seed0: algo.lr = 0.5 in the run, 0.001 now" in out
+
+    # the definition changes: the finished run is stale, not re-run without --restart-stale
+    _tiny_spec(spec, [a if a != "algo.batch_size=32" else "algo.batch_size=16" for a in TINY_ARGS])
+    rc, out = cli("status", "--spec", str(spec), "--root", str(root))
+    assert "| t1 | 1 | 0 (0) | 0 | 1 (0, 0, 1) |" in out
+    rc, out = cli("run", *common, "--dry-run")
+    assert "stale         t1/a/seed0" in out
+    rc, out = cli("run", *common)
+    assert rc == 3 and "start " not in out and len(_ledger(root)["runs"]["t1/a/seed0"]["starts"]) == 2
+
+    # --restart-stale: the old dir is moved aside, the run starts over under the new definition
+    rc, out = cli("run", *common, "--restart-stale", "--poll", "0.1")
+    assert rc == 0 and "start  t1/a/seed0 (fresh)" in out, out
+    moved = list(run_dir.parent.glob("seed0.stale-*"))
+    assert len(moved) == 1 and json.loads((moved[0] / "summary.json").read_text())["frames"] == 1024
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["algo"]["batch_size"] == 16
+    rec = _ledger(root)["runs"]["t1/a/seed0"]
+    assert rec["args"][-2] == "algo.batch_size=16" and len(rec["archived"]) == 1
+    assert [s["outcome"] for s in rec["starts"]] == ["stopped", "finished", "finished"]
+
+
+def test_search_runs_compose_with_the_exported_policies(tmp_path):
+    """Table 6's search.py overrides compose through conf/search.yaml; a policy proposer gets
+    the three policy files its export entry writes."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from billiards.campaign.ledger import fill
+    from billiards.search.config import register, validate
+
+    register()
+    c = paper_campaign()
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        searches = [x for x in c.entries if x.kind == "search"]
+        for e in searches:  # the policy proposers' entries differ only in the proposer's name
+            assert [a.replace(e.variant.split("/")[0], "P") for a in e.args] == \
+                [a.replace("base", "P") for a in c.by_key()[f"table6/base/{e.variant.split('/')[1]}"].args] or \
+                e.variant.startswith("geometric")
+        for e in (x for x in searches if x.variant.split("/")[0] in ("base", "geometric")):
+            cfg = compose("search", overrides=[fill(a, tmp_path) for a in e.args])
+            proposer, rest = e.variant.split("/")
+            assert (cfg.proposer.name, f"{cfg.search.kind}_{cfg.protocol.name}", cfg.search.budget) == (proposer, rest, 400)
+            assert cfg.physics.preset == "korean_medium"
+            if proposer == "geometric":
+                validate(cfg)
+            else:
+                export = tmp_path.resolve() / "table6" / "export" / proposer
+                assert list(cfg.proposer.checkpoints) == [str(export / f"seed{s}.pt") for s in range(3)]
+
+
+def test_a_failing_run_is_retried_then_left_alone(tmp_path):
+    """A run whose command fails (here an unknown config key) is tried MAX_FAILURES times,
+    each failure recorded with its exit status; then runs leave it alone until --retry-failed."""
+    from billiards.campaign.runner import MAX_FAILURES
+
+    spec = tmp_path / "bad.yaml"
+    spec.write_text(yaml.safe_dump({"name": "bad", "runs": [
+        {"table": "t", "variant": "x", "seed": 0, "steps": 10, "args": ["budget=smoke", "algo.lrr=1"]}]}))
+    root = tmp_path / "state"
+    rc, out = cli("run", "--spec", str(spec), "--root", str(root), "--poll", "0.1")
+    assert rc == 3 and f"see {root / 't' / 'x' / 'seed0' / 'train.log'}" in out
+    rec = _ledger(root)["runs"]["t/x/seed0"]
+    assert rec["failures"] == MAX_FAILURES and all(s["outcome"] == "failed (exit 1)" for s in rec["starts"])
+    assert "algo.lrr" in (root / "t" / "x" / "seed0" / "train.log").read_text()
+    rc, out = cli("status", "--spec", str(spec), "--root", str(root))
+    assert "| t | 1 | 0 (0) | 0 | 1 (0, 1, 0) |" in out
+    rc, out = cli("run", "--spec", str(spec), "--root", str(root))
+    assert rc == 3 and "start " not in out
+
+
+def test_a_run_left_by_a_killed_runner_is_adopted_not_started_twice(tmp_path):
+    """The ledger names a live process running the entry (its runner was killed, it was not):
+    status counts it as running; a new runner waits for it instead of starting a duplicate."""
+    import subprocess
+    import sys
+
+    spec = _tiny_spec(tmp_path / "tiny.yaml")
+    root = tmp_path / "state"
+    run_dir = (root / "t1" / "a" / "seed0").resolve()
+    run_dir.mkdir(parents=True)
+    # a process standing in for the orphaned training run: its command line names the run dir
+    orphan = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", f"hydra.run.dir={run_dir}"],
+                              start_new_session=True)
+    try:
+        (root / LEDGER).write_text(json.dumps({"campaign": "tiny", "runs": {"t1/a/seed0": {
+            "args": TINY_ARGS, "starts": [{"commit": "abc1234", "started": "x", "mode": "fresh", "frames": 0}],
+            "commits": ["abc1234"], "pid": orphan.pid, "failures": 0}}}))
+        rc, out = cli("status", "--spec", str(spec), "--root", str(root), "--only", "t1")
+        assert "| t1 | 1 | 0 (0) | 1 | 0 (0, 0, 0) |" in out
+        log = io.StringIO()
+        runner = Runner(load_spec(spec), root, only=["t1"], poll=0.1, out=log)
+        thread = threading.Thread(target=runner.run)
+        thread.start()
+        until = time.time() + 20
+        while "adopt  t1/a/seed0" not in log.getvalue() and time.time() < until:
+            time.sleep(0.05)
+        (root / "STOP").touch()  # drain: nothing may start once the orphan ends (set after the runner cleared it)
+        time.sleep(0.5)
+        assert thread.is_alive() and "adopt  t1/a/seed0" in log.getvalue() and "start " not in log.getvalue()
+        orphan.kill()
+        orphan.wait()
+        thread.join(timeout=30)
+        assert not thread.is_alive()
+    finally:
+        orphan.kill()
+    rec = _ledger(root)["runs"]["t1/a/seed0"]
+    assert rec["pid"] is None and rec["starts"][-1]["outcome"] == "ended (adopted, exit status unknown)"
+    assert len(rec["starts"]) == 1 and "start " not in log.getvalue()
+
+
+def test_a_stopped_search_is_not_done_and_p3_resumes(tmp_path):
+    """A search stopped by the runner leaves a results.json marked partial: not done; a P3
+    continues with `search.py resume=<dir>`, a P1 starts over."""
+    c, root = paper_campaign(), tmp_path / "state"
+    p3, p1 = (root / "table6" / "geometric" / f"h2_{p}" for p in ("p3", "p1"))
+    for run_dir, proto in ((p3, "p3"), (p1, "p1")):
+        run_dir.mkdir(parents=True)
+        (run_dir / "config.yaml").write_text(yaml.safe_dump({"protocol": {"name": proto}}))
+        (run_dir / "results.json").write_text(json.dumps({"shots": 120, "seconds": 6.0, "extra": {"partial": True}}))
+    rc, out = cli("run", "--root", str(root), "--only", "table6", "--dry-run")
+    assert f"resume        table6/geometric/h2_p3: search.py resume={p3.resolve()} threads=1" in out
+    assert "fresh         table6/geometric/h2_p1: search.py proposer=geometric" in out
+    states = {s.entry.key: s.state for s in entry_states(c, root, c.select(["table6"]))}
+    assert states["table6/geometric/h2_p3"] == "resumable" and states["table6/geometric/h2_p1"] == "new"
+    (p3 / "results.json").write_text(json.dumps({"shots": 900, "seconds": 30.0, "extra": {}}))
+    states = {s.entry.key: s for s in entry_states(c, root, c.select(["table6"]))}
+    assert states["table6/geometric/h2_p3"].state == "done" and states["table6/geometric/h2_p3"].frames == 900
