@@ -16,11 +16,26 @@ from omegaconf import DictConfig
 import billiards.rl.config  # noqa: F401  (registers the schema and resolvers before Hydra composes)
 
 
+class JobFailed(RuntimeError):
+    """A multirun job that could not run (an invalid config, a bad checkpoint): the job fails
+    on its own and the sweeper decides what happens next (Optuna records the trial as failed)."""
+
+
 @hydra.main(version_base="1.3", config_path="conf", config_name="config")
 def main(cfg: DictConfig) -> float:
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
     from billiards.rl.train import train
 
-    return train(cfg)
+    try:
+        return train(cfg)
+    except SystemExit as err:
+        # train() exits on a bad config; in a multirun that would end every job with this one
+        # (Hydra records only Exceptions as failed jobs), so it becomes this job's failure.
+        if err.code in (None, 0) or HydraConfig.get().mode != RunMode.MULTIRUN:
+            raise
+        raise JobFailed(str(err.code)) from None
 
 
 if __name__ == "__main__":

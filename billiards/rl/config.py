@@ -56,8 +56,13 @@ class Start(str, enum.Enum):
 
 class LoggerBackend(str, enum.Enum):
     wandb = "wandb"
+    tensorboard = "tensorboard"  # TorchRL's TensorboardLogger; needs the [tensorboard] extra
     csv = "csv"
     none = "none"
+
+
+# Backends that need a package outside the core dependencies: (module, pip extra).
+LOGGER_EXTRAS = {LoggerBackend.tensorboard: ("tensorboard", "tensorboard")}
 
 
 class WandbMode(str, enum.Enum):
@@ -169,7 +174,7 @@ class CurriculumConfig:
 @dataclass
 class LoggerConfig:
     backend: LoggerBackend = LoggerBackend.csv
-    csv: bool = True  # metrics.csv in the run dir (always on for the wandb backend)
+    csv: bool = True  # metrics.csv in the run dir (always on for the wandb and tensorboard backends)
     project: str = "billiards"
     entity: Optional[str] = None
     group: Optional[str] = None
@@ -329,6 +334,7 @@ def _errors(cfg: DictConfig) -> list[str]:
              f"shaping.rm_model={cfg.shaping.rm_model!r}: no reward model there; train one with "
              f"`python -m billiards.rm generate` and `python -m billiards.rm train` (see the README)")
     errs.extend(_curriculum_errors(cfg))
+    errs.extend(_logger_errors(cfg))
 
     need(len(a.hidden_sizes) > 0 and all(h > 0 for h in a.hidden_sizes),
          f"algo.hidden_sizes must be a non-empty list of positive widths, got {list(a.hidden_sizes)}")
@@ -388,6 +394,20 @@ def resolve_rm_model(path: str) -> Path:
     return ROOT / p
 
 
+def _logger_errors(cfg: DictConfig) -> list[str]:
+    """A logger backend whose optional package is missing fails before the run starts."""
+    import importlib.util
+
+    backend = LoggerBackend(cfg.logger.backend)
+    if backend not in LOGGER_EXTRAS:
+        return []
+    module, extra = LOGGER_EXTRAS[backend]
+    if importlib.util.find_spec(module) is not None:
+        return []
+    return [f"logger={backend.value} needs the {module!r} package, which is not installed: "
+            f'pip install -e ".[{extra}]" (or pip install {module})']
+
+
 def _curriculum_errors(cfg: DictConfig) -> list[str]:
     c = cfg.curriculum
     if c.name == "none":
@@ -417,6 +437,25 @@ def validate(cfg: DictConfig) -> None:
     errs = _errors(cfg)
     if errs:
         raise ConfigError("invalid training config:\n  - " + "\n  - ".join(errs))
+
+
+def _fixed_job_config(config: DictConfig) -> tuple[DictConfig, set[str]]:
+    """For a sweeper that composes its own jobs (Optuna ...): the job config with every
+    override that is not a sweep applied, and the keys the sweeper will set (its
+    ``hydra.sweeper.params`` and the command line's sweep overrides)."""
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    loader = GlobalHydra.instance().config_loader()
+    parser = OverridesParser.create(config_loader=loader)
+    swept = {str(k) for k in (config.hydra.sweeper.get("params") or {})}
+    fixed = []
+    for override in parser.parse_overrides(list(config.hydra.overrides.task)):
+        if override.is_sweep_override():
+            swept.add(override.key_or_group)
+        else:
+            fixed.append(override.input_line)
+    return loader.load_sweep_config(config, fixed), swept
 
 
 def _job_configs(config: DictConfig) -> list[DictConfig]:
@@ -452,7 +491,8 @@ class ValidateConfig(Callback):
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         print(f"sweep: {config.hydra.sweep.dir}", flush=True)
         if config.hydra.sweeper._target_ != "hydra._internal.core_plugins.basic_sweeper.BasicSweeper":
-            return  # another sweeper composes its own jobs; each job still validates in the task
+            self._check_fixed_part(config)
+            return
         errs = []
         try:
             jobs = _job_configs(config)
@@ -465,6 +505,22 @@ class ValidateConfig(Callback):
                 errs.append(f"job {list(job.hydra.overrides.task)}: {err}")
         if errs:
             raise SystemExit("Error: " + "\n".join(errs))
+
+    @staticmethod
+    def _check_fixed_part(config: DictConfig) -> None:
+        """Another sweeper (Optuna) chooses its jobs' values as it goes, so each job validates
+        in its task (a bad trial fails on its own; see train.py). What the sweeper does not
+        vary is checked here, before the study starts: a problem that would fail every trial
+        aborts the sweep at once. Problems that name a swept key are left to the trials."""
+        try:
+            job, swept = _fixed_job_config(config)
+            errs = _errors(job)
+        except Exception as err:  # Hydra would only warn and go on
+            raise SystemExit(f"Error: {err}") from None
+        errs = [e for e in errs if not any(key in e for key in swept)]
+        if errs:
+            raise SystemExit("Error: invalid training config (every trial of the sweep would fail):\n  - "
+                             + "\n  - ".join(errs))
 
 
 def with_physics(container: dict) -> dict:

@@ -1,16 +1,23 @@
 """Metric logging of a training run: ``metrics.csv`` in the run dir, optionally mirrored to
-Weights & Biases (offline by default: no login, no prompt, no network)."""
+Weights & Biases (offline by default: no login, no prompt, no network) or to TensorBoard event
+files in the run dir (TorchRL's ``TensorboardLogger``)."""
 
 from __future__ import annotations
 
 import csv
 import math
+import numbers
 from pathlib import Path
 from typing import Any
 
 from billiards.files import atomic_open
 
 from .config import METRICS_FILE, LoggerBackend, wandb_env_defaults
+
+TENSORBOARD_DIR = "tensorboard"  # event files: <run dir>/tensorboard/events.out.tfevents.*
+# TensorBoard tags: metrics.csv's columns grouped into sections (eval_mean -> eval/mean ...).
+_TB_SECTIONS = (("eval_", "eval/"), ("train_", "train/"))
+_TB_SPEED = ("updates", "wall_time", "cpu_time", "fps", "ups")
 
 # Columns of metrics.csv, in order; a row leaves the ones it does not have empty.
 BASE_COLUMNS = (
@@ -20,13 +27,23 @@ BASE_COLUMNS = (
 EVAL_COLUMNS = ("eval_mean", "eval_std", "eval_best", "eval_foul_innings_pct", "eval_foul_pct", "eval_success_pct")
 
 
+def tensorboard_tag(column: str) -> str:
+    """The TensorBoard tag of a metrics.csv column: eval_mean -> eval/mean,
+    train_reward -> train/reward, fps -> speed/fps, an agent's loss_actor -> agent/loss_actor."""
+    for prefix, section in _TB_SECTIONS:
+        if column.startswith(prefix):
+            return section + column[len(prefix):]
+    return ("speed/" if column in _TB_SPEED else "agent/") + column
+
+
 class MetricLogger:
     """Writes one CSV row per :meth:`log` call (``step`` = env frames so far) and mirrors it
-    to wandb when ``cfg.logger.backend == "wandb"``.
+    to wandb (``logger=wandb``) or to TensorBoard event files (``logger=tensorboard``).
 
     On resume, rows logged after the checkpoint's step (by the killed process) are dropped
     from metrics.csv so that the file reads as one run; the wandb run continues under the
-    same id (``resume="allow"``).
+    same id (``resume="allow"``); TensorBoard is told to purge the killed process's events
+    after that step (``purge_step``), so its curves read as one run too.
     """
 
     def __init__(self, cfg, run_dir: Path, metric_names: tuple[str, ...], resume_step: int | None = None,
@@ -35,12 +52,15 @@ class MetricLogger:
         backend = LoggerBackend(cfg.logger.backend)
         self.path = run_dir / METRICS_FILE
         self._file = None
-        if cfg.logger.csv or backend is LoggerBackend.wandb:
+        if cfg.logger.csv or backend in (LoggerBackend.wandb, LoggerBackend.tensorboard):
             self._open_csv(resume_step)
         self.wandb = None
         self.wandb_id = wandb_id
         if backend is LoggerBackend.wandb:
             self._init_wandb(cfg, run_dir, wandb_id)
+        self.tensorboard = None
+        if backend is LoggerBackend.tensorboard:
+            self._init_tensorboard(cfg, run_dir, resume_step)
 
     def _open_csv(self, resume_step: int | None) -> None:
         """Write the header (and on resume the rows kept) atomically, so a kill while a resume
@@ -75,6 +95,24 @@ class MetricLogger:
         )
         self.wandb_id = self.wandb.id
 
+    def _init_tensorboard(self, cfg, run_dir: Path, resume_step: int | None) -> None:
+        from omegaconf import OmegaConf
+        from torchrl.record.loggers.tensorboard import TensorboardLogger
+
+        class _Logger(TensorboardLogger):
+            # TorchRL's logger with SummaryWriter's purge_step: a resumed run hides the events
+            # the killed process wrote after the checkpoint.
+            def _create_experiment(self):
+                from torch.utils.tensorboard import SummaryWriter
+
+                purge = None if resume_step is None else resume_step + 1
+                return SummaryWriter(log_dir=str(Path(self.log_dir) / self.exp_name), purge_step=purge)
+
+        self.tensorboard = _Logger(exp_name=TENSORBOARD_DIR, log_dir=str(run_dir))
+        if resume_step is None:
+            yaml = OmegaConf.to_yaml(OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
+            self.tensorboard.experiment.add_text("config", "```\n" + yaml + "```", global_step=0)
+
     def log(self, row: dict[str, Any]) -> None:
         row = {k: v for k, v in row.items() if v is not None}
         if self._file is not None:
@@ -82,6 +120,12 @@ class MetricLogger:
             self._file.flush()
         if self.wandb is not None:
             self.wandb.log({k: v for k, v in row.items() if k != "step"}, step=int(row["step"]))
+        if self.tensorboard is not None:
+            step = int(row["step"])
+            for k, v in row.items():
+                if k != "step" and isinstance(v, numbers.Real):
+                    self.tensorboard.log_scalar(tensorboard_tag(k), float(v), step=step)
+            self.tensorboard.experiment.flush()
 
     def close(self) -> None:
         if self._file is not None:
@@ -90,6 +134,9 @@ class MetricLogger:
         if self.wandb is not None:
             self.wandb.finish()
             self.wandb = None
+        if self.tensorboard is not None:
+            self.tensorboard.experiment.close()
+            self.tensorboard = None
 
 
 def _row_step(row: dict) -> float:
