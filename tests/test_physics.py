@@ -592,3 +592,10 @@ def test_adversarial_racks_and_chains_end_inside_the_tolerance(max_english):
         acts = np.column_stack([rng.uniform(0, 2 * np.pi, 500), np.ones(500), np.cos(ang), np.sin(ang)])
         pos = simulate_batch(pos, acts, params).positions  # raises if a state became invalid
     assert_valid_rest(pos)
+
+
+def test_make_kiss_slack_stays_inside_the_input_tolerance():
+    from billiards.physics import POSITION_TOL
+
+    # a kiss may press a ball KISS_SLACK deep; rest states must stay valid next-shot inputs
+    assert 0.0 < core.KISS_SLACK < POSITION_TOL
