@@ -477,6 +477,33 @@ def _clear(st, k, x, y, p, partner):
 
 
 @njit(cache=True, error_model="numpy")
+def _free_move(st, k, dx, dy, p, partner):
+    """The move (dx, dy) of ball k without its components into the rails and balls (but
+    partner) that block it (:func:`_clear`): the ball slides along what it presses against.
+    (0, 0) if no such move is clear."""
+    R, W, L = p[P_R], p[P_W], p[P_L]
+    for _ in range(3):
+        x, y = st[k, 0] + dx, st[k, 1] + dy
+        if _clear(st, k, x, y, p, partner):
+            return dx, dy
+        if _deeper(st[k, 0] - R, x - R) or _deeper(W - R - st[k, 0], W - R - x):
+            dx = 0.0
+        if _deeper(st[k, 1] - R, y - R) or _deeper(L - R - st[k, 1], L - R - y):
+            dy = 0.0
+        for m in range(N_BALLS):
+            if m != k and m != partner:
+                ux, uy = st[m, 0] - st[k, 0], st[m, 1] - st[k, 1]
+                u = _norm(ux, uy)
+                if _deeper(u - 2.0 * R, _norm(st[m, 0] - x, st[m, 1] - y) - 2.0 * R):
+                    c = (dx * ux + dy * uy) / (u * u)
+                    if c > 0.0:
+                        dx, dy = dx - c * ux, dy - c * uy
+    if _clear(st, k, st[k, 0] + dx, st[k, 1] + dy, p, partner):
+        return dx, dy
+    return 0.0, 0.0
+
+
+@njit(cache=True, error_model="numpy")
 def _place_pair(st, i, j, xi, yi, xj, yj, p):
     """Move balls i and j to the given centres if neither ends up in a rail or a third ball
     (:func:`_clear`); returns whether they moved."""
@@ -492,8 +519,9 @@ def _kiss_balls(st, lab, i, j, p):
 
     Where pooltool's placement (along the velocities, else pushed apart symmetrically) would
     push a ball into a rail or a third ball (:func:`_clear`), the push is taken by one ball
-    alone (the other being blocked), else a part of the spacer is made, and if even an eighth
-    cannot be the balls stay where they are: they separate after the impulse anyway, and
+    alone (the other being blocked), else a part of the spacer is made, else each ball slides
+    along what blocks it (:func:`_free_move`), and if none of that parts them the balls stay
+    where they are: they separate after the impulse anyway, and
     detection treats touching balls that turn towards each other as a collision
     (:func:`ball_ball_time`), so the spacer is a convenience, not a need.
     """
@@ -528,6 +556,12 @@ def _kiss_balls(st, lab, i, j, p):
             si, sj = share * push, (1.0 - share) * push
             if _place_pair(st, i, j, st[i, 0] - si * nx, st[i, 1] - si * ny, st[j, 0] + sj * nx, st[j, 1] + sj * ny, p):
                 return
+    # wedged along the line of centres: each ball slides along what it presses against
+    push = dist - n
+    dix, diy = _free_move(st, i, -0.5 * push * nx, -0.5 * push * ny, p, j)
+    djx, djy = _free_move(st, j, 0.5 * push * nx, 0.5 * push * ny, p, i)
+    if (djx - dix) * nx + (djy - diy) * ny > 0.0:
+        _place_pair(st, i, j, st[i, 0] + dix, st[i, 1] + diy, st[j, 0] + djx, st[j, 1] + djy, p)
 
 
 @njit(cache=True, error_model="numpy")
@@ -590,6 +624,10 @@ def resolve_cushion(st, lab, i, w, p):
         if not moved:
             x, y = st[i, 0] - scale * need * nx, st[i, 1] - scale * need * ny
             moved = _clear(st, i, x, y, p, -1)
+    if not moved:  # wedged: slide along what blocks the push, if that still leaves the rail
+        dx, dy = _free_move(st, i, -need * nx, -need * ny, p, -1)
+        x, y = st[i, 0] + dx, st[i, 1] + dy
+        moved = dx * nx + dy * ny < 0.0
     if moved:
         st[i, 0], st[i, 1] = x, y
     # rail frame: x along the normal oriented with the velocity, y = z cross x
