@@ -471,9 +471,10 @@ def _cushion(st, lab, T=10.0):
     return core.cushion_time(st, poly, lab, 0, P.array, T)
 
 
-def assert_valid_rest(pos, tol=1e-6):
-    """Every rack of pos (N, 4, 2) is on the table and overlap-free within tol (what the
+def assert_valid_rest(pos, params=P, tol=1e-6):
+    """Every rack of pos (N, 4, 2) is on params' table and overlap-free within tol (what the
     next shot's validation accepts)."""
+    R, W, L = params.ball_radius, params.table_width, params.table_length
     assert np.isfinite(pos).all()
     x, y = pos[..., 0], pos[..., 1]
     assert (x >= R - tol).all() and (x <= W - R + tol).all() and (y >= R - tol).all() and (y <= L - R + tol).all()
@@ -541,11 +542,11 @@ def test_make_kiss_never_pushes_a_ball_through_a_rail():
     assert (res.event_state[:, :, 0] >= x0).all()  # never deeper than it started
 
 
-def adversarial_shots(rng, n):
+def adversarial_shots(rng, n, params):
     """n racks of balls on the nose lines and corners (exactly or within the tolerance) and
     touching each other (exactly, along the axes and diagonals), with extreme actions: power
     1, tips on the rim, aims along the axes and straight at a touching neighbour."""
-    tol = 1e-6
+    tol, R, W, L = 1e-6, params.ball_radius, params.table_width, params.table_length
     racks = np.empty((n, 4, 2))
     todo = np.arange(n)
     while todo.size:
@@ -578,20 +579,20 @@ def adversarial_shots(rng, n):
     return racks, acts
 
 
-@pytest.mark.parametrize("max_english", [0.6, 1.0])
-def test_adversarial_racks_and_chains_end_inside_the_tolerance(max_english):
-    params = PhysicsParams(max_english=max_english)
+@pytest.mark.parametrize("preset, max_english", [("international", 0.6), ("international", 1.0), ("korean_medium", 1.0)])
+def test_adversarial_racks_and_chains_end_inside_the_tolerance(preset, max_english):
+    params = dataclasses.replace(PRESETS[preset], max_english=max_english)
     rng = np.random.default_rng(17)
-    racks, acts = adversarial_shots(rng, 20000)
-    res = simulate_batch(racks, acts, params)
-    assert_valid_rest(res.positions)
+    racks, acts = adversarial_shots(rng, 20000, params)
+    res = api.simulate_batch(racks, acts, params)
+    assert_valid_rest(res.positions, params)
     assert not res.truncated.any()
     pos = res.positions[:500]  # and on from there, as an inning would
     for _ in range(5):
         ang = rng.uniform(0, 2 * np.pi, 500)
         acts = np.column_stack([rng.uniform(0, 2 * np.pi, 500), np.ones(500), np.cos(ang), np.sin(ang)])
-        pos = simulate_batch(pos, acts, params).positions  # raises if a state became invalid
-    assert_valid_rest(pos)
+        pos = api.simulate_batch(pos, acts, params).positions  # raises if a state became invalid
+    assert_valid_rest(pos, params)
 
 
 def test_make_kiss_slack_stays_inside_the_input_tolerance():
