@@ -20,8 +20,10 @@ shot the simulator had to flag (``truncated``) is counted apart, as is a rest st
 validation would refuse as the next shot's start (the union of the first three).
 
 Prints shots, violations by kind and family, and the time; ``--out`` writes the figures as
-JSON with the command and the git commit. ``--physics`` picks the parameters: ``default``
-(``PhysicsParams()``), optionally with ``--max-english``.
+JSON with the command and the git commit. ``--physics`` picks the parameters by preset name
+(``billiards.physics.PRESETS``; the default preset if omitted), ``--max-english`` overrides
+the largest tip offset. Shots stopped at the preset's ``max_time`` are counted (``timed_out``)
+but are no violation: every ball then rests where it is, a valid state.
 """
 
 from __future__ import annotations
@@ -38,7 +40,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _shots import git_commit, write_json  # noqa: E402
 
-from billiards.physics import POSITION_TOL, PhysicsParams, check_positions, random_racks, simulate_batch  # noqa: E402
+from billiards.physics import (  # noqa: E402
+    DEFAULT_PRESET, POSITION_TOL, PRESETS, PhysicsParams, check_positions, random_racks, simulate_batch,
+)
 
 FAMILIES = ("natural", "contacts", "rails", "chained")
 KINDS = ("off_table", "overlap", "non_finite", "truncated", "refused_next")
@@ -200,7 +204,7 @@ class Tally:
 
     def __init__(self, params: PhysicsParams):
         self.params = params
-        self.counts = {f: dict(shots=0, **{k: 0 for k in KINDS}) for f in FAMILIES}
+        self.counts = {f: dict(shots=0, timed_out=0, **{k: 0 for k in KINDS}) for f in FAMILIES}
         self.worst_off, self.worst_overlap = -np.inf, -np.inf
         self.examples: list[dict] = []
 
@@ -209,6 +213,7 @@ class Tally:
         v = violations(result.positions, result.truncated, self.params)
         c = self.counts[family]
         c["shots"] += racks.shape[0]
+        c["timed_out"] += int(result.timed_out.sum())
         for k in KINDS:
             c[k] += int(v[k].sum())
         finite = np.isfinite(result.positions).all(axis=(1, 2))
@@ -257,11 +262,14 @@ def run(shots: int, seed: int, params: PhysicsParams, batch: int, chain: int) ->
 
 
 def physics_from_args(args) -> PhysicsParams:
-    if args.physics != "default":
-        raise SystemExit(f"--physics must be 'default', got {args.physics!r}")
-    params = PhysicsParams()
+    if args.physics not in PRESETS:
+        raise SystemExit(f"--physics must be one of {sorted(PRESETS)}, got {args.physics!r}")
+    params = PRESETS[args.physics]
     if args.max_english is not None:
-        params = dataclasses.replace(params, max_english=args.max_english)
+        try:
+            params = dataclasses.replace(params, max_english=args.max_english)
+        except ValueError as err:
+            raise SystemExit(f"--max-english: {err}") from None
     return params
 
 
@@ -269,7 +277,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--shots", type=int, default=1_000_000, help="total shots over all families")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--physics", default="default", help="parameter set: 'default' (PhysicsParams())")
+    ap.add_argument("--physics", default=DEFAULT_PRESET, help=f"physics preset, one of {sorted(PRESETS)}")
     ap.add_argument("--max-english", type=float, default=None, help="override max_english (tip offsets up to this fraction of R)")
     ap.add_argument("--batch", type=int, default=20000, help="shots per simulate_batch call")
     ap.add_argument("--chain", type=int, default=20, help="shots per chained inning")
@@ -280,19 +288,20 @@ def main(argv=None) -> None:
     params = physics_from_args(args)
 
     tally, seconds = run(args.shots, args.seed, params, args.batch, args.chain)
-    total = {k: sum(c[k] for c in tally.counts.values()) for k in ("shots",) + KINDS}
-    print(f"physics={args.physics} max_english={params.max_english} seed={args.seed} threads={numba.get_num_threads()}")
+    total = {k: sum(c[k] for c in tally.counts.values()) for k in ("shots", "timed_out") + KINDS}
+    print(f"physics={params.describe()} seed={args.seed} threads={numba.get_num_threads()}")
     print(f"{'family':10s} {'shots':>9s} " + " ".join(f"{k:>12s}" for k in KINDS))
     for f, c in list(tally.counts.items()) + [("total", total)]:
         print(f"{f:10s} {c['shots']:9d} " + " ".join(f"{c[k]:12d}" for k in KINDS))
     print(f"worst excursion off the table {tally.worst_off:.3g} m, deepest overlap {tally.worst_overlap:.3g} m "
           f"(tolerance {POSITION_TOL:g} m; negative: none at all)")
-    print(f"time {seconds:.1f} s ({total['shots'] / seconds:.0f} shots/s)")
+    print(f"time {seconds:.1f} s ({total['shots'] / seconds:.0f} shots/s); {total['timed_out']} shots stopped at "
+          f"max_time = {params.max_time} s (no violation)")
     for ex in tally.examples:
         print("example", ex)
     if args.out:
         summary = {"command": " ".join(["python", "benchmarks/fuzz.py"] + (argv if argv is not None else sys.argv[1:])),
-                   "commit": git_commit(), "physics": args.physics, "params": dataclasses.asdict(params),
+                   "commit": git_commit(), "physics": params.describe(), "params": params.to_dict(),
                    "seed": args.seed, "threads": numba.get_num_threads(), "seconds": seconds,
                    "total": total, "families": tally.counts, "worst_off_table_m": tally.worst_off,
                    "worst_overlap_m": tally.worst_overlap, "examples": tally.examples}
