@@ -37,7 +37,7 @@ EV_STRIKE, EV_TRANSITION, EV_BALL_BALL, EV_CUSHION, EV_STOP = 0, 1, 2, 3, 4
 # Cushions: 0 is x = 0, 1 is x = w, 2 is y = 0, 3 is y = l.
 N_BALLS = 4
 EPS = 100.0 * np.finfo(np.float64).eps  # pooltool's EPS, 2.2e-14
-KISS_SLACK = 5e-7  # m a make_kiss may press a ball into a rail or third ball (< api.POSITION_TOL)
+KISS_SLACK = 9e-7  # m a make_kiss may press a ball into a rail or third ball (< api.POSITION_TOL)
 INF = np.inf
 # Pairs of balls, in a fixed order.
 PAIR_I = np.array([0, 0, 0, 1, 1, 2], dtype=np.int64)
