@@ -23,7 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+# This checkout's benchmarks and package first, so the figures come from the code (and the
+# commit) of the checkout the script lives in, not from another installed copy of billiards.
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE), str(HERE.parent)]
 from _shots import ROOT, git_commit, write_json  # noqa: E402
 
 from billiards.physics import PRESETS, random_racks  # noqa: E402

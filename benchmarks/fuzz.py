@@ -37,7 +37,10 @@ from pathlib import Path
 import numba
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+# This checkout's benchmarks and package first, so the figures come from the code (and the
+# commit) of the checkout the script lives in, not from another installed copy of billiards.
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE), str(HERE.parent)]
 from _shots import git_commit, write_json  # noqa: E402
 
 from billiards.physics import (  # noqa: E402
