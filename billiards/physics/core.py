@@ -521,9 +521,9 @@ def _kiss_balls(st, lab, i, j, p):
     push a ball into a rail or a third ball (:func:`_clear`), the push is taken by one ball
     alone (the other being blocked), else a part of the spacer is made, else each ball slides
     along what blocks it (:func:`_free_move`), and if none of that parts them the balls stay
-    where they are: they separate after the impulse anyway, and
-    detection treats touching balls that turn towards each other as a collision
-    (:func:`ball_ball_time`), so the spacer is a convenience, not a need.
+    where they are: they separate after the impulse anyway, and detection treats touching
+    balls that turn towards each other as a collision (:func:`ball_ball_time`), so the spacer
+    is a convenience, not a need.
     """
     dist = 2.0 * p[P_R] + p[P_MIN_DIST]
     md = p[P_MIN_DIST]
