@@ -37,6 +37,7 @@ EV_STRIKE, EV_TRANSITION, EV_BALL_BALL, EV_CUSHION, EV_STOP = 0, 1, 2, 3, 4
 # Cushions: 0 is x = 0, 1 is x = w, 2 is y = 0, 3 is y = l.
 N_BALLS = 4
 EPS = 100.0 * np.finfo(np.float64).eps  # pooltool's EPS, 2.2e-14
+KISS_SLACK = 9e-7  # m a make_kiss may press a ball into a rail or third ball (< api.POSITION_TOL)
 INF = np.inf
 # Pairs of balls, in a fixed order.
 PAIR_I = np.array([0, 0, 0, 1, 1, 2], dtype=np.int64)
@@ -304,7 +305,10 @@ def ball_ball_time(st, poly, lab, i, j, R, T):
 
     f(t) = |dA t^2 + dB t + dC|^2 - (2R)^2 is a quartic. Its derivative's real roots split
     [0, T] into monotone pieces; the first piece on which f falls from > 0 to <= 0 holds the
-    contact, found by safeguarded Newton on the direct (non-expanded) form of f.
+    contact, found by safeguarded Newton on the direct (non-expanded) form of f. Balls that
+    touch or overlap (f <= 0, within the input tolerance or after a make_kiss that had no
+    room) collide where they start to approach: now, or at the start of the first piece on
+    which f falls from <= 0; separating, they do not.
     """
     if lab[i] <= SPINNING and lab[j] <= SPINNING:
         return INF
@@ -341,6 +345,8 @@ def ball_ball_time(st, poly, lab, i, j, R, T):
                     return tn
                 t = tn
             return t
+        if flo <= 0.0 and fhi < flo:
+            return lo  # touching at lo and turning towards each other there
         lo, flo = hi, fhi
     return INF
 
@@ -365,12 +371,27 @@ def min_separation(st, poly, lab, i, j, T):
 
 
 @njit(cache=True, error_model="numpy")
-def cushion_time(st, poly, lab, i, p, T):
-    """Earliest time in (EPS, T] at which ball i reaches a cushion (§3.3): (time, cushion).
+def _moving_in(fa, fb, fc, t):
+    """Whether a ball whose penetration past a nose line is f(t) = fa t^2 + fb t + fc is
+    pressing into the rail at t: f' > 0, or f' = 0 with f'' > 0 (about to)."""
+    d = 2.0 * fa * t + fb
+    return d > 0.0 or (d == 0.0 and fa > 0.0)
 
-    A ball already touching or pressed into a cushion (by up to the make-kiss spacers of an
-    earlier collision) and moving into it collides now (time 0), as overlapping balls do;
-    the quadratic alone would let it pass through the rail.
+
+@njit(cache=True, error_model="numpy")
+def cushion_time(st, poly, lab, i, p, T):
+    """Earliest time in [0, T] at which ball i meets a cushion (§3.3): (time, cushion).
+
+    The ball meets cushion w when its penetration past w's nose line, f(t) (a quadratic), is
+    >= 0 while it presses into the rail (:func:`_moving_in`). A ball already touching or
+    pressed into a cushion (by up to the make-kiss spacers of an earlier collision, or by the
+    input tolerance) and moving into it collides now (time 0), as overlapping balls do; so
+    does one that sits on the nose line with no normal velocity but accelerates into it.
+    Otherwise the contact is the first root of f at which the ball moves in. From outside the
+    line (f(0) < 0) that is pooltool's rule, the first root > EPS, except that a root <= EPS
+    (a ball a hair outside the line) counts too instead of letting the ball through the rail.
+    A pressed-in ball moving out does not collide as it leaves, but does if it turns back
+    before it is out (at the turn) or comes back later (at the root where it re-enters).
     """
     if lab[i] <= SPINNING:
         return INF, -1
@@ -383,7 +404,8 @@ def cushion_time(st, poly, lab, i, p, T):
         else:
             a, b, c = ay, by, st[i, 1] - (R if w == 2 else p[P_L] - R)
         inward = -1.0 if w % 2 == 0 else 1.0  # sign of the velocity component into the cushion
-        if c * inward >= 0.0 and b * inward > 0.0:
+        fa, fb, fc = a * inward, b * inward, c * inward
+        if fc >= 0.0 and _moving_in(fa, fb, fc, 0.0):
             return 0.0, w
         if abs(a) < EPS:
             if abs(b) < EPS:
@@ -392,8 +414,12 @@ def cushion_time(st, poly, lab, i, p, T):
         else:
             r1, r2 = _quadratic_roots(a, b, c)
         for r in (r1, r2):
-            if r == r and EPS < r <= T and r < best:
+            if r == r and 0.0 <= r <= T and r < best and ((r > EPS and fc < 0.0) or _moving_in(fa, fb, fc, r)):
                 best, which = r, w
+        if fc >= 0.0 and fa > 0.0 and fb < 0.0:
+            tv = -fb / (2.0 * fa)  # a pressed-in ball moving out turns back at tv
+            if tv <= T and tv < best and (fa * tv + fb) * tv + fc >= 0.0:
+                best, which = tv, w
     return best, which
 
 
@@ -419,8 +445,86 @@ def strike(st, lab, V0, phi, a, b, p):
 
 
 @njit(cache=True, error_model="numpy")
+def _deeper(before, after):
+    """Whether a gap to a rail or ball (m; negative: pressed in) that moved from before to
+    after went deeper than KISS_SLACK, or deeper at all if it was already past it."""
+    return after < -KISS_SLACK and after < before
+
+
+@njit(cache=True, error_model="numpy")
+def _clear(st, k, x, y, p, partner):
+    """Whether moving ball k to (x, y) presses it no deeper than KISS_SLACK into any rail or
+    other ball but partner (-1: none), nor deeper at all into one it was already past that.
+
+    make_kiss moves balls by a few min_dist, and more when they move slowly; near a rail or a
+    third ball (balls resting against each other, a cluster struck at an exact contact) that
+    could push one through it, unseen by detection, and the shot would end off the table or
+    overlapping. A placement that fails this check is not used. The slack lets a pair wedged
+    between touching neighbours still part a little, so that it does not collide again at
+    once (a ball pushing another with no normal speed left would do so forever).
+    """
+    R, W, L = p[P_R], p[P_W], p[P_L]
+    if _deeper(st[k, 0] - R, x - R) or _deeper(W - R - st[k, 0], W - R - x):
+        return False
+    if _deeper(st[k, 1] - R, y - R) or _deeper(L - R - st[k, 1], L - R - y):
+        return False
+    for m in range(N_BALLS):
+        if m != k and m != partner:
+            before = _norm(st[m, 0] - st[k, 0], st[m, 1] - st[k, 1]) - 2.0 * R
+            if _deeper(before, _norm(st[m, 0] - x, st[m, 1] - y) - 2.0 * R):
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _free_move(st, k, dx, dy, p, partner):
+    """The move (dx, dy) of ball k without its components into the rails and balls (but
+    partner) that block it (:func:`_clear`): the ball slides along what it presses against.
+    (0, 0) if no such move is clear."""
+    R, W, L = p[P_R], p[P_W], p[P_L]
+    for _ in range(3):
+        x, y = st[k, 0] + dx, st[k, 1] + dy
+        if _clear(st, k, x, y, p, partner):
+            return dx, dy
+        if _deeper(st[k, 0] - R, x - R) or _deeper(W - R - st[k, 0], W - R - x):
+            dx = 0.0
+        if _deeper(st[k, 1] - R, y - R) or _deeper(L - R - st[k, 1], L - R - y):
+            dy = 0.0
+        for m in range(N_BALLS):
+            if m != k and m != partner:
+                ux, uy = st[m, 0] - st[k, 0], st[m, 1] - st[k, 1]
+                u = _norm(ux, uy)
+                if _deeper(u - 2.0 * R, _norm(st[m, 0] - x, st[m, 1] - y) - 2.0 * R):
+                    c = (dx * ux + dy * uy) / (u * u)
+                    if c > 0.0:
+                        dx, dy = dx - c * ux, dy - c * uy
+    if _clear(st, k, st[k, 0] + dx, st[k, 1] + dy, p, partner):
+        return dx, dy
+    return 0.0, 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _place_pair(st, i, j, xi, yi, xj, yj, p):
+    """Move balls i and j to the given centres if neither ends up in a rail or a third ball
+    (:func:`_clear`); returns whether they moved."""
+    if not (_clear(st, i, xi, yi, p, j) and _clear(st, j, xj, yj, p, i)):
+        return False
+    st[i, 0], st[i, 1], st[j, 0], st[j, 1] = xi, yi, xj, yj
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def _kiss_balls(st, lab, i, j, p):
-    """make_kiss (§4): separate touching balls to 2R + min_dist, along their velocities."""
+    """make_kiss (§4): separate touching balls to 2R + min_dist, along their velocities.
+
+    Where pooltool's placement (along the velocities, else pushed apart symmetrically) would
+    push a ball into a rail or a third ball (:func:`_clear`), the push is taken by one ball
+    alone (the other being blocked), else a part of the spacer is made, else each ball slides
+    along what blocks it (:func:`_free_move`), and if none of that parts them the balls stay
+    where they are: they separate after the impulse anyway, and detection treats touching
+    balls that turn towards each other as a collision (:func:`ball_ball_time`), so the spacer
+    is a convenience, not a need.
+    """
     dist = 2.0 * p[P_R] + p[P_MIN_DIST]
     md = p[P_MIN_DIST]
     rx, ry = st[j, 0] - st[i, 0], st[j, 1] - st[i, 1]
@@ -435,17 +539,29 @@ def _kiss_balls(st, lab, i, j, p):
     if t == t and moving:
         mx = 0.5 * t * (st[i, 2] + st[j, 2])
         my = 0.5 * t * (st[i, 3] + st[j, 3])
-        if _norm(mx, my) <= 5.0 * md:
-            for k in (i, j):
-                st[k, 0] += t * st[k, 2]
-                st[k, 1] += t * st[k, 3]
+        if _norm(mx, my) <= 5.0 * md and _place_pair(
+                st, i, j, st[i, 0] + t * st[i, 2], st[i, 1] + t * st[i, 3],
+                st[j, 0] + t * st[j, 2], st[j, 1] + t * st[j, 3], p):
             return
     # fallback: push apart symmetrically along the line of centres
     cx, cy = 0.5 * (st[i, 0] + st[j, 0]), 0.5 * (st[i, 1] + st[j, 1])
     n = _norm(rx, ry)
     nx, ny = rx / n, ry / n
-    st[i, 0], st[i, 1] = cx - 0.5 * dist * nx, cy - 0.5 * dist * ny
-    st[j, 0], st[j, 1] = cx + 0.5 * dist * nx, cy + 0.5 * dist * ny
+    if _place_pair(st, i, j, cx - 0.5 * dist * nx, cy - 0.5 * dist * ny, cx + 0.5 * dist * nx, cy + 0.5 * dist * ny, p):
+        return
+    # blocked: one ball alone, then less than the full spacer
+    for scale in (1.0, 0.5, 0.25, 0.125):
+        push = scale * (dist - n)
+        for share in (0.0, 1.0, 0.5):  # the part of the push ball i takes
+            si, sj = share * push, (1.0 - share) * push
+            if _place_pair(st, i, j, st[i, 0] - si * nx, st[i, 1] - si * ny, st[j, 0] + sj * nx, st[j, 1] + sj * ny, p):
+                return
+    # wedged along the line of centres: each ball slides along what it presses against
+    push = dist - n
+    dix, diy = _free_move(st, i, -0.5 * push * nx, -0.5 * push * ny, p, j)
+    djx, djy = _free_move(st, j, 0.5 * push * nx, 0.5 * push * ny, p, i)
+    if (djx - dix) * nx + (djy - diy) * ny > 0.0:
+        _place_pair(st, i, j, st[i, 0] + dix, st[i, 1] + diy, st[j, 0] + djx, st[j, 1] + djy, p)
 
 
 @njit(cache=True, error_model="numpy")
@@ -494,16 +610,26 @@ def resolve_cushion(st, lab, i, w, p):
         d = st[i, 1]
     else:
         d = p[P_L] - st[i, 1]
+    # (only where that does not push it into another rail or a ball, see _clear; else part of
+    # the spacer, or it stays: detection needs no spacer, see cushion_time)
     need = R + md - d
     vn = _norm(st[i, 2], st[i, 3])
     along = (st[i, 2] * nx + st[i, 3] * ny) / vn if vn > 0.0 else 0.0
     shift = need / along if along > 0.0 else INF
+    moved = False
     if abs(shift) <= 5.0 * md:
-        st[i, 0] -= shift * st[i, 2] / vn
-        st[i, 1] -= shift * st[i, 3] / vn
-    else:
-        st[i, 0] -= need * nx
-        st[i, 1] -= need * ny
+        x, y = st[i, 0] - shift * st[i, 2] / vn, st[i, 1] - shift * st[i, 3] / vn
+        moved = _clear(st, i, x, y, p, -1)
+    for scale in (1.0, 0.5, 0.25, 0.125):  # along the normal; blocked: part of the spacer
+        if not moved:
+            x, y = st[i, 0] - scale * need * nx, st[i, 1] - scale * need * ny
+            moved = _clear(st, i, x, y, p, -1)
+    if not moved:  # wedged: slide along what blocks the push, if that still leaves the rail
+        dx, dy = _free_move(st, i, -need * nx, -need * ny, p, -1)
+        x, y = st[i, 0] + dx, st[i, 1] + dy
+        moved = dx * nx + dy * ny < 0.0
+    if moved:
+        st[i, 0], st[i, 1] = x, y
     # rail frame: x along the normal oriented with the velocity, y = z cross x
     if st[i, 2] * nx + st[i, 3] * ny < 0.0:
         nx, ny = -nx, -ny
