@@ -31,7 +31,6 @@ sys.path[:0] = [str(REPO), str(REPO / "benchmarks")]  # this checkout's billiard
 def training_state(rows: int, obs_dim: int = 32) -> dict:
     """A SAC checkpoint's content with a filled buffer of ``rows`` rows."""
     import numpy as np
-    import torch
     from update_cost import make_agent, random_batch
 
     from billiards.rl.checkpoint import rng_state

@@ -121,7 +121,8 @@ def main(argv=None) -> None:
               f"{r['rev_shots_per_s']:.0f} vs {r['this_shots_per_s']:.0f} shots/s, time ratio "
               f"{r['time_ratio_this_over_rev']:.3f}")
     if args.out:
-        write_json(args.out, {"command": " ".join(["python", "benchmarks/compare_physics.py"] + (argv if argv is not None else sys.argv[1:])),
+        argv_used = argv if argv is not None else sys.argv[1:]
+        write_json(args.out, {"command": " ".join(["python", "benchmarks/compare_physics.py"] + argv_used),
                               "commit": git_commit(), "rev": args.rev, "rev_commit": rev_commit, "seed": args.seed,
                               "presets": results})
 

@@ -114,7 +114,8 @@ def main(argv: list[str] | None = None) -> None:
 
     print(f"SAC training throughput, env=aim_features, {args.threads} thread(s), median of {args.repeats} alternating "
           f"runs of {args.seconds:g}s; python {sys.version.split()[0]}")
-    header = f"{'config':<24} {'settings':<46} {'updates/s':>10} {'samples/s':>10} {'frames/s':>10} {'train fr/s':>10} {'400k':>7} {'1M':>7}"
+    header = (f"{'config':<24} {'settings':<46} {'updates/s':>10} {'samples/s':>10} {'frames/s':>10} "
+              f"{'train fr/s':>10} {'400k':>7} {'1M':>7}")
     print(header)
     print("-" * len(header))
     for name, cfg in configs.items():

@@ -149,7 +149,9 @@ class ShapingConfig:
 
     name: str = "none"
     foul_penalty: float = 0.0  # reward -= foul_penalty * foul
-    gentle: float = 0.0  # on a score, reward += gentle * exp(-(d - 0.2)^2 / (2 0.1^2)), d the white's rest distance to the second red (the paper: 0.2)
+    # on a score, reward += gentle * exp(-(d - 0.2)^2 / (2 0.1^2)), d the white's rest distance to
+    # the second red it hit (the paper: 0.2)
+    gentle: float = 0.0
     gentle_kind: str = "leave"  # leave: the paper's leave-position bonus above; power: gentle * (1 - p)
     near_miss: float = 0.0  # reward += near_miss * exp(-gap / near_miss_sigma) for a one-red miss (the paper: 0.05)
     near_miss_sigma: float = 0.03
@@ -194,7 +196,9 @@ class BudgetConfig:
     final_eval_innings: int = 100  # innings of the final evaluation (the paper's protocol: 100)
     checkpoint_every: int = 50_000  # 0 = only at the end
     log_every: int = 5_000
-    cpu_minutes: float = 0.0  # also stop training once this run has used this many process CPU minutes (0 = no limit); the final evaluation follows
+    # also stop training once this run has used this many process CPU minutes (0 = no limit);
+    # the final evaluation follows
+    cpu_minutes: float = 0.0
     kill_after_checkpoint: int = 0  # debug: SIGKILL the run right after writing its n-th checkpoint (0 = never)
 
 

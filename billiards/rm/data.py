@@ -22,7 +22,6 @@ generation goes back to the last chunk every file holds and redraws the rest, an
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import time
