@@ -55,6 +55,96 @@ class GeometricProposer:
         return np.concatenate([theta[..., None], p[..., None], ab], axis=-1)
 
 
+class EnsembleHeads:
+    """The Gaussian heads of an ensemble of identical policy networks as stacked float32 arrays.
+
+    Every layer of the E policies is one ``np.matmul`` over the stacked weights, so the whole
+    ensemble's forward pass at S states costs a few NumPy calls instead of E framework calls
+    (TensorDict, distribution and transform objects) that dwarf a 32->256->256->8 network at
+    the batch sizes the search uses (S <= a few hundred). It reproduces, in float32 like the
+    torch modules: the MLP (Linear/ReLU), TorchRL's ``NormalParamExtractor`` (biased softplus
+    scale, lower bound), the ``TanhNormal`` on [-1, 1] (tanh clamped to +-(1 - float32
+    resolution), TorchRL's safe tanh) and :class:`~billiards.rl.agents.ScaleAction`.
+    """
+
+    def __init__(self, weights, biases, scale_bias, scale_min, scale_lb, tanh_lim, mid, half, held):
+        self.weights, self.biases = weights, biases  # per layer: (E, in, out), (E, 1, out)
+        self.scale_bias, self.scale_min, self.scale_lb, self.tanh_lim = scale_bias, scale_min, scale_lb, tanh_lim
+        self.mid, self.half, self.held = mid, half, held  # (E, 1, 1, A); held: None or (mask, values)
+        self.size = weights[0].shape[0]
+
+    @classmethod
+    def from_policies(cls, policies) -> "EnsembleHeads":
+        """Stack the weights of ``policies`` (see :class:`PolicyProposer`); raises ValueError
+        naming the first part it does not recognise or that differs between the policies."""
+        parts = [_head_parts(p) for p in policies]
+        shapes = {tuple(tuple(w.shape) for w in part["weights"]) for part in parts}
+        if len(shapes) != 1:
+            raise ValueError(f"the policies' networks differ in shape: {sorted(shapes)}")
+        for key in ("scale_bias", "scale_min", "scale_lb", "held"):
+            if len({repr(part[key]) for part in parts}) != 1:
+                raise ValueError(f"the policies differ in {key}")
+        stack = lambda key: [np.stack(ws) for ws in zip(*(part[key] for part in parts))]
+        p0 = parts[0]
+        tanh_lim = 1.0 - float(np.finfo(np.float32).resolution)
+        mid = np.stack([part["mid"] for part in parts])[:, None, None]
+        half = np.stack([part["half"] for part in parts])[:, None, None]
+        return cls(stack("weights"), [b[:, None] for b in stack("biases")], p0["scale_bias"], p0["scale_min"],
+                   p0["scale_lb"], tanh_lim, mid, half, p0["held"])
+
+    def heads(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """obs (S, D) float32 -> loc, scale (E, S, A) float32 of every policy's Gaussian."""
+        x = obs
+        last = len(self.weights) - 1
+        for n, (w, b) in enumerate(zip(self.weights, self.biases)):
+            x = np.matmul(x, w) + b
+            if n < last:
+                np.maximum(x, 0, out=x)
+        loc, pre = np.split(x, 2, axis=-1)
+        z = pre + np.float32(self.scale_bias)  # torch's softplus: identity above threshold 20
+        scale = np.where(z > 20, z, np.log1p(np.exp(np.minimum(z, 20)))) + np.float32(self.scale_min)
+        return loc, np.maximum(scale, np.float32(self.scale_lb))
+
+    def actions(self, pre_tanh: np.ndarray) -> np.ndarray:
+        """Pre-tanh draws (E, S, n, A) -> actions in the env's bounds (E, S, n, A), float32."""
+        y = np.clip(np.tanh(pre_tanh), np.float32(-self.tanh_lim), np.float32(self.tanh_lim))
+        if self.held is not None:
+            y = np.where(self.held[0], self.held[1], y)
+        return self.mid + self.half * y
+
+
+def _head_parts(policy) -> dict:
+    """The arrays and constants of one policy laid out as ``(actor, ScaleAction)`` with actor =
+    ProbabilisticActor(TensorDictModule(Sequential(MLP, NormalParamExtractor)), TanhNormal)."""
+    from torchrl.modules import NormalParamExtractor, TanhNormal
+
+    try:
+        actor, scale = policy[0], policy[1]
+        net, dist_module = actor.module[0].module, actor.module[1]
+        mlp, extractor = net[0], net[1]
+    except (TypeError, IndexError, AttributeError, KeyError) as err:
+        raise ValueError(f"not an (actor, ScaleAction) policy over an MLP Gaussian head: {err}") from None
+    if not isinstance(extractor, NormalParamExtractor) or type(extractor.scale_mapping).__name__ != "biased_softplus":
+        raise ValueError("the head is not a NormalParamExtractor with a biased softplus scale")
+    kwargs = dict(dist_module.distribution_kwargs)
+    bounds = [torch.as_tensor(kwargs.pop(k, d)) for k, d in (("low", -1.0), ("high", 1.0))]
+    if (dist_module.distribution_class is not TanhNormal or kwargs.get("tanh_loc", False)
+            or not kwargs.get("safe_tanh", True) or set(kwargs) - {"tanh_loc", "safe_tanh"}
+            or not (bool((bounds[0] == -1).all()) and bool((bounds[1] == 1).all()))):
+        raise ValueError(f"the distribution is not a safe TanhNormal on [-1, 1]: {dist_module.distribution_class.__name__} {kwargs}")
+    layers = list(mlp)
+    linear = layers[0::2]
+    if (not all(isinstance(m, torch.nn.Linear) for m in linear)
+            or not all(isinstance(m, torch.nn.ReLU) for m in layers[1::2]) or len(layers) % 2 != 1):
+        raise ValueError(f"the network is not Linear/ReLU layers: {[type(m).__name__ for m in layers]}")
+    mask = scale.hold.mask
+    held = None if mask is None else (mask.numpy().copy(), scale.hold.held_norm.numpy().astype(np.float32))
+    f32 = lambda t: t.detach().to(torch.float32).numpy().copy()
+    return {"weights": [f32(m.weight).T.copy() for m in linear], "biases": [f32(m.bias) for m in linear],
+            "scale_bias": float(extractor.scale_mapping.bias), "scale_min": float(extractor.scale_mapping.min_val),
+            "scale_lb": float(extractor.scale_lb), "held": held, "mid": f32(scale.mid), "half": f32(scale.half_range)}
+
+
 class PolicyProposer:
     """An ensemble of stochastic policies emitting k candidates jointly.
 
@@ -64,20 +154,45 @@ class PolicyProposer:
     action[0] is u in [-1, 1] and is mapped to theta with :func:`domain.constrained_theta`.
     Candidate j goes to policy j mod E; each policy's first candidate is its deterministic
     action (policy 0's is candidate 0), the rest are samples.
+
+    ``impl``: ``"batched"`` evaluates the ensemble with :class:`EnsembleHeads` (one NumPy
+    matmul per layer for all policies); ``"reference"`` calls each policy's torch modules;
+    ``"auto"`` (default) is batched when the networks are of the kind it reproduces, else
+    reference. Both consume the caller's generator identically (same draws, same order) and
+    give the same candidates up to float32 rounding of the network (different matmul kernels
+    sum in different orders; see ``tests/test_search.py``). ``self.impl`` is the one in use.
+    The batched proposer copies the weights when it is built: later changes to the torch
+    modules do not reach it (build a new proposer).
     """
 
+    IMPLS = ("auto", "batched", "reference")
+
     def __init__(self, policies: Sequence[torch.nn.Module], *, constrain_aim: bool, extra_features: bool,
-                 name: str = "policy", R: float = DEFAULT_PARAMS.ball_radius):
+                 name: str = "policy", R: float = DEFAULT_PARAMS.ball_radius, impl: str = "auto"):
         if not policies:
             raise ValueError("PolicyProposer needs at least one policy")
+        if impl not in self.IMPLS:
+            raise ValueError(f"PolicyProposer impl must be one of {', '.join(self.IMPLS)}; got {impl!r}")
         self.policies = list(policies)
         self.constrain_aim, self.extra_features, self.name, self.R = constrain_aim, extra_features, name, R
+        self.heads = None
+        if impl != "reference":
+            try:
+                self.heads = EnsembleHeads.from_policies(self.policies)
+            except ValueError as err:
+                if impl == "batched":
+                    raise ValueError(f"proposer {name!r} cannot be batched: {err}") from None
+        self.impl = "reference" if self.heads is None else "batched"
 
-    def observation(self, positions: np.ndarray) -> torch.Tensor:
+    def observation_array(self, positions: np.ndarray) -> np.ndarray:
+        """The policies' float32 observation (S, D) of tables at rest (S, 4, 2)."""
         obs = domain.rest_observation(positions)
         if self.extra_features:
             obs = np.concatenate([obs, domain.carom_features(positions).astype(np.float32)], axis=-1)
-        return torch.from_numpy(obs)
+        return obs
+
+    def observation(self, positions: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(self.observation_array(positions))
 
     @staticmethod
     def _actions(policy, obs: torch.Tensor, n: int, rng: np.random.Generator) -> torch.Tensor:
@@ -105,8 +220,26 @@ class PolicyProposer:
         norm = torch.cat(draws, dim=1).reshape(S * n, -1)
         return scale(TensorDict({"action_norm": norm}, batch_size=[S * n]))["action"].reshape(S, n, -1)
 
+    def _raw_batched(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+        """(S, k, 4) float32 actions in the env's bounds, all policies in one pass.
+
+        Policy e's i-th candidate is candidate j = i * E + e; its draw eps is the i-th row of
+        the (S, n_e - 1, A) normals the reference draws for policy e (the same calls in the
+        same order), 0 for the deterministic candidate i = 0: tanh(loc + scale * 0) = tanh(loc).
+        """
+        S, E = positions.shape[0], self.heads.size
+        loc, scale = self.heads.heads(self.observation_array(positions))  # (E, S, A)
+        counts = [len(range(e, k, E)) for e in range(E)]
+        eps = np.zeros((E, S, max(counts), loc.shape[-1]), dtype=np.float32)
+        for e, n in enumerate(counts):
+            if n > 1:
+                eps[e, :, 1:n] = rng.standard_normal((S, n - 1, loc.shape[-1]))
+        acts = self.heads.actions(loc[:, :, None] + scale[:, :, None] * eps)  # (E, S, n_max, A)
+        return acts.transpose(1, 2, 0, 3).reshape(S, -1, acts.shape[-1])[:, :k]
+
     @torch.no_grad()
-    def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+    def _raw_reference(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+        """(S, k, 4) actions in the env's bounds, one torch call per policy."""
         S, E = positions.shape[0], len(self.policies)
         obs = self.observation(positions)
         out = np.empty((S, k, 4))
@@ -114,6 +247,11 @@ class PolicyProposer:
             cols = np.arange(e, k, E)
             if cols.size:
                 out[:, cols] = self._actions(policy, obs, cols.size, rng).double().numpy()
+        return out
+
+    def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+        raw = self._raw_batched if self.impl == "batched" else self._raw_reference
+        out = raw(positions, k, rng).astype(np.float64)
         out[..., 1] = np.clip(out[..., 1], 0.0, 1.0)
         out[..., 2:] = np.clip(out[..., 2:], -1.0, 1.0)
         if self.constrain_aim:
@@ -121,4 +259,4 @@ class PolicyProposer:
         return out
 
 
-__all__ = ["GeometricProposer", "PolicyProposer", "Proposer"]
+__all__ = ["EnsembleHeads", "GeometricProposer", "PolicyProposer", "Proposer"]

@@ -14,18 +14,27 @@ chain, so its node is terminal (value 0 below it); the exact value of a terminal
 known, so descents never re-enter one: a node whose children are all terminal widens. The executed action is the root's most
 visited child (ties: higher Q, then sampling order). Exactly ``budget`` shots are simulated
 per state and decision.
+
+The trees live in arrays (:mod:`billiards.search.puct_tree`): walking down, widening and
+backing up are compiled, so a round costs one ``simulate_batch`` call plus a few compiled
+calls, and the proposer is called once per node whose prior samples are used up (``pool`` at
+a time), in the same order as :func:`billiards.search.puct_reference.puct_reference`, the
+pure-Python tree (``impl="reference"``): from the same generator state both make the same
+decisions.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, simulate_batch
 
+from . import puct_tree as tree
 from .lookahead import VERIFIER_FOUL_PENALTY, SearchResult, verifier_reward
+
+IMPLS = ("compiled", "reference")
 
 
 @dataclass(frozen=True)
@@ -50,100 +59,53 @@ class PUCTConfig:
         return self.budget
 
 
-@dataclass
-class _Node:
-    positions: np.ndarray
-    depth: int
-    terminal: bool = False
-    pool: np.ndarray | None = None  # (pool, 4) prior samples
-    children: list = field(default_factory=list)  # child indices into the tree's node list
-    actions: list = field(default_factory=list)
-    rewards: list = field(default_factory=list)
-    visits: int = 0
-    value_sum: float = 0.0
-
-
-def _q(node: _Node) -> float:
-    return node.value_sum / node.visits if node.visits else 0.0
-
-
 def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random.Generator,
-                params: PhysicsParams = DEFAULT_PARAMS) -> SearchResult:
-    positions = np.asarray(positions, dtype=np.float64)
-    S = positions.shape[0]
-    trees = [[_Node(positions[s], 0)] for s in range(S)]
-    pools = proposer.propose(positions, cfg.pool, rng)
-    for s in range(S):
-        trees[s][0].pool = pools[s]
-    sims = np.zeros(S, dtype=np.int64)
-    guard = 0
-    while (sims < cfg.budget).any():
-        guard += 1
-        if guard > 20 * cfg.budget:
-            raise RuntimeError("PUCT made no progress: every path ends at max_depth")
-        pending = []  # (tree, path of node ids, parent id, action)
-        for s in range(S):
-            if sims[s] >= cfg.budget:
-                continue
-            tree, path = trees[s], [0]
-            while True:
-                node = tree[path[-1]]
-                if node.depth >= cfg.max_depth:
-                    pending.append((s, path, None, None))
-                    break
-                live = [k for k, c in enumerate(node.children) if not tree[c].terminal]
-                allowed = math.ceil(cfg.pw_c * (node.visits + 1) ** cfg.pw_alpha)
-                n_child = len(node.children)
-                if n_child < allowed or not live:
-                    if node.pool is None:  # first expansion of this node: draw its prior samples
-                        node.pool = proposer.propose(node.positions[None], cfg.pool, rng)[0]
-                    elif n_child == len(node.pool):  # prior samples used up: draw more
-                        more = proposer.propose(node.positions[None], cfg.pool, rng)[0]
-                        node.pool = np.concatenate([node.pool, more])
-                    pending.append((s, path, path[-1], node.pool[n_child]))
-                    break
-                sqrt_n = math.sqrt(node.visits)
-                prior = 1.0 / n_child
-                best, best_score = -1, -math.inf
-                for k in live:
-                    child = tree[node.children[k]]
-                    score = node.rewards[k] + cfg.gamma * _q(child) + cfg.c_puct * prior * sqrt_n / (1 + child.visits)
-                    if score > best_score:
-                        best, best_score = k, score
-                path.append(node.children[best])
-        expand = [p for p in pending if p[2] is not None]
-        if expand:
-            start = np.stack([trees[s][parent].positions for s, _, parent, _ in expand])
-            acts = np.stack([a for *_, a in expand])
-            res = simulate_batch(start, acts, params)
-            rewards = verifier_reward(res, cfg.foul_penalty)
-            for n, (s, path, parent, a) in enumerate(expand):
-                tree = trees[s]
-                child = _Node(res.positions[n], tree[parent].depth + 1, terminal=not bool(res.score[n]))
-                tree.append(child)
-                tree[parent].children.append(len(tree) - 1)
-                tree[parent].actions.append(a)
-                tree[parent].rewards.append(float(rewards[n]))
-                path.append(len(tree) - 1)
-                sims[s] += 1
-        for s, path, _, _ in pending:  # back up discounted returns along each path
-            tree, ret = trees[s], 0.0
-            for depth in range(len(path) - 1, -1, -1):
-                node = tree[path[depth]]
-                node.visits += 1
-                node.value_sum += ret
-                if depth:
-                    parent = tree[path[depth - 1]]
-                    ret = parent.rewards[parent.children.index(path[depth])] + cfg.gamma * ret
+                params: PhysicsParams = DEFAULT_PARAMS, impl: str = "compiled") -> SearchResult:
+    """Choose one action for each of S table states (positions (S, 4, 2)) by PUCT."""
+    if impl == "reference":
+        from .puct_reference import puct_reference
 
-    actions, value, r1, after = np.empty((S, 4)), np.empty(S), np.empty(S), np.empty((S, 4, 2))
-    for s in range(S):
-        root, tree = trees[s][0], trees[s]
-        keys = [(tree[c].visits, root.rewards[k] + cfg.gamma * _q(tree[c]), -k) for k, c in enumerate(root.children)]
-        k = max(range(len(keys)), key=keys.__getitem__)
-        actions[s], r1[s] = root.actions[k], root.rewards[k]
-        value[s], after[s] = keys[k][1], tree[root.children[k]].positions
-    return SearchResult(actions, value, r1, after, int(sims.sum()))
+        return puct_reference(positions, proposer, cfg, rng, params)
+    if impl != "compiled":
+        raise ValueError(f"puct_search impl must be one of {', '.join(IMPLS)}; got {impl!r}")
+    positions = np.asarray(positions, dtype=np.float64)
+    S, P = positions.shape[0], cfg.pool
+    t = tree.new_trees(positions, cfg.budget, P, cfg.max_depth)
+    ints, floats, pool = t["ints"], t["floats"], t["pool"]
+    pool[:, 0] = proposer.propose(positions, P, rng)
+    ints[:, 0, tree.DRAWN] = P
+    start, actions, rounds = np.empty((S, 4, 2)), np.empty((S, 4)), np.zeros(1, dtype=np.int64)
+    after, score, reward = np.empty((0, 4, 2)), np.empty(0, dtype=bool), np.empty(0)
+    while True:
+        m = tree.advance(ints, floats, t["positions"], t["actions"], pool, t["n_nodes"], t["sims"], t["path"],
+                         t["path_len"], t["kind"], start, actions, after, score, reward, rounds, cfg.budget,
+                         cfg.max_depth, cfg.c_puct, cfg.pw_c, cfg.pw_alpha, cfg.gamma)
+        if m == tree.DONE:
+            break
+        if m == tree.STALLED:
+            raise RuntimeError("PUCT made no progress: every path ends at max_depth")
+        if m == tree.DRAW_POOLS:
+            _draw_pools(t, proposer, rng, P)
+            m = tree.gather(ints, t["positions"], pool, t["path"], t["path_len"], t["kind"], start, actions)
+        res = simulate_batch(start[:m], actions[:m], params)
+        after, score, reward = res.positions, res.score, verifier_reward(res, cfg.foul_penalty)
+
+    best, value = np.empty(S, dtype=np.int64), np.empty(S)
+    tree.root_choice(ints, floats, cfg.gamma, best, value)
+    rows = np.arange(S)
+    return SearchResult(t["actions"][rows, best], value, floats[rows, best, tree.REWARD].copy(),
+                        t["positions"][rows, best], int(t["sims"].sum()))
+
+
+def _draw_pools(t: dict, proposer, rng: np.random.Generator, P: int) -> None:
+    """Fresh prior samples for every leaf that has used its own up, one proposer call per leaf
+    in tree order (the reference's calls and draws), then mark those leaves ready to expand."""
+    ints, path, path_len, kind = t["ints"], t["path"], t["path_len"], t["kind"]
+    for s in np.flatnonzero(kind == tree.NEEDS_POOL):
+        leaf = path[s, path_len[s] - 1]
+        t["pool"][s, leaf] = proposer.propose(t["positions"][s, leaf][None], P, rng)[0]
+        ints[s, leaf, tree.DRAWN] += P
+        kind[s] = tree.EXPAND
 
 
 __all__ = ["PUCTConfig", "puct_search"]

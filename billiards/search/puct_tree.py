@@ -1,0 +1,221 @@
+"""The PUCT trees as arrays, and the compiled steps that walk them (numba, ``cache=True``).
+
+S trees, each with room for C nodes (a decision at budget B creates at most B + 1). Node n of
+tree s is a table at rest; its integer fields are ``ints[s, n, FIELD]`` and its two floats
+``value_sum, reward = floats[s, n]`` (``reward``: verifier reward of the shot into the node).
+Children form a singly linked list in creation (= sampling) order: ``FIRST``, ``LAST``, ``NEXT``.
+
+A round of the search is: every unfinished tree walks down to the node it acts on
+(:func:`descend`), the caller draws prior samples for leaves that have used theirs up,
+:func:`gather` collects the new shots, one ``simulate_batch`` call simulates them, and
+:func:`attach_and_back_up` adds them as children and backs the returns up. :func:`advance`
+chains the compiled parts between two simulation calls. The arithmetic is written in the
+reference's order (``puct_reference.py``), so both compute bit-identical scores.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# integer fields of a node
+DEPTH, TERMINAL, VISITS, N_CHILD, FIRST, LAST, NEXT, DRAWN = range(8)
+N_INT = 8
+VALUE_SUM, REWARD = 0, 1
+
+# what a tree does this round
+IDLE, EXPAND, MAX_DEPTH, NEEDS_POOL = 0, 1, 2, 3
+# what advance() asks of its caller
+DONE, DRAW_POOLS, STALLED = -1, -2, -3
+
+
+def new_trees(positions: np.ndarray, budget: int, pool: int, max_depth: int):
+    """Empty trees holding only their roots (positions (S, 4, 2)); arrays as described above,
+    plus ``pool`` (S, C, pool, 4): each node's current batch of prior samples, of which
+    children take ``DRAWN - pool .. DRAWN - 1`` in order, and the per-round path buffers."""
+    S, C = positions.shape[0], budget + 1
+    ints = np.empty((S, C, N_INT), dtype=np.int64)
+    ints[:, 0] = (0, 0, 0, 0, -1, -1, -1, 0)
+    floats = np.empty((S, C, 2))
+    floats[:, 0] = 0.0
+    node_pos = np.empty((S, C, 4, 2))
+    node_pos[:, 0] = positions
+    return {
+        "ints": ints, "floats": floats, "positions": node_pos,
+        "actions": np.empty((S, C, 4)), "pool": np.empty((S, C, pool, 4)),
+        "n_nodes": np.ones(S, dtype=np.int64), "sims": np.zeros(S, dtype=np.int64),
+        "path": np.empty((S, max_depth + 2), dtype=np.int64), "path_len": np.zeros(S, dtype=np.int64),
+        "kind": np.zeros(S, dtype=np.int64),
+    }
+
+
+@njit(cache=True)
+def _has_live_child(ints, s, node):
+    c = ints[s, node, FIRST]
+    while c >= 0:
+        if not ints[s, c, TERMINAL]:
+            return True
+        c = ints[s, c, NEXT]
+    return False
+
+
+@njit(cache=True)
+def _select(ints, floats, s, node, c_puct, gamma):
+    """argmax over the live children of Q + c_puct * P * sqrt(N) / (1 + N_child); first wins ties."""
+    visits = ints[s, node, VISITS]
+    sqrt_n = math.sqrt(visits)
+    prior = 1.0 / ints[s, node, N_CHILD]
+    best, best_score = -1, -math.inf
+    c = ints[s, node, FIRST]
+    while c >= 0:
+        if not ints[s, c, TERMINAL]:
+            n = ints[s, c, VISITS]
+            q = floats[s, c, VALUE_SUM] / n if n else 0.0
+            score = floats[s, c, REWARD] + gamma * q + c_puct * prior * sqrt_n / (1 + n)
+            if score > best_score:
+                best, best_score = c, score
+        c = ints[s, c, NEXT]
+    return best
+
+
+@njit(cache=True)
+def descend(ints, floats, sims, path, path_len, kind, budget, max_depth, c_puct, pw_c, pw_alpha, gamma):
+    """Walk every tree with sims < budget from its root to the node this round acts on.
+
+    The walk stops at a node of depth ``max_depth`` (``MAX_DEPTH``: nothing to simulate) or
+    at a node that may widen -- fewer children than ``ceil(pw_c * (N + 1) ** pw_alpha)``, or
+    no live (scoring) child -- (``EXPAND``, or ``NEEDS_POOL`` if its prior samples are used
+    up); otherwise it follows :func:`_select`. Returns how many trees need prior samples.
+    """
+    needs = 0
+    for s in range(ints.shape[0]):
+        kind[s] = IDLE
+        path_len[s] = 0
+        if sims[s] >= budget:
+            continue
+        node, n = 0, 1
+        path[s, 0] = 0
+        while True:
+            if ints[s, node, DEPTH] >= max_depth:
+                kind[s] = MAX_DEPTH
+                break
+            n_child = ints[s, node, N_CHILD]
+            allowed = math.ceil(pw_c * (ints[s, node, VISITS] + 1) ** pw_alpha)
+            if n_child < allowed or not _has_live_child(ints, s, node):
+                if n_child == ints[s, node, DRAWN]:
+                    kind[s] = NEEDS_POOL
+                    needs += 1
+                else:
+                    kind[s] = EXPAND
+                break
+            node = _select(ints, floats, s, node, c_puct, gamma)
+            path[s, n] = node
+            n += 1
+        path_len[s] = n
+    return needs
+
+
+@njit(cache=True)
+def gather(ints, node_pos, pool, path, path_len, kind, start, actions):
+    """The shots of this round's ``EXPAND`` leaves, in tree order: each leaf's table into
+    ``start`` and its next unused prior sample into ``actions``. Returns their number."""
+    P = pool.shape[2]
+    m = 0
+    for s in range(ints.shape[0]):
+        if kind[s] != EXPAND:
+            continue
+        leaf = path[s, path_len[s] - 1]
+        k = ints[s, leaf, N_CHILD] - (ints[s, leaf, DRAWN] - P)
+        start[m] = node_pos[s, leaf]
+        actions[m] = pool[s, leaf, k]
+        m += 1
+    return m
+
+
+@njit(cache=True)
+def attach_and_back_up(ints, floats, node_pos, node_actions, n_nodes, sims, path, path_len, kind,
+                       actions, after, score, reward, gamma):
+    """Add each simulated shot (rows in :func:`gather`'s order) as the newest child of its leaf,
+    then back the discounted return up every walked path (terminal value 0 below a leaf)."""
+    m = 0
+    for s in range(ints.shape[0]):
+        if kind[s] == EXPAND:
+            leaf = path[s, path_len[s] - 1]
+            c = n_nodes[s]
+            n_nodes[s] += 1
+            ints[s, c, DEPTH] = ints[s, leaf, DEPTH] + 1
+            ints[s, c, TERMINAL] = not score[m]
+            ints[s, c, VISITS] = 0
+            ints[s, c, N_CHILD] = 0
+            ints[s, c, FIRST] = -1
+            ints[s, c, LAST] = -1
+            ints[s, c, NEXT] = -1
+            ints[s, c, DRAWN] = 0
+            floats[s, c, VALUE_SUM] = 0.0
+            floats[s, c, REWARD] = reward[m]
+            node_pos[s, c] = after[m]
+            node_actions[s, c] = actions[m]
+            if ints[s, leaf, LAST] >= 0:
+                ints[s, ints[s, leaf, LAST], NEXT] = c
+            else:
+                ints[s, leaf, FIRST] = c
+            ints[s, leaf, LAST] = c
+            ints[s, leaf, N_CHILD] += 1
+            path[s, path_len[s]] = c
+            path_len[s] += 1
+            sims[s] += 1
+            m += 1
+        ret = 0.0
+        for d in range(path_len[s] - 1, -1, -1):
+            node = path[s, d]
+            ints[s, node, VISITS] += 1
+            floats[s, node, VALUE_SUM] += ret
+            ret = floats[s, node, REWARD] + gamma * ret
+
+
+@njit(cache=True)
+def root_choice(ints, floats, gamma, best_child, best_value):
+    """Each root's most visited child (ties: higher r + gamma * Q, then sampling order) into
+    ``best_child[s]``, and its value r + gamma * Q into ``best_value[s]``."""
+    for s in range(ints.shape[0]):
+        best, best_n, best_v = -1, -1, -math.inf
+        c = ints[s, 0, FIRST]
+        while c >= 0:
+            n = ints[s, c, VISITS]
+            v = floats[s, c, REWARD] + gamma * (floats[s, c, VALUE_SUM] / n if n else 0.0)
+            if n > best_n or (n == best_n and v > best_v):
+                best, best_n, best_v = c, n, v
+            c = ints[s, c, NEXT]
+        best_child[s] = best
+        best_value[s] = best_v
+
+
+@njit(cache=True)
+def advance(ints, floats, node_pos, node_actions, pool, n_nodes, sims, path, path_len, kind, start, actions,
+            after, score, reward, rounds, budget, max_depth, c_puct, pw_c, pw_alpha, gamma):
+    """Finish the current round with its simulated shots (``after, score, reward``; none in the
+    first call, whose ``kind`` is all ``IDLE``), then run rounds until one has shots to simulate.
+
+    Rounds in which every walk ends at ``max_depth`` simulate nothing and are finished here.
+    Returns the number of shots gathered into ``start, actions`` (> 0), ``DRAW_POOLS`` (the
+    caller draws prior samples, then calls :func:`gather`), ``DONE`` when every tree has
+    simulated ``budget`` shots, or ``STALLED`` after ``20 * budget`` rounds (``rounds[0]``
+    counts them).
+    """
+    attach_and_back_up(ints, floats, node_pos, node_actions, n_nodes, sims, path, path_len, kind,
+                       actions, after, score, reward, gamma)
+    while True:
+        if not (sims < budget).any():
+            return DONE
+        rounds[0] += 1
+        if rounds[0] > 20 * budget:
+            return STALLED
+        if descend(ints, floats, sims, path, path_len, kind, budget, max_depth, c_puct, pw_c, pw_alpha, gamma):
+            return DRAW_POOLS
+        m = gather(ints, node_pos, pool, path, path_len, kind, start, actions)
+        if m:
+            return m
+        attach_and_back_up(ints, floats, node_pos, node_actions, n_nodes, sims, path, path_len, kind,
+                           actions, after, score, reward, gamma)
