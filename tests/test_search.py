@@ -11,8 +11,10 @@ import pytest
 
 import billiards.search.lookahead as lookahead_mod
 import billiards.search.puct as puct_mod
+import billiards.search.puct_reference as puct_reference_mod
 from billiards.physics import random_racks, simulate_batch
-from billiards.search import GeometricProposer, H2Config, LookaheadActor, PUCTActor, PUCTConfig, h2_search, verifier_reward
+from billiards.search import (GeometricProposer, H2Config, LookaheadActor, PolicyProposer, PUCTActor, PUCTConfig, h2_search,
+                              puct_search, verifier_reward)
 from billiards.search.protocols import run_chain, run_p1
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -30,6 +32,20 @@ class Recording:
         return out
 
 
+class ScoringFirst:
+    """A strong prior for PUCT tests: 4k geometric candidates, the k first after ordering those
+    that score first (stable). Most children are then live, so the trees grow deep and every
+    descent chooses among several children by the PUCT rule."""
+
+    name = "scoring-first"
+
+    def propose(self, positions, k, rng):
+        cand = GeometricProposer().propose(positions, 4 * k, rng)
+        score = simulate_batch(np.repeat(positions, 4 * k, 0), cand.reshape(-1, 4)).score.reshape(len(positions), 4 * k)
+        order = np.argsort(~score, axis=1, kind="stable")[:, :k]
+        return np.take_along_axis(cand, order[..., None], axis=1)
+
+
 @pytest.fixture
 def count_sims(monkeypatch):
     """Counts the shots that reach the simulator from the search modules."""
@@ -41,7 +57,16 @@ def count_sims(monkeypatch):
 
     monkeypatch.setattr(lookahead_mod, "simulate_batch", counting)
     monkeypatch.setattr(puct_mod, "simulate_batch", counting)
+    monkeypatch.setattr(puct_reference_mod, "simulate_batch", counting)
     return counter
+
+
+@pytest.fixture(scope="module")
+def base_policies():
+    """The three shipped policies of the Table 5 "base" proposer, as torch modules."""
+    from billiards.rl.policy import load_policy
+
+    return [load_policy(ROOT / "results" / "policies" / "base" / f"seed{s}.pt")[0] for s in range(3)]
 
 
 def test_lookahead_choice_maximises_r1_plus_gamma_max_r2():
@@ -86,6 +111,86 @@ def test_actors_use_exactly_the_configured_number_of_simulations(count_sims):
     actor = PUCTActor(GeometricProposer(), PUCTConfig(budget=60))
     actor(td.clone())
     assert count_sims["shots"] == 3 * 60 == actor.n_sims
+    count_sims["shots"] = 0
+    puct_search(racks, GeometricProposer(), PUCTConfig(budget=60), np.random.default_rng(0), impl="reference")
+    assert count_sims["shots"] == 3 * 60
+
+
+@pytest.mark.parametrize("cfg, prior", [
+    (PUCTConfig(budget=150), ScoringFirst),  # deep trees, walks often end at max_depth
+    (PUCTConfig(budget=100, pool=4, max_depth=4, c_puct=2.0), ScoringFirst),  # samples used up and refilled
+    (PUCTConfig(budget=150), GeometricProposer),  # mostly terminal children: the root widens
+    (PUCTConfig(budget=60, c_puct=0.0, pw_c=0.5, pw_alpha=1.0, max_depth=1), GeometricProposer),  # flat, no bonus
+])
+def test_compiled_puct_makes_the_reference_decisions(cfg, prior):
+    """The compiled tree and the pure-Python one, from the same generator state, choose the same
+    actions with the same values and predictions, and leave the generator in the same state
+    (the same proposer calls, in the same order)."""
+    racks = random_racks(np.random.default_rng(11), 4)
+    rng_ref, rng_new = np.random.default_rng(3), np.random.default_rng(3)
+    prop_ref, prop_new = Recording(prior()), Recording(prior())
+    ref = puct_search(racks, prop_ref, cfg, rng_ref, impl="reference")
+    new = puct_search(racks, prop_new, cfg, rng_new)
+    for field in ("actions", "value", "r1", "positions"):
+        np.testing.assert_array_equal(getattr(new, field), getattr(ref, field), err_msg=field)
+    assert new.n_sims == ref.n_sims == 4 * cfg.budget
+    assert rng_new.bit_generator.state == rng_ref.bit_generator.state
+    # the same nodes were widened in the same order: the trees grew alike, not just the choice
+    assert len(prop_new.calls) == len(prop_ref.calls) > 4
+    for (pos_new, _), (pos_ref, _) in zip(prop_new.calls, prop_ref.calls):
+        np.testing.assert_array_equal(pos_new, pos_ref)
+    # the predicted table and reward are those of the chosen shot
+    check = simulate_batch(racks, new.actions)
+    np.testing.assert_array_equal(check.positions, new.positions)
+    np.testing.assert_array_equal(verifier_reward(check), new.r1)
+
+
+def test_compiled_puct_with_a_trained_ensemble_and_a_stall(base_policies):
+    prop = PolicyProposer(base_policies, constrain_aim=True, extra_features=True)
+    racks = random_racks(np.random.default_rng(12), 2)
+    cfg = PUCTConfig(budget=100, pool=5)
+    ref = puct_search(racks, prop, cfg, np.random.default_rng(4), impl="reference")
+    new = puct_search(racks, prop, cfg, np.random.default_rng(4))
+    np.testing.assert_array_equal(new.actions, ref.actions)
+    np.testing.assert_array_equal(new.value, ref.value)
+    # a configuration whose walks keep ending at max_depth stops the same way in both
+    stall = PUCTConfig(budget=100, pool=3, max_depth=2)
+    for impl in ("compiled", "reference"):
+        with pytest.raises(RuntimeError, match="PUCT made no progress"):
+            puct_search(random_racks(np.random.default_rng(0), 1), GeometricProposer(), stall, np.random.default_rng(7), impl=impl)
+    with pytest.raises(ValueError, match="impl must be one of compiled, reference"):
+        puct_search(racks, prop, cfg, np.random.default_rng(4), impl="python")
+
+
+@pytest.mark.parametrize("S, k", [(1, 16), (5, 7), (3, 1), (2, 200)])
+def test_batched_proposer_gives_the_per_policy_candidates(base_policies, S, k):
+    """Same generator state in, same candidates out, same generator state after. Equal to float32
+    rounding, not bit for bit: both evaluate the networks in float32, but NumPy's and torch's
+    matmul kernels sum the 256 products in different orders (and tanh/softplus come from
+    different math libraries), so a coordinate can differ in its last float32 bits; the draws,
+    their order and every step after the network are the same."""
+    kw = dict(constrain_aim=True, extra_features=True)
+    batched, reference = PolicyProposer(base_policies, **kw), PolicyProposer(base_policies, impl="reference", **kw)
+    assert (batched.impl, reference.impl) == ("batched", "reference")
+    racks = random_racks(np.random.default_rng(S), S)
+    rng_b, rng_r = np.random.default_rng(9), np.random.default_rng(9)
+    a, b = batched.propose(racks, k, rng_b), reference.propose(racks, k, rng_r)
+    assert a.shape == b.shape == (S, k, 4) and a.dtype == b.dtype == np.float64
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
+    assert rng_b.bit_generator.state == rng_r.bit_generator.state
+    if k > 3:  # policy 0's first sample (candidate 3) differs from its mode (candidate 0)
+        assert (a[:, 3] != a[:, 0]).any()
+
+
+def test_policy_proposer_impl_choice_fails_clearly(base_policies):
+    import torch
+
+    not_a_policy = torch.nn.Identity()
+    assert PolicyProposer([not_a_policy], constrain_aim=False, extra_features=False).impl == "reference"
+    with pytest.raises(ValueError, match="proposer 'odd' cannot be batched: not an \\(actor, ScaleAction\\) policy"):
+        PolicyProposer([not_a_policy], constrain_aim=False, extra_features=False, name="odd", impl="batched")
+    with pytest.raises(ValueError, match="impl must be one of auto, batched, reference; got 'numpy'"):
+        PolicyProposer(base_policies, constrain_aim=True, extra_features=True, impl="numpy")
 
 
 def test_a_fixed_seed_gives_the_same_chain():
@@ -101,8 +206,13 @@ def test_a_fixed_seed_gives_the_same_chain():
     assert not all(np.array_equal(x[1], y[1]) for x, y in zip(h1, h3))  # another seed, another chain
 
 
-def test_search_collector_plays_exactly_the_verified_shot():
-    actor = LookaheadActor(GeometricProposer(), H2Config(k1=60, m1=4, k2=10))
+@pytest.mark.parametrize("search, proposer", [("h2", "geometric"), ("h2", "base"), ("puct", "geometric"), ("puct", "base")])
+def test_search_collector_plays_exactly_the_verified_shot(search, proposer, base_policies):
+    prop = GeometricProposer() if proposer == "geometric" else PolicyProposer(base_policies, constrain_aim=True, extra_features=True)
+    if search == "h2":
+        actor = LookaheadActor(prop, H2Config(k1=60, m1=4, k2=10))
+    else:
+        actor = PUCTActor(prop, PUCTConfig(budget=100))
     res = run_p1(actor, n_innings=6, shots=4, seed=0, progress=False)
     assert len(res.values) == 6 and res.sims_per_decision == 100
     # the predicted immediate reward of every executed shot came true in the environment
@@ -174,8 +284,9 @@ def test_policy_proposer_from_a_training_run(tmp_path):
     policy, _ = load_policy(run / "checkpoint.pt")
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         mode = policy(TensorDict({"observation": prop.observation(racks)}, batch_size=[4]))["action"].detach().double().numpy()
-    np.testing.assert_allclose(a[:, 0, 1:], np.clip(mode[:, 1:], [0, -1, -1], [1, 1, 1]))
-    np.testing.assert_allclose(a[:, 0, 0], domain.constrained_theta(racks, np.clip(mode[:, 0], -1, 1)))
+    # to float32 rounding: the proposer evaluates the network with NumPy (see the batched test)
+    np.testing.assert_allclose(a[:, 0, 1:], np.clip(mode[:, 1:], [0, -1, -1], [1, 1, 1]), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(a[:, 0, 0], domain.constrained_theta(racks, np.clip(mode[:, 0], -1, 1)), rtol=0, atol=1e-6)
     res = h2_search(racks, prop, H2Config(k1=8, m1=2, k2=4), np.random.default_rng(1))
     assert res.actions.shape == (4, 4) and res.n_sims == 4 * 16
 
