@@ -69,6 +69,7 @@ class EnsembleHeads:
 
     def __init__(self, weights, biases, scale_bias, scale_min, scale_lb, tanh_lim, mid, half, held):
         self.weights, self.biases = weights, biases  # per layer: (E, in, out), (E, 1, out)
+        self.first = np.concatenate(list(weights[0]), axis=1)  # (in, E * out): layer 1 of all policies
         self.scale_bias, self.scale_min, self.scale_lb, self.tanh_lim = scale_bias, scale_min, scale_lb, tanh_lim
         self.mid, self.half, self.held = mid, half, held  # (E, 1, 1, A); held: None or (mask, values)
         self.size = weights[0].shape[0]
@@ -93,17 +94,20 @@ class EnsembleHeads:
                    p0["scale_lb"], tanh_lim, mid, half, p0["held"])
 
     def heads(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """obs (S, D) float32 -> loc, scale (E, S, A) float32 of every policy's Gaussian."""
-        x = obs
-        last = len(self.weights) - 1
-        for n, (w, b) in enumerate(zip(self.weights, self.biases)):
+        """obs (S, D) float32 -> loc, scale (E, S, A) float32 of every policy's Gaussian.
+
+        The first layer reads the same observation in every policy: one (S, D) x (D, E * H)
+        matmul; the others are (E, S, H) x (E, H, H') batched matmuls.
+        """
+        E, S = self.size, obs.shape[0]
+        x = (obs @ self.first).reshape(S, E, -1).transpose(1, 0, 2) + self.biases[0]
+        for w, b in zip(self.weights[1:], self.biases[1:]):
+            np.maximum(x, 0, out=x)
             x = np.matmul(x, w) + b
-            if n < last:
-                np.maximum(x, 0, out=x)
-        loc, pre = np.split(x, 2, axis=-1)
-        z = pre + np.float32(self.scale_bias)  # torch's softplus: identity above threshold 20
+        A = x.shape[-1] // 2
+        z = x[..., A:] + np.float32(self.scale_bias)  # torch's softplus: identity above threshold 20
         scale = np.where(z > 20, z, np.log1p(np.exp(np.minimum(z, 20)))) + np.float32(self.scale_min)
-        return loc, np.maximum(scale, np.float32(self.scale_lb))
+        return x[..., :A], np.maximum(scale, np.float32(self.scale_lb))
 
     def actions(self, pre_tanh: np.ndarray) -> np.ndarray:
         """Pre-tanh draws (E, S, n, A) -> actions in the env's bounds (E, S, n, A), float32."""
