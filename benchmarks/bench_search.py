@@ -38,16 +38,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # time this checkout's billiards
 from _shots import ROOT, git_commit, write_json  # noqa: E402
 
-from billiards.physics import DEFAULT_PARAMS, canonical_rack, random_racks, simulate_batch  # noqa: E402
+from billiards.physics import DEFAULT_PRESET, PRESETS, canonical_rack, get_params, random_racks, simulate_batch  # noqa: E402
 from billiards.search import GeometricProposer, H2Config, PolicyProposer, PUCTConfig, h2_search, puct_search  # noqa: E402
 
 GOALS = {"h2 ensemble after": 3.0, "puct ensemble after": 10.0}  # issue #20: multiples of the raw batch
 
 
-def chain_states(n: int, seed: int, params=DEFAULT_PARAMS) -> np.ndarray:
+def chain_states(n: int, seed: int, params) -> np.ndarray:
     """n tables at rest met along greedy h2 chains (geometric proposer) from the opening rack; a
     chain that fails restarts from the opening rack."""
-    rng, prop, cfg = np.random.default_rng(seed), GeometricProposer(), H2Config(k1=60, m1=4, k2=10)
+    rng, cfg = np.random.default_rng(seed), H2Config(k1=60, m1=4, k2=10)
+    prop = GeometricProposer(R=params.ball_radius)
     out, pos = [], canonical_rack(params)[None]
     while len(out) < n:
         out.append(pos[0])
@@ -56,32 +57,32 @@ def chain_states(n: int, seed: int, params=DEFAULT_PARAMS) -> np.ndarray:
     return np.stack(out)
 
 
-def ensemble(name: str, impl: str) -> PolicyProposer:
+def ensemble(name: str, impl: str, params) -> PolicyProposer:
     from billiards.rl.policy import load_policy
 
     policies = [load_policy(ROOT / "results" / "policies" / name / f"seed{s}.pt")[0] for s in range(3)]
-    return PolicyProposer(policies, constrain_aim=True, extra_features=True, name=name, impl=impl)
+    return PolicyProposer(policies, constrain_aim=True, extra_features=True, name=name, R=params.ball_radius, impl=impl)
 
 
-def measures(ens_before, ens_after, seed: int) -> dict:
+def measures(ens_before, ens_after, seed: int, params) -> dict:
     """name -> function(state (1, 4, 2)); each search with its own generator."""
-    geo = GeometricProposer()
+    geo = GeometricProposer(R=params.ball_radius)
     h2, puct = H2Config.from_budget(400, 200, 10), PUCTConfig(budget=400)
-    acts = geo.propose(random_racks(np.random.default_rng(seed), 1), 400, np.random.default_rng(seed))[0]
+    acts = geo.propose(random_racks(np.random.default_rng(seed), 1, params), 400, np.random.default_rng(seed))[0]
     rngs = {}
 
     def rng(name):
         return rngs.setdefault(name, np.random.default_rng([seed, len(rngs)]))
 
     return {
-        "raw": lambda r: simulate_batch(np.repeat(r, 400, 0), acts),
-        "h2 geometric": lambda r: h2_search(r, geo, h2, rng("h2g")),
-        "h2 ensemble before": lambda r: h2_search(r, ens_before, h2, rng("h2eb")),
-        "h2 ensemble after": lambda r: h2_search(r, ens_after, h2, rng("h2ea")),
-        "puct geometric before": lambda r: puct_search(r, geo, puct, rng("pgb"), impl="reference"),
-        "puct geometric after": lambda r: puct_search(r, geo, puct, rng("pga")),
-        "puct ensemble before": lambda r: puct_search(r, ens_before, puct, rng("peb"), impl="reference"),
-        "puct ensemble after": lambda r: puct_search(r, ens_after, puct, rng("pea")),
+        "raw": lambda r: simulate_batch(np.repeat(r, 400, 0), acts, params),
+        "h2 geometric": lambda r: h2_search(r, geo, h2, rng("h2g"), params),
+        "h2 ensemble before": lambda r: h2_search(r, ens_before, h2, rng("h2eb"), params),
+        "h2 ensemble after": lambda r: h2_search(r, ens_after, h2, rng("h2ea"), params),
+        "puct geometric before": lambda r: puct_search(r, geo, puct, rng("pgb"), params, impl="reference"),
+        "puct geometric after": lambda r: puct_search(r, geo, puct, rng("pga"), params),
+        "puct ensemble before": lambda r: puct_search(r, ens_before, puct, rng("peb"), params, impl="reference"),
+        "puct ensemble after": lambda r: puct_search(r, ens_after, puct, rng("pea"), params),
     }
 
 
@@ -103,6 +104,7 @@ def main(argv=None) -> None:
     ap.add_argument("--puct-decisions", type=int, default=30, help="states timed for the pure-Python PUCT (slow)")
     ap.add_argument("--ensemble", default="base", help="results/policies/<name>/seed{0,1,2}.pt")
     ap.add_argument("--states", default="random,chain", help="comma-separated: random, chain")
+    ap.add_argument("--physics", default=DEFAULT_PRESET, choices=sorted(PRESETS), help="the table (a physics preset)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None)
@@ -112,20 +114,21 @@ def main(argv=None) -> None:
         raise SystemExit(f"Error: --states takes random and/or chain, got {args.states!r}")
     numba.set_num_threads(args.threads)
     torch.set_num_threads(1)
-    ens_before, ens_after = ensemble(args.ensemble, "reference"), ensemble(args.ensemble, "batched")
-    fns = measures(ens_before, ens_after, args.seed)
+    params = get_params(args.physics)
+    ens_before, ens_after = ensemble(args.ensemble, "reference", params), ensemble(args.ensemble, "batched", params)
+    fns = measures(ens_before, ens_after, args.seed, params)
     counts = {name: args.puct_decisions if name.endswith("before") and name.startswith("puct") else args.decisions
               for name in fns}
-    warm = random_racks(np.random.default_rng(args.seed + 1), 1)
+    warm = random_racks(np.random.default_rng(args.seed + 1), 1, params)
     for fn in fns.values():  # compiled kernels load from numba's cache; first calls fill other caches
         fn(warm)
 
     summary = {"command": " ".join(["python", "benchmarks/bench_search.py"] + (sys.argv[1:] if argv is None else argv)),
-               "commit": git_commit(), "threads": args.threads, "ensemble": args.ensemble,
+               "commit": git_commit(), "threads": args.threads, "ensemble": args.ensemble, "physics": args.physics,
                "unit": "ms per decision (one state, 400 simulations)", "goals": GOALS}
     for kind in kinds:
-        states = (random_racks(np.random.default_rng(args.seed), args.decisions) if kind == "random"
-                  else chain_states(args.decisions, args.seed))
+        states = (random_racks(np.random.default_rng(args.seed), args.decisions, params) if kind == "random"
+                  else chain_states(args.decisions, args.seed, params))
         fig = time_interleaved(fns, states, counts)
         raw = fig["raw"].mean()
         print(f"\n{kind} states: {'measure':22s} {'mean ms':>8s} {'median ms':>10s} {'n':>4s} {'x raw':>6s}")
