@@ -160,6 +160,8 @@ def test_compiled_puct_with_a_trained_ensemble_and_a_stall(base_policies):
             puct_search(random_racks(np.random.default_rng(0), 1), GeometricProposer(), stall, np.random.default_rng(7), impl=impl)
     with pytest.raises(ValueError, match="impl must be one of compiled, reference"):
         puct_search(racks, prop, cfg, np.random.default_rng(4), impl="python")
+    with pytest.raises(ValueError, match=r"positions of shape \(S, 4, 2\); got \(4, 2\)"):
+        puct_search(racks[0], prop, cfg, np.random.default_rng(4))
 
 
 @pytest.mark.parametrize("S, k", [(1, 16), (5, 7), (3, 1), (2, 200)])

@@ -61,14 +61,20 @@ class PUCTConfig:
 
 def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random.Generator,
                 params: PhysicsParams = DEFAULT_PARAMS, impl: str = "compiled") -> SearchResult:
-    """Choose one action for each of S table states (positions (S, 4, 2)) by PUCT."""
+    """Choose one action for each of S table states (positions (S, 4, 2)) by PUCT.
+
+    ``impl="compiled"`` walks the array trees of :mod:`billiards.search.puct_tree`;
+    ``"reference"`` runs the pure-Python tree (same decisions, several times slower).
+    """
+    if impl not in IMPLS:
+        raise ValueError(f"puct_search impl must be one of {', '.join(IMPLS)}; got {impl!r}")
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim != 3 or positions.shape[1:] != (4, 2):
+        raise ValueError(f"puct_search needs positions of shape (S, 4, 2); got {positions.shape}")
     if impl == "reference":
         from .puct_reference import puct_reference
 
         return puct_reference(positions, proposer, cfg, rng, params)
-    if impl != "compiled":
-        raise ValueError(f"puct_search impl must be one of {', '.join(IMPLS)}; got {impl!r}")
-    positions = np.asarray(positions, dtype=np.float64)
     S, P = positions.shape[0], cfg.pool
     t = tree.new_trees(positions, cfg.budget, P, cfg.max_depth)
     ints, floats, pool = t["ints"], t["floats"], t["pool"]
