@@ -80,3 +80,28 @@ def test_resume_of_a_directory_that_is_no_search_run_fails_clearly(tmp_path):
     cfg.resume = str(tmp_path)
     with pytest.raises(ValueError, match="no config.yaml there"):
         search_run.run(cfg, tmp_path)
+
+
+SEARCH_BAD = [
+    (["seed=-1"], "seed must be >= 0"),
+    (["search=puct", "search.c_puct=nan"], "search (puct): PUCT needs finite c_puct >= 0"),
+    (["search=puct", "search.gamma=1.5"], "search (puct): gamma must lie in [0, 1], got 1.5"),
+    (["search.foul_penalty=-1"], "search (h2): foul_penalty must be a finite number >= 0, got -1.0"),
+    (["proposer.power_low=0.95"], "proposer.power_low and proposer.power_high must satisfy"),
+    (["threads=0"], "threads must be >= 1"),
+    (["physics=bogus"], "Could not find 'physics/bogus'"),
+]
+
+
+@pytest.mark.parametrize("overrides,message", SEARCH_BAD, ids=[" ".join(o) for o, _ in SEARCH_BAD])
+def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    search_py = Path(__file__).resolve().parents[1] / "search.py"
+    proc = subprocess.run([sys.executable, str(search_py), *overrides], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode != 0 and message in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert list(tmp_path.iterdir()) == [], f"wrote {list(tmp_path.rglob('*'))}"

@@ -86,10 +86,24 @@ def validate(cfg) -> None:
             raise ValueError(f"{key} must be one of {', '.join(allowed)}; got {value!r}")
     if s.budget < 1:
         raise ValueError(f"search.budget must be >= 1, got {s.budget}")
-    if s.kind == "h2":
-        from .lookahead import H2Config
+    if cfg.seed < 0:
+        raise ValueError(f"seed must be >= 0 (a numpy seed), got {cfg.seed}")
+    try:
+        if s.kind == "h2":
+            from .lookahead import H2Config
 
-        H2Config.from_budget(s.budget, s.k1, s.m1, gamma=s.gamma, foul_penalty=s.foul_penalty)
+            H2Config.from_budget(s.budget, s.k1, s.m1, gamma=s.gamma, foul_penalty=s.foul_penalty)
+        else:
+            from .puct import PUCTConfig
+
+            PUCTConfig(budget=s.budget, c_puct=s.c_puct, pw_c=s.pw_c, pw_alpha=s.pw_alpha, pool=s.pool,
+                       max_depth=s.max_depth, gamma=s.gamma, foul_penalty=s.foul_penalty)
+    except ValueError as err:
+        raise ValueError(f"search ({s.kind}): {err}") from None
+    pr = cfg.proposer
+    if not 0.0 <= pr.power_low <= pr.power_high <= 1.0:
+        raise ValueError(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
+                         f"got {pr.power_low}, {pr.power_high}")
     for key in ("n_innings", "shots", "seeds", "cap"):
         if getattr(p, key) < 1:
             raise ValueError(f"protocol.{key} must be >= 1, got {getattr(p, key)}")

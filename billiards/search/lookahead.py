@@ -56,6 +56,7 @@ class H2Config:
             raise ValueError(f"h2 search cannot expand m1={self.m1} of only k1={self.k1} candidates")
         if not 0.0 <= self.gamma <= 1.0:
             raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
+        domain.check_coefficient("foul_penalty", self.foul_penalty)
 
     @classmethod
     def from_budget(cls, budget: int, k1: int, m1: int, **kw) -> "H2Config":

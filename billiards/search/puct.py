@@ -25,10 +25,12 @@ decisions.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, simulate_batch
 
 from . import puct_tree as tree
@@ -51,8 +53,13 @@ class PUCTConfig:
     def __post_init__(self):
         if self.budget < 1 or self.pool < 1 or self.max_depth < 1:
             raise ValueError(f"PUCT needs budget, pool and max_depth >= 1; got {self.budget}, {self.pool}, {self.max_depth}")
-        if self.c_puct < 0 or self.pw_c <= 0 or not 0 < self.pw_alpha <= 1:
-            raise ValueError("PUCT needs c_puct >= 0, pw_c > 0 and 0 < pw_alpha <= 1")
+        finite = all(math.isfinite(v) for v in (self.c_puct, self.pw_c, self.pw_alpha, self.gamma))
+        if not finite or self.c_puct < 0 or self.pw_c <= 0 or not 0 < self.pw_alpha <= 1:
+            raise ValueError(f"PUCT needs finite c_puct >= 0, pw_c > 0 and 0 < pw_alpha <= 1; got c_puct={self.c_puct}, "
+                             f"pw_c={self.pw_c}, pw_alpha={self.pw_alpha}")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
+        domain.check_coefficient("foul_penalty", self.foul_penalty)
 
     @property
     def sims_per_decision(self) -> int:
