@@ -174,8 +174,13 @@ class Run:
 LEGACY_PHYSICS = "international"
 
 # Top-level config keys that never put two runs in different rows: the seed, run-time switches,
-# the budget (the steps column shows it), logging and the table label itself.
-SAME_ROW_KEYS = ("seed", "resume", "threads", "progress", "compile", "budget", "logger", "checkpoint", "table", "paper_steps")
+# logging and the table label itself. Everything else does, the budget included (total steps,
+# CPU minutes, warm-up, the final evaluation's innings): only runs of one configuration share a
+# row, and the steps column shows where each stopped.
+SAME_ROW_KEYS = ("seed", "resume", "threads", "progress", "compile", "logger", "checkpoint", "table", "paper_steps", "device")
+# Budget keys that only set a cadence (how often to log, evaluate on the way, checkpoint).
+CADENCE_KEYS = ("budget.name", "budget.eval_every", "budget.eval_innings", "budget.checkpoint_every", "budget.log_every",
+                "budget.kill_after_checkpoint")
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -193,7 +198,8 @@ def split_by_settings(items: list, config_of) -> dict[str, list]:
     with, say, another learning rate never merge into one mean: ``{"": items}`` when they agree,
     else ``{" (algo.lr=0.001, algo.gamma=0.9)": [...], ...}``. Keys missing from some configs
     (written before the schema had them) are not compared."""
-    flats = [{k: v for k, v in _flat(config_of(it)).items() if k.split(".")[0] not in SAME_ROW_KEYS} for it in items]
+    flats = [{k: v for k, v in _flat(config_of(it)).items() if k.split(".")[0] not in SAME_ROW_KEYS and k not in CADENCE_KEYS}
+             for it in items]
     common = set.intersection(*(set(f) for f in flats)) if flats else set()
     differing = sorted(k for k in common if len({repr(f[k]) for f in flats}) > 1)
     if not differing:
@@ -202,6 +208,24 @@ def split_by_settings(items: list, config_of) -> dict[str, list]:
     for it, f in zip(items, flats):
         out[" (" + ", ".join(f"{k}={f[k]}" for k in differing) + ")"].append(it)
     return dict(sorted(out.items()))
+
+
+def split_repeats(items: list, config_of) -> dict[str, list]:
+    """Runs of one row that repeat a seed never count as more seeds: the n-th run of a seed goes
+    to the row suffixed ``" (repeat n)"``, so the seeds column counts distinct seeds."""
+    seen: dict = defaultdict(int)
+    out: dict[str, list] = defaultdict(list)
+    for it in items:
+        seed = config_of(it).get("seed")
+        seen[seed] += 1
+        out["" if seen[seed] == 1 else f" (repeat {seen[seed]})"].append(it)
+    return dict(out)
+
+
+def split_rows(items: list, config_of) -> dict[str, list]:
+    """One row per configuration and per repeat of a seed (:func:`split_by_settings`, :func:`split_repeats`)."""
+    return {suffix + again: part for suffix, group in split_by_settings(items, config_of).items()
+            for again, part in split_repeats(group, config_of).items()}
 
 
 def base_variant(variant: str) -> str:
@@ -426,7 +450,7 @@ def report(dirs: list[Path]) -> str:
             by_table[table][row] = by_table["table4"][source]
     for table, groups in by_table.items():
         by_table[table] = {variant + suffix: part for variant, group in groups.items()
-                           for suffix, part in split_by_settings(group, lambda r: r.config).items()}
+                           for suffix, part in split_rows(group, lambda r: r.config).items()}
     parts = [
         "## Training results",
         "",
@@ -528,7 +552,7 @@ def _group_curves(curves: list[Curve]) -> dict[tuple, list[Curve]]:
     for c in curves:
         groups[(c.table or "", c.variant)].append(c)
     split = {(table, variant + suffix): part for (table, variant), group in groups.items()
-             for suffix, part in split_by_settings(group, lambda c: c.config).items()}
+             for suffix, part in split_rows(group, lambda c: c.config).items()}
     return dict(sorted(split.items()))
 
 

@@ -240,7 +240,7 @@ def test_search_entry_point_writes_results(tmp_path):
     from billiards.report import report
 
     text = report([tmp_path])
-    assert "| geometric | — \\| — | — \\| — | " in text and f"{data['mean']:.1f} ({data['max']:.0f}, cap 4)" in text
+    assert "| geometric | — \\| — | — \\| — | " in text and f"{data['mean']:.1f} ({data['max']:.0f}, cap 4, 2 chains)" in text
 
 
 @pytest.mark.parametrize("override, message", [

@@ -169,14 +169,16 @@ def test_cpu_hour_preset_stops_at_its_cpu_budget(tmp_path):
 
 
 def test_report_never_merges_runs_with_different_settings(tmp_path):
-    """Runs of one table row that differ in a setting (here algo.lr) get one row each, named by
-    the setting and still beside the paper's figure; seeds and budgets do not split a row."""
+    """Runs of one table row that differ in a setting (here algo.lr, or the budget) get one row
+    each, named by the setting and still beside the paper's figure; seeds do not split a row,
+    and runs of one configuration stopped at different steps (a CPU budget) share it."""
     from billiards.report import main as report_main
 
-    def fake_run(name: str, seed: int, lr: float, mean: float, steps: int) -> None:
+    def fake_run(name: str, seed: int, lr: float, mean: float, steps: int, budget: int = 2_000_000) -> None:
         d = tmp_path / "runs" / name
         d.mkdir(parents=True)
-        config = {"table": "table4", "seed": seed, "budget": {"total_steps": steps},
+        (d / "summary.json").write_text(json.dumps({"frames": steps}))
+        config = {"table": "table4", "seed": seed, "budget": {"total_steps": budget, "cpu_minutes": 60.0},
                   "algo": {"name": "sac", "lr": lr, "hidden_sizes": [256, 256]},
                   "env": {"paradigm": "random_continue", "constrain_aim": True, "extra_features": True},
                   "shaping": {"name": "none"}}
@@ -199,6 +201,41 @@ def test_report_never_merges_runs_with_different_settings(tmp_path):
     report_main([str(tmp_path / "runs"), "--curves", "--out", str(out)])
     titles = [line for line in out.read_text().splitlines() if line.startswith("### ")]
     assert titles == ["### table4: + extra feat. (algo.lr=0.0003) (seeds 0, 1, 2)", "### table4: + extra feat. (algo.lr=0.001) (seeds 0)"]
+
+
+def test_report_rows_are_configurations_and_count_distinct_seeds(tmp_path):
+    """One seed at two budgets gives two rows; a second run of the same seed and configuration
+    is a repeat, not another seed; runs of different physics never share a row."""
+    from billiards.report import report
+
+    def fake_run(name, seed, steps, mean, physics=None):
+        d = tmp_path / name
+        d.mkdir()
+        config = {"seed": seed, "budget": {"name": "x", "total_steps": steps, "eval_every": steps // 2},
+                  "algo": {"name": "sac"}, "env": {"paradigm": "random_continue"}, "shaping": {"name": "none"}}
+        if physics:
+            config["physics"] = {"preset": physics}
+        (d / "config.yaml").write_text(yaml.safe_dump(config))
+        (d / "summary.json").write_text(json.dumps({"frames": steps}))
+        (d / "eval.json").write_text(json.dumps({"mean": mean, "best": 3, "start": "random", "foul_innings_pct": 0.0,
+                                                 "foul_per_shot_pct": 0.0, "success_per_shot_pct": 10.0}))
+
+    fake_run("s0_2k", 0, 2_000, 0.1, "korean_medium")
+    fake_run("s0_100k", 0, 100_000, 0.4, "korean_medium")
+    fake_run("s0_100k_again", 0, 100_000, 0.6, "korean_medium")
+    fake_run("s1_100k", 1, 100_000, 0.5, "korean_medium")
+    fake_run("s1_100k_old", 1, 100_000, 0.9)  # before the presets: the international table
+    rows = [line for line in report([tmp_path]).splitlines() if line.startswith("| sac")]
+    assert len(rows) == 4, rows
+    by_label = {r.split(" | ")[0]: r for r in rows}
+    two_k = next(r for label, r in by_label.items() if "budget.total_steps=2000" in label)
+    assert " | 1 | 2k |" in two_k and two_k.rstrip(" |").endswith("korean_medium")
+    hundred = [r for label, r in by_label.items() if "budget.total_steps=100000" in label and "physics.preset=korean" in label]
+    first = next(r for r in hundred if "repeat" not in r)
+    assert " | 2 | 100k |" in first and "0.450 ± 0.050" in first  # seeds 0 and 1, each once
+    assert any("(repeat 2)" in r and " | 1 | 100k |" in r and "0.600" in r for r in hundred)
+    old = next(r for label, r in by_label.items() if "physics.preset=international" in label)
+    assert " | 1 | 100k |" in old and old.rstrip(" |").endswith("international")
 
 
 def test_report_skips_broken_run_dirs_with_a_warning_naming_them(tmp_path, capsys):

@@ -45,14 +45,30 @@ def find_results(dirs) -> list[dict]:
 
 
 def _cell(res: dict | None, protocol: str) -> str:
+    """A cell, marked wherever the run departs from the caption's protocol: fewer P1 innings or
+    other inning lengths, capped P3 chains, fewer P3 seeds, and an interrupted (partial) run."""
     if res is None:
         return "—"
+    extra = res.get("extra", {})
+    notes = []
     if protocol == "p1":
-        innings = res.get("extra", {}).get("n_innings")
-        return f"{res['mean']:.2f}" + (f" ({innings} inn.)" if innings and innings != 100 else "")
-    capped = res.get("extra", {}).get("cap")
-    tail = f", cap {capped}" if capped and capped != 10000 else ""
-    return f"{res['mean']:.1f} ({res['max']:.0f}{tail})"
+        innings, shots = extra.get("n_innings"), extra.get("shots_per_inning")
+        if innings and innings != 100:
+            notes.append(f"{innings} inn.")
+        if shots and shots != 100:
+            notes.append(f"{shots}-shot innings")
+        text = f"{res['mean']:.2f}"
+    else:
+        capped, seeds = extra.get("cap"), len(extra.get("seeds", [])) or None
+        if capped and capped != 10000:
+            notes.append(f"cap {capped}")
+        if seeds and seeds != 10:
+            notes.append(f"{seeds} chains")
+        text = f"{res['mean']:.1f} ({res['max']:.0f}" + "".join(f", {n}" for n in notes) + ")"
+        notes = []
+    if extra.get("partial"):
+        notes.append("partial")
+    return text + (f" ({', '.join(notes)})" if notes else "")
 
 
 def _paper(name: str, protocol: str, kind: str) -> str:
@@ -79,7 +95,8 @@ def _table6(physics: str, results: list[dict]) -> str:
     lines = [
         "Table 6: proposers at 400 simulations per shot. P1: points per 100-shot random-start inning (100 innings); "
         "P3: canonical-start chain length before the first miss or foul, mean (longest). Ours | paper. "
-        f"(n inn.): fewer P1 innings; cap: chains stopped at that length. Physics: `{physics}`.",
+        f"(n inn.), (n-shot innings), (n chains): a run that departs from that protocol; cap: chains stopped "
+        f"at that length; partial: an interrupted run. Physics: `{physics}`.",
         "",
         "| proposer | P1 h=2 | P1 PUCT | P3 h=2 mean (max) | P3 PUCT mean (max) |",
         "|---|---|---|---|---|",
