@@ -28,7 +28,6 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 ACTION_NAMES = ("aim", "power", "english_a", "english_b")
-ALL_DIMS = (0, 1, 2, 3)
 
 
 class HoldActions(TensorDictModuleBase):
