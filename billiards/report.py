@@ -183,11 +183,12 @@ CADENCE_KEYS = ("budget.name", "budget.eval_every", "budget.eval_innings", "budg
                 "budget.kill_after_checkpoint")
 
 
-def _flat(d: dict, prefix: str = "") -> dict:
+def flatten_config(d: dict, prefix: str = "") -> dict:
+    """A nested config as ``{"algo.lr": 0.001, ...}`` (lists as tuples, so values compare and hash)."""
     out = {}
     for k, v in d.items():
         if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
+            out.update(flatten_config(v, f"{prefix}{k}."))
         else:
             out[f"{prefix}{k}"] = tuple(v) if isinstance(v, list) else v
     return out
@@ -198,7 +199,7 @@ def split_by_settings(items: list, config_of) -> dict[str, list]:
     with, say, another learning rate never merge into one mean: ``{"": items}`` when they agree,
     else ``{" (algo.lr=0.001, algo.gamma=0.9)": [...], ...}``. Keys missing from some configs
     (written before the schema had them) are not compared."""
-    flats = [{k: v for k, v in _flat(config_of(it)).items() if k.split(".")[0] not in SAME_ROW_KEYS and k not in CADENCE_KEYS}
+    flats = [{k: v for k, v in flatten_config(config_of(it)).items() if k.split(".")[0] not in SAME_ROW_KEYS and k not in CADENCE_KEYS}
              for it in items]
     common = set.intersection(*(set(f) for f in flats)) if flats else set()
     differing = sorted(k for k in common if len({repr(f[k]) for f in flats}) > 1)

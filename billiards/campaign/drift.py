@@ -17,19 +17,10 @@ from pathlib import Path
 import yaml
 
 from billiards.provenance import ROOT
+from billiards.report import flatten_config
 
 from .ledger import entry_dir, fill
 from .spec import Campaign, Entry
-
-
-def _flat(d: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
 
 
 def config_drift(campaign: Campaign, root: Path, entries: list[Entry]) -> dict[str, list[tuple[str, object, object]]]:
@@ -52,9 +43,9 @@ def config_drift(campaign: Campaign, root: Path, entries: list[Entry]) -> dict[s
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         for e, path in started:
-            now = _flat(OmegaConf.to_container(compose("config", overrides=[fill(a, root) for a in e.args]),
+            now = flatten_config(OmegaConf.to_container(compose("config", overrides=[fill(a, root) for a in e.args]),
                                                resolve=True, enum_to_str=True))
-            saved = _flat(yaml.safe_load(path.read_text()) or {})
+            saved = flatten_config(yaml.safe_load(path.read_text()) or {})
             diff = [(k, saved.get(k), now.get(k)) for k in sorted(set(now) | set(saved))
                     if k not in ignored and not k.startswith("logger.") and saved.get(k) != now.get(k)]
             if diff:

@@ -709,6 +709,18 @@ def _record(ev_time, ev_info, ev_state, n_rec, t, kind, who, other, st, lab):
 
 
 @njit(cache=True, error_model="numpy")
+def _halt(st, lab, out_int, flag, record, ev_time, ev_info, ev_state, n_rec, t):
+    """Stop the shot: every ball rests where it is, ``out_int[flag]`` says why (the shot-time
+    limit or the event cap), and the log records the stop. Returns the (possibly grown) log."""
+    for k in range(N_BALLS):
+        resolve_transition(st, lab, k, STATIONARY)
+    out_int[flag] = 1
+    if record:
+        return _record(ev_time, ev_info, ev_state, n_rec, t, EV_STOP, -1, -1, st, lab)
+    return ev_time, ev_info, ev_state, n_rec
+
+
+@njit(cache=True, error_model="numpy")
 def run_shot(positions, V0, phi, a, b, p, record):
     """Simulate one shot from rest to rest.
 
@@ -796,11 +808,7 @@ def run_shot(positions, V0, phi, a, b, p, record):
             evolve_ball(st, lab, k, dt, p)
         t = t_next
         if timeout:
-            for k in range(N_BALLS):
-                resolve_transition(st, lab, k, STATIONARY)
-            out_int[O_TIMEOUT] = 1
-            if record:
-                ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, n_rec, t, EV_STOP, -1, -1, st, lab)
+            ev_time, ev_info, ev_state, n_rec = _halt(st, lab, out_int, O_TIMEOUT, record, ev_time, ev_info, ev_state, n_rec, t)
             break
         if kind == EV_TRANSITION:
             resolve_transition(st, lab, who, other)
@@ -825,13 +833,8 @@ def run_shot(positions, V0, phi, a, b, p, record):
         n_ev += 1
         if record:
             ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, n_rec, t, kind, who, other, st, lab)
-        if n_ev >= max_events:
-            # safety net: stop every ball where it is and flag the shot
-            for k in range(N_BALLS):
-                resolve_transition(st, lab, k, STATIONARY)
-            out_int[O_TRUNC] = 1
-            if record:
-                ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, n_rec, t, EV_STOP, -1, -1, st, lab)
+        if n_ev >= max_events:  # safety net
+            ev_time, ev_info, ev_state, n_rec = _halt(st, lab, out_int, O_TRUNC, record, ev_time, ev_info, ev_state, n_rec, t)
             break
     out_int[O_NEVENTS] = n_ev
     out_float[OF_CLOSE2] = max(closest[0] - 2.0 * R, 0.0)
