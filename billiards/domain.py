@@ -12,6 +12,7 @@ same convention as the action's aim ``theta``.
 Contents
 --------
 * observation layout: :func:`rest_observation` (28 floats) and the action bounds;
+* the normalised action [-1, 1]^4 and its map to the raw shot: :func:`unnormalize_action`;
 * the aim constraint: :func:`nearest_red`, :func:`aim_window`, :func:`constrained_theta`;
 * the carom features: :func:`carom_features`;
 * reward shaping: :func:`foul_penalty`, :func:`gentle_bonus` (the paper's leave-position
@@ -62,6 +63,43 @@ def rest_observation(positions: np.ndarray) -> np.ndarray:
     obs = np.zeros(positions.shape[:-2] + (N_BALLS, BALL_STATE_DIM), dtype=np.float32)
     obs[..., :2] = positions
     return obs.reshape(positions.shape[:-2] + (OBS_DIM,))
+
+
+# ----------------------------------------------------------------------------- normalised action
+
+
+def action_bounds(constrain_aim: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) of the raw action: (theta, p, a, b) = ACTION_LOW/HIGH, or with the aim
+    constraint (u, p, a, b) with u in [-1, 1]. Fresh float64 arrays of shape (4,)."""
+    low, high = ACTION_LOW.copy(), ACTION_HIGH.copy()
+    if constrain_aim:
+        low[0], high[0] = -1.0, 1.0
+    return low, high
+
+
+def unnormalize_action(x: np.ndarray, constrain_aim: bool = False) -> np.ndarray:
+    """The normalised action ``x in [-1, 1]^4`` as the raw action the simulator plays.
+
+    This is THE map between the two (the gymnasium env's default action space, and the
+    TorchRL ``NormalizedActions`` transform): each coordinate goes affinely from [-1, 1]
+    onto its raw bounds (:func:`action_bounds`)::
+
+        theta = pi * (x0 + 1)     in [0, 2 pi]   (with the aim constraint: u = x0 in [-1, 1])
+        p     = (x1 + 1) / 2      in [0, 1]
+        a     = x2,  b = x3       in [-1, 1]
+
+    Why: Gaussian policies (SB3's PPO, ...) sample around 0 and clip to the box; on the raw
+    box half their shots would have p clipped to 0. x (..., 4) -> (..., 4) float64.
+    """
+    low, high = action_bounds(constrain_aim)
+    return low + (np.asarray(x, dtype=np.float64) + 1.0) * 0.5 * (high - low)
+
+
+def normalize_action(action: np.ndarray, constrain_aim: bool = False) -> np.ndarray:
+    """The inverse of :func:`unnormalize_action`: raw (theta | u, p, a, b) -> x in [-1, 1]^4
+    (for theta in [0, 2 pi]). (..., 4) float64."""
+    low, high = action_bounds(constrain_aim)
+    return 2.0 * (np.asarray(action, dtype=np.float64) - low) / (high - low) - 1.0
 
 
 # ----------------------------------------------------------------------------- aim constraint

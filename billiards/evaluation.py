@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from billiards import domain
 from billiards.envs import make_env
 from billiards.files import atomic_write_text
 
@@ -118,3 +119,25 @@ def evaluate(
     foul = rollout["next", "foul"][..., 0].numpy()
     assert score.shape == (n_innings, max_shots), score.shape
     return summarize(score, foul, start=start, seed=seed)
+
+
+def numpy_policy(act, *, normalized: bool = True, constrain_aim: bool = False):
+    """A policy for :func:`evaluate` from a NumPy one, e.g. a Stable-Baselines3 model's
+    ``lambda obs: model.predict(obs, deterministic=True)[0]``.
+
+    ``act(observation)`` gets the (B, D) float32 observations of the TorchRL env (the gymnasium
+    env's observations, batched) and returns (B, 4) actions: normalised x in [-1, 1]^4, the
+    gymnasium env's default, mapped by :func:`billiards.domain.unnormalize_action`, or with
+    ``normalized=False`` raw (theta | u, p, a, b). The shot is written as float64 so theta is
+    not rounded, as the gymnasium env plays it.
+    """
+
+    def policy(td):
+        obs = td.get("observation").detach().cpu().numpy()
+        action = np.asarray(act(obs), dtype=np.float64).reshape(obs.shape[0], domain.ACTION_DIM)
+        if normalized:
+            action = domain.unnormalize_action(action, constrain_aim)
+        td.set("action", torch.from_numpy(action))
+        return td
+
+    return policy

@@ -34,6 +34,10 @@ from ._common import (
 )
 
 
+INFO_KEYS = ("score", "foul", "miss", "first_contact", "second_red", "hits", "closest", "cushions",
+             "n_events", "shot", "positions", "theta", "raw_action")
+
+
 class Billiards4BallInningEnv(gym.Env):
     """One inning of Korean 4-ball as a gymnasium env.
 
@@ -42,8 +46,12 @@ class Billiards4BallInningEnv(gym.Env):
     and spin slots are 0 at rest), then with ``extra_features`` the 4 carom features
     (d1, d2, sin phi, cos phi) of :func:`billiards.domain.carom_features` (32 floats).
 
-    Action (float32, 4): (theta, p, a, b) with theta in [0, 2pi] (any real is accepted and
-    wrapped), power p in [0, 1], tip offsets a, b in [-1, 1]. With ``constrain_aim`` the first
+    Action (float32, 4): by default (``normalize_actions=True``) the normalised x in [-1, 1]^4,
+    played as theta = pi (x0 + 1), p = (x1 + 1) / 2, a = x2, b = x3
+    (:func:`billiards.domain.unnormalize_action`, the one definition of that map); with the aim
+    constraint the first coordinate is u = x0 as below. With ``normalize_actions=False`` the
+    paper's raw box (theta, p, a, b): theta in [0, 2pi] (any real is accepted and wrapped),
+    power p in [0, 1], tip offsets a, b in [-1, 1]. With ``constrain_aim`` the first
     coordinate is u in [-1, 1] and theta = theta_target + u * asin(min(1, 2R/d))
     (:func:`billiards.domain.constrained_theta`).
 
@@ -63,9 +71,13 @@ class Billiards4BallInningEnv(gym.Env):
     (drawn from the env's ``np_random``, so ``reset(seed=s)`` is reproducible) or
     ``"canonical"``. ``reset(options={"positions": (4, 2) array})`` starts from a given table.
 
-    ``info`` after a step: score, foul, miss, first_contact, hits (yellow, red1, red2),
-    closest (gap to red1, red2 in m), cushions, n_events, shot (shots played), positions
-    (exact float64 table), theta (the aim actually played).
+    ``info``: the same keys after a reset and after a step (:data:`INFO_KEYS`), numpy values,
+    so TorchRL's ``GymEnv(...).auto_register_info_dict()`` can read them: score, foul, miss
+    (bool), first_contact, second_red (int64; -1 for none), hits (3,) bool (yellow, red1, red2),
+    closest (2,) float64 (gap to red1, red2 in m), cushions, n_events, shot (shots played)
+    (int64), positions (4, 2) float64 (the exact table), theta (float64, the aim actually
+    played) and raw_action (4,) float64 (the (theta, p, a, b) the simulator played). After a
+    reset the per-shot entries read "no shot yet": False, -1 and zeros.
     """
 
     metadata: ClassVar[dict] = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -83,6 +95,7 @@ class Billiards4BallInningEnv(gym.Env):
         gentle_kind: str = "leave",
         near_miss: float = 0.0,
         near_miss_sigma: float = domain.NEAR_MISS_SIGMA,
+        normalize_actions: bool = True,
         physics: PhysicsParams | str | dict | None = None,
         params: PhysicsParams | str | dict | None = None,
         render_mode: str | None = None,
@@ -95,6 +108,7 @@ class Billiards4BallInningEnv(gym.Env):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.start, self.on_miss, self.params, self.render_mode = start, on_miss, params, render_mode
         self.constrain_aim, self.extra_features = bool(constrain_aim), bool(extra_features)
+        self.normalize_actions = bool(normalize_actions)
         if gentle_kind not in domain.GENTLE_KINDS:
             raise ValueError(f"gentle_kind must be one of {domain.GENTLE_KINDS}, got {gentle_kind!r}")
         self.shaping = dict(
@@ -105,9 +119,9 @@ class Billiards4BallInningEnv(gym.Env):
             near_miss_sigma=domain.check_coefficient("near_miss_sigma", near_miss_sigma, strict=True),
         )
 
-        low, high = domain.ACTION_LOW.copy(), domain.ACTION_HIGH.copy()
-        if self.constrain_aim:
-            low[0], high[0] = -1.0, 1.0
+        low, high = domain.action_bounds(self.constrain_aim)
+        if self.normalize_actions:
+            low, high = -np.ones(domain.ACTION_DIM), np.ones(domain.ACTION_DIM)
         self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
         w, l = params.table_width, params.table_length
@@ -154,33 +168,54 @@ class Billiards4BallInningEnv(gym.Env):
         else:
             self._positions = initial_racks(self.np_random, self.start, 1, self.params)[0]
         self._shot = 0
-        return self._obs(), {"positions": self.positions, "shot": 0}
+        return self._obs(), self._info()
 
-    def step(self, action):
+    def _raw_action(self, action) -> np.ndarray:
+        """The (theta, p, a, b) to simulate from the agent's action (see the class docstring)."""
         act = validate_action(action, (domain.ACTION_DIM,)).copy()
+        if self.normalize_actions:
+            if np.any(np.abs(act[1:]) > 1.0):
+                raise ValueError(f'"action" is normalised: x1, x2, x3 (power, tip offsets) must lie in [-1, 1]; got {act.tolist()}')
+            act = domain.unnormalize_action(act, self.constrain_aim)
         if self.constrain_aim:
             act[0] = domain.constrained_theta(self._positions, act[0], self.params.ball_radius)
+        return act
+
+    def _info(self, res=None, act=None) -> dict:
+        """The info dict: the same keys and dtypes after reset (res None: "no shot yet") and step."""
+        if res is None:
+            return {
+                "score": np.False_, "foul": np.False_, "miss": np.False_,
+                "first_contact": np.int64(-1), "second_red": np.int64(-1),
+                "hits": np.zeros(3, dtype=bool), "closest": np.zeros(2), "cushions": np.int64(0),
+                "n_events": np.int64(0), "shot": np.int64(self._shot), "positions": self.positions,
+                "theta": np.float64(0.0), "raw_action": np.zeros(domain.ACTION_DIM),
+            }
+        return {
+            "score": np.bool_(res.score[0]),
+            "foul": np.bool_(res.foul[0]),
+            "miss": np.bool_(res.miss[0]),
+            "first_contact": np.int64(res.first_contact[0]),
+            "second_red": np.int64(res.second_red[0]),
+            "hits": res.hits[0].astype(bool),
+            "closest": res.closest[0].astype(np.float64),
+            "cushions": np.int64(res.cushions[0]),
+            "n_events": np.int64(res.n_events[0]),
+            "shot": np.int64(self._shot),
+            "positions": self.positions,
+            "theta": np.float64(act[0]),
+            "raw_action": act.astype(np.float64),
+        }
+
+    def step(self, action):
+        act = self._raw_action(action)
         res = simulate_batch(self._positions[None], act[None], self.params)
         self._positions = res.positions[0]
         self._shot += 1
         reward = domain.shaped_reward(res.score, res.foul, act[None, 1], res.hits, res.closest,
                                       res.positions, res.second_red, **self.shaping)
         terminated, truncated = terminated_truncated(res.score, np.array([self._shot]), self.on_miss, self.max_shots)
-        info = {
-            "score": bool(res.score[0]),
-            "foul": bool(res.foul[0]),
-            "miss": bool(res.miss[0]),
-            "first_contact": int(res.first_contact[0]),
-            "second_red": int(res.second_red[0]),
-            "hits": res.hits[0].copy(),
-            "closest": res.closest[0].copy(),
-            "cushions": int(res.cushions[0]),
-            "n_events": int(res.n_events[0]),
-            "shot": self._shot,
-            "positions": self.positions,
-            "theta": float(act[0]),
-        }
-        return self._obs(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), info
+        return self._obs(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), self._info(res, act)
 
     def render(self):
         if self.render_mode != "rgb_array":
