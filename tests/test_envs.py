@@ -166,7 +166,7 @@ def test_gym_same_seed_same_inning_and_reset_to_positions():
 
 def test_gym_shaping_and_constraint_match_domain():
     rng = np.random.default_rng(1)
-    env = Billiards4BallInningEnv(**ALL_LAYERS)
+    env = Billiards4BallInningEnv(**ALL_LAYERS, normalize_actions=False)  # the paper's raw (u, p, a, b)
     for n in range(30):
         env.reset(seed=n)
         pos = env.positions

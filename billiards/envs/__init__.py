@@ -1,27 +1,56 @@
 """Environments: a gymnasium env (``Billiards4Ball-v0``) and a batched TorchRL env, plus the
-TorchRL transforms of the paper's domain knowledge and :func:`make_env`."""
+TorchRL transforms of the paper's domain knowledge and :func:`make_env`.
+
+Importing this package registers ``Billiards4Ball-v0`` and loads only the gymnasium side
+(numpy, numba, gymnasium). The TorchRL names (:class:`BilliardsEnv`, :func:`make_env`, the
+transforms) load torch and TorchRL on first use, so a gymnasium-only user neither pays for
+that import nor gets the multiprocessing start method TorchRL sets.
+"""
+
+import importlib
 
 import gymnasium
 
 from ._common import ON_MISS, PARADIGMS, STARTS
+from .gym_env import INFO_KEYS as GYM_INFO_KEYS
 from .gym_env import Billiards4BallInningEnv
-from .torchrl_env import INFO_KEYS, BilliardsEnv, reset_to
-from .transforms import (
-    AimConstraint,
-    CaromFeatures,
-    FoulPenalty,
-    GentleShotBonus,
-    NearMissBonus,
-    RewardModelBonus,
-    make_env,
-)
 
 GYM_ID = "Billiards4Ball-v0"
 if GYM_ID not in gymnasium.registry:
     gymnasium.register(id=GYM_ID, entry_point="billiards.envs.gym_env:Billiards4BallInningEnv")
 
+# TorchRL names -> the submodule that defines them, imported on first attribute access.
+_LAZY = {
+    "INFO_KEYS": "torchrl_env",
+    "BilliardsEnv": "torchrl_env",
+    "reset_to": "torchrl_env",
+    "exact_positions": "torchrl_env",
+    "AimConstraint": "transforms",
+    "CaromFeatures": "transforms",
+    "FoulPenalty": "transforms",
+    "GentleShotBonus": "transforms",
+    "NearMissBonus": "transforms",
+    "NormalizedActions": "transforms",
+    "RewardModelBonus": "transforms",
+    "make_env": "transforms",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
 __all__ = [
     "GYM_ID",
+    "GYM_INFO_KEYS",
     "INFO_KEYS",
     "ON_MISS",
     "PARADIGMS",
@@ -33,7 +62,9 @@ __all__ = [
     "FoulPenalty",
     "GentleShotBonus",
     "NearMissBonus",
+    "NormalizedActions",
     "RewardModelBonus",
+    "exact_positions",
     "make_env",
     "reset_to",
 ]

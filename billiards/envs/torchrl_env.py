@@ -16,6 +16,7 @@ action             (4,) f32     (theta, p, a, b); spec Bounded([0,0,-1,-1], [2pi
 observation        (28,) f32    4 balls x (x, y, vx, vy, wx, wy, wz), ball order; at rest the
                                 velocity/spin slots are 0 (:func:`billiards.domain.rest_observation`)
 positions          (4, 2) f64   exact ball centres (white, yellow, red1, red2); state
+positions_bits     (4, 2) i64   the same table's float64 bit pattern; state (see below)
 shot               (1,) i64     shots played in the current inning; state
 reward             (1,) f32     the carom score in {0, 1} (transforms may add shaping)
 done/terminated/   (1,) bool    terminated: a miss or foul under ``on_miss="reset"``;
@@ -29,6 +30,13 @@ n_events           (1,) i64     physical events of the shot
 =================  ===========  ===========================================================
 
 After a reset the per-shot entries are "no shot yet": False, first_contact -1, zeros.
+
+Why ``positions_bits``: dtype-casting transforms (TorchRL's ``DoubleToFloat``, which the usual
+SAC recipes append) turn every float64 entry of the specs into float32, and would hand the env
+a rounded table. The bit pattern, stored as int64, is out of their reach, so the env and the
+transforms read the table through :func:`exact_positions`, which restores the exact table when
+``"positions"`` is only a rounded copy of it; a table given as anything but float64 without
+its exact bits is refused.
 """
 
 from __future__ import annotations
@@ -62,7 +70,38 @@ from ._common import (
     validate_action,
 )
 
+BITS_KEY = "positions_bits"
 INFO_KEYS = ("score", "foul", "miss", "first_contact", "second_red", "hits", "closest", "n_events")
+
+
+def exact_positions(tensordict: TensorDictBase) -> np.ndarray | None:
+    """The exact float64 table (..., 4, 2) of a tensordict, or None without ``"positions"``.
+
+    ``"positions"`` is the table, except where it is only a rounded copy of the exact one
+    carried as ``"positions_bits"``: equal to it rounded to float32 (what ``DoubleToFloat``
+    and back makes of it) or to the dtype ``"positions"`` arrives in; those rows take the exact
+    table. A table that is not float64 and has no such exact copy raises ValueError (it would
+    be simulated rounded). A new table written into ``"positions"`` wins over stale bits.
+    """
+    pos_t = tensordict.get("positions", None)
+    if pos_t is None:
+        return None
+    pos_t = pos_t.detach().cpu()
+    pos = pos_t.to(torch.float64).numpy()
+    use_exact = np.zeros(pos.shape[:-2], dtype=bool)
+    bits = tensordict.get(BITS_KEY, None)
+    if bits is not None and bits.shape == pos_t.shape and bits.dtype == torch.int64:
+        exact = np.ascontiguousarray(bits.detach().cpu().numpy()).view(np.float64)
+        low = pos_t.dtype if pos_t.dtype.is_floating_point and pos_t.dtype != torch.float64 else torch.float32
+        rounded = torch.from_numpy(exact).to(low).to(torch.float64).numpy()
+        use_exact = ((pos == exact) | (pos == rounded)).all(axis=(-2, -1))
+        pos = np.where(use_exact[..., None, None], exact, pos)
+    if pos_t.dtype != torch.float64 and not use_exact.all():
+        raise ValueError(
+            f'"positions" must be the exact float64 table; got {pos_t.dtype} without its exact copy '
+            f'"{BITS_KEY}" (a dtype-casting transform such as DoubleToFloat rounded it: leave "positions" out of its keys)'
+        )
+    return pos
 
 
 def _bool_spec(shape) -> Categorical:
@@ -123,9 +162,11 @@ class BilliardsEnv(EnvBase):
         pos_high = torch.tensor([w, l], dtype=torch.float64).expand(*B, 4, 2)
         positions = Bounded(torch.zeros_like(pos_high), pos_high, shape=(*B, 4, 2), dtype=torch.float64)
         shot = Bounded(0, self.max_shots, shape=(*B, 1), dtype=torch.int64)
+        bits = Unbounded(shape=(*B, 4, 2), dtype=torch.int64)
         self.observation_spec = Composite(
             observation=Unbounded(shape=(*B, OBS_DIM), dtype=torch.float32),
             positions=positions,
+            positions_bits=bits,
             shot=shot,
             score=_bool_spec((*B, 1)),
             foul=_bool_spec((*B, 1)),
@@ -137,7 +178,7 @@ class BilliardsEnv(EnvBase):
             n_events=Unbounded(shape=(*B, 1), dtype=torch.int64),
             shape=B,
         )
-        self.state_spec = Composite(positions=positions.clone(), shot=shot.clone(), shape=B)
+        self.state_spec = Composite(positions=positions.clone(), positions_bits=bits.clone(), shot=shot.clone(), shape=B)
         self.action_spec = Bounded(
             torch.as_tensor(ACTION_LOW, dtype=torch.float32).expand(*B, ACTION_DIM),
             torch.as_tensor(ACTION_HIGH, dtype=torch.float32).expand(*B, ACTION_DIM),
@@ -160,11 +201,10 @@ class BilliardsEnv(EnvBase):
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         B = self.batch_size[0]
         action = validate_action(tensordict.get("action", None), (B, ACTION_DIM))
-        positions = tensordict.get("positions", None)
+        positions = exact_positions(tensordict)
         shot = tensordict.get("shot", None)
         if positions is None or shot is None:
             raise KeyError('BilliardsEnv.step needs "positions" and "shot" in the input: call env.reset() first')
-        positions = positions.detach().numpy().astype(np.float64, copy=False)
         shot = shot.detach().numpy().reshape(B) + 1
         result = simulate_batch(positions, action, self.params)
         terminated, truncated = terminated_truncated(result.score, shot, self.on_miss, self.max_shots)
@@ -187,9 +227,11 @@ class BilliardsEnv(EnvBase):
     def _output(self, *, positions, shot, reward=None, terminated, truncated, **info) -> TensorDictBase:
         B = self.batch_size[0]
         col = lambda x: torch.from_numpy(np.ascontiguousarray(x)).reshape(B, -1)
+        positions = np.ascontiguousarray(positions, dtype=np.float64)
         data = {
             "observation": torch.from_numpy(rest_observation(positions)),
-            "positions": torch.from_numpy(np.ascontiguousarray(positions, dtype=np.float64)),
+            "positions": torch.from_numpy(positions),
+            BITS_KEY: torch.from_numpy(positions.view(np.int64).copy()),
             "shot": col(shot.astype(np.int64)),
             "done": col(terminated | truncated),
             "terminated": col(terminated),
@@ -207,8 +249,7 @@ class BilliardsEnv(EnvBase):
         mask = np.ones(B, dtype=bool)
         if tensordict is not None and "_reset" in tensordict:
             mask = tensordict.get("_reset").detach().numpy().reshape(B).astype(bool)
-        given = tensordict.get("positions", None) if tensordict is not None else None
-        given = None if given is None else given.detach().numpy().astype(np.float64)
+        given = exact_positions(tensordict) if tensordict is not None else None
         if given is not None and given.shape != (B, 4, 2):
             raise ValueError(f'"positions" must have shape ({B}, 4, 2) (white, yellow, red1, red2 x (x, y)); got {given.shape}')
 
@@ -250,4 +291,4 @@ def reset_to(env: EnvBase, positions) -> TensorDictBase:
     return env.reset(TensorDict({"positions": positions}, batch_size=env.batch_size), set_state=True)
 
 
-__all__ = ["INFO_KEYS", "BilliardsEnv", "reset_to"]
+__all__ = ["BITS_KEY", "INFO_KEYS", "BilliardsEnv", "exact_positions", "reset_to"]

@@ -5,6 +5,8 @@ this module only moves tensors in and out of tensordicts.
 
 * :class:`AimConstraint` -- action[..., 0] becomes u in [-1, 1]:
   ``theta = theta_target + u * asin(min(1, 2R/d))`` (:func:`billiards.domain.constrained_theta`).
+* :class:`NormalizedActions` -- the policy acts in [-1, 1]^4, mapped to the raw action by
+  :func:`billiards.domain.unnormalize_action` (opt-in; the training env keeps the raw box).
 * :class:`CaromFeatures` -- appends (d1, d2, sin phi, cos phi) to ``"observation"``
   (:func:`billiards.domain.carom_features`), 28 -> 32 floats.
 * :class:`FoulPenalty` -- reward += ``-c * foul``.
@@ -31,7 +33,7 @@ from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params
 from billiards.physics.config import warn_physics_mismatch
 
 from ._common import resolve_paradigm, validate_action
-from .torchrl_env import BilliardsEnv
+from .torchrl_env import BilliardsEnv, exact_positions
 
 
 def _np(x: torch.Tensor) -> np.ndarray:
@@ -68,7 +70,7 @@ class AimConstraint(Transform):
                 return tensordict
             raise KeyError('AimConstraint needs "action" in the input tensordict')
         u_action = validate_action(_np(action), (*tensordict.batch_size, domain.ACTION_DIM))
-        u_action[..., 0] = domain.constrained_theta(_np(tensordict.get("positions")), u_action[..., 0], self.R)
+        u_action[..., 0] = domain.constrained_theta(exact_positions(tensordict), u_action[..., 0], self.R)
         tensordict.set("action", torch.from_numpy(u_action))
         return tensordict
 
@@ -78,6 +80,47 @@ class AimConstraint(Transform):
         low, high = spec.space.low.clone(), spec.space.high.clone()
         low[..., 0], high[..., 0] = -1.0, 1.0
         input_spec["full_action_spec", "action"] = Bounded(low, high, shape=spec.shape, dtype=spec.dtype, device=spec.device)
+        return input_spec
+
+
+class NormalizedActions(Transform):
+    """The policy acts in the normalised box [-1, 1]^4, as in the gymnasium env's default.
+
+    Before the step the action x becomes the raw action by
+    :func:`billiards.domain.unnormalize_action` (theta = pi (x0 + 1), p = (x1 + 1) / 2,
+    a = x2, b = x3; with ``constrain_aim`` u = x0, and this transform must then come after
+    :class:`AimConstraint` so that the u it produces goes through the constraint). The
+    transformed action spec is [-1, 1]^4. Opt-in (``make_env(normalize_actions=True)``); the
+    training env's default action space is the paper's raw box.
+    """
+
+    def __init__(self, constrain_aim: bool = False):
+        super().__init__()
+        self.constrain_aim = bool(constrain_aim)
+
+    def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = tensordict.get("action", None)
+        if action is None:
+            if self.missing_tolerance:
+                return tensordict
+            raise KeyError('NormalizedActions needs "action" in the input tensordict')
+        x = validate_action(_np(action), (*tensordict.batch_size, domain.ACTION_DIM))
+        tensordict.set("action", torch.from_numpy(domain.unnormalize_action(x, self.constrain_aim)))
+        return tensordict
+
+    def transform_input_spec(self, input_spec: Composite) -> Composite:
+        input_spec = input_spec.clone()
+        spec = input_spec["full_action_spec", "action"]
+        low, high = domain.action_bounds(self.constrain_aim)
+        below = (_np(spec.space.low).reshape(-1, domain.ACTION_DIM), _np(spec.space.high).reshape(-1, domain.ACTION_DIM))
+        if not (np.allclose(below[0], low, atol=1e-6) and np.allclose(below[1], high, atol=1e-6)):
+            raise ValueError(
+                f"NormalizedActions(constrain_aim={self.constrain_aim}) maps onto the action bounds {low.tolist()} .. "
+                f"{high.tolist()}, but the env below it has {below[0][0].tolist()} .. {below[1][0].tolist()}: "
+                "with AimConstraint, pass constrain_aim=True and put NormalizedActions after it"
+            )
+        ones = torch.ones_like(spec.space.high)
+        input_spec["full_action_spec", "action"] = Bounded(-ones, ones, shape=spec.shape, dtype=spec.dtype, device=spec.device)
         return input_spec
 
 
@@ -98,7 +141,7 @@ class CaromFeatures(Transform):
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
         obs = next_tensordict.get("observation")
-        feats = domain.carom_features(_np(next_tensordict.get("positions"))).astype(np.float32)
+        feats = domain.carom_features(exact_positions(next_tensordict)).astype(np.float32)
         next_tensordict.set("observation", torch.cat([obs, torch.from_numpy(feats)], dim=-1))
         return next_tensordict
 
@@ -152,7 +195,7 @@ class GentleShotBonus(_RewardTerm):
         score = _np(next_tensordict.get("score"))
         if self.kind == "power":
             return domain.gentle_power_bonus(score, _np(tensordict.get("action"))[..., 1:2], self.beta)
-        bonus = domain.gentle_bonus(score[..., 0], _np(next_tensordict.get("positions")),
+        bonus = domain.gentle_bonus(score[..., 0], exact_positions(next_tensordict),
                                     _np(next_tensordict.get("second_red"))[..., 0], self.beta)
         return bonus[..., None]
 
@@ -197,7 +240,7 @@ class RewardModelBonus(_RewardTerm):
             warn_physics_mismatch("the reward model", self.model.params, params)
 
     def _term(self, tensordict, next_tensordict):
-        positions = _np(tensordict.get("positions")).astype(np.float64)
+        positions = exact_positions(tensordict)
         action = _np(tensordict.get("action")).astype(np.float64)
         return self.beta * self.model.prob(positions, action)
 
@@ -210,6 +253,7 @@ def make_env(
     paradigm: str | None = None,
     max_shots: int = 10,
     constrain_aim: bool = False,
+    normalize_actions: bool = False,
     extra_features: bool = False,
     foul_penalty: float = 0.0,
     gentle: float = 0.0,
@@ -232,6 +276,8 @@ def make_env(
             ``"canonical-continue"`` or ``"canonical-reset"``; explicit start/on_miss must agree.
         max_shots: shots per inning before truncation (default 10).
         constrain_aim: add :class:`AimConstraint` (action[0] is u in [-1, 1]).
+        normalize_actions: add :class:`NormalizedActions` (the policy acts in [-1, 1]^4, as in
+            the gymnasium env); off by default, the training env acts in the raw box.
         extra_features: add :class:`CaromFeatures` (observation 28 -> 32).
         foul_penalty: c of :class:`FoulPenalty` (reward -= c * foul); 0 disables it.
         gentle: beta of :class:`GentleShotBonus` (the paper: 0.2); 0 disables it.
@@ -263,6 +309,8 @@ def make_env(
     transforms: list[Transform] = []
     if constrain_aim:
         transforms.append(AimConstraint(params.ball_radius))
+    if normalize_actions:
+        transforms.append(NormalizedActions(constrain_aim))
     if extra_features:
         transforms.append(CaromFeatures())
     if foul_penalty:
@@ -278,4 +326,4 @@ def make_env(
     return TransformedEnv(base, Compose(*transforms))
 
 
-__all__ = ["AimConstraint", "CaromFeatures", "FoulPenalty", "GentleShotBonus", "NearMissBonus", "RewardModelBonus", "make_env"]
+__all__ = ["AimConstraint", "CaromFeatures", "NormalizedActions", "FoulPenalty", "GentleShotBonus", "NearMissBonus", "RewardModelBonus", "make_env"]
