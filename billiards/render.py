@@ -176,11 +176,16 @@ def render_shot(
     return result
 
 
-def table_rgb_array(positions, params: PhysicsParams = DEFAULT_PARAMS, dpi: int = 60) -> np.ndarray:
-    """An (H, W, 3) uint8 image of the table with the balls at ``positions``."""
+def table_rgb_array(positions, params: PhysicsParams = DEFAULT_PARAMS, dpi: int = 60, last_shot=None) -> np.ndarray:
+    """An (H, W, 3) uint8 image of the table with the balls at ``positions``; with
+    ``last_shot = (positions_before, raw_action)`` the shot that led there, drawn as by
+    :func:`draw_shot` (ball paths, the balls where they started, faint, and where they stopped)."""
     fig, ax = _figure(params, dpi=dpi)
-    draw_table(ax, params)
-    draw_balls(ax, np.asarray(positions, dtype=np.float64), params)
+    if last_shot is None:
+        draw_table(ax, params)
+        draw_balls(ax, np.asarray(positions, dtype=np.float64), params)
+    else:
+        draw_shot(ax, *last_shot, params=params)
     fig.canvas.draw()
     image = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
     plt.close(fig)

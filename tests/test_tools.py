@@ -178,3 +178,58 @@ def test_table_not_float64_is_refused_and_a_new_table_wins_over_stale_bits():
     stale = td.clone().set("positions", torch.from_numpy(new))  # bits still of the old table
     out = env.step(stale)["next", "positions"].numpy()
     np.testing.assert_array_equal(out, simulate_batch(new, td["action"].numpy().astype(np.float64)).positions)
+
+
+# ----------------------------------------------------------------------------- spec and rendering
+
+
+@pytest.mark.parametrize(
+    "physics",
+    [None, "international", {"preset": "international", "u_roll": 0.02}, DEFAULT_PARAMS.__class__(u_roll=0.012)],
+)
+def test_gym_spec_round_trips_through_json_with_any_physics(physics):
+    kwargs = {} if physics is None else {"physics": physics}
+    env = gym.make(GYM_ID, max_shots=3, **kwargs)
+    spec = gym.envs.registration.EnvSpec.from_json(env.spec.to_json())
+    again = gym.make(spec)
+    assert again.unwrapped.params == env.unwrapped.params and again.unwrapped.max_shots == 3
+    # the same physics: the same shot from the same table
+    pos = env.reset(seed=0)[1]["positions"]
+    again.reset(options={"positions": pos})
+    x = np.array([0.3, 0.4, 0.1, -0.2], dtype=np.float32)
+    np.testing.assert_array_equal(env.step(x)[-1]["positions"], again.step(x)[-1]["positions"])
+    if physics is not None:
+        assert gym.make(GYM_ID, params=physics).spec.to_json()  # the older spelling too
+
+
+def test_human_render_names_the_missing_dependency(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pygame", None)  # as if not installed
+    with pytest.raises(gym.error.DependencyNotInstalled, match=r"pygame.*billiards\[render\]"):
+        Billiards4BallInningEnv(render_mode="human")
+
+
+def test_human_render_shows_frames(monkeypatch):
+    pygame = pytest.importorskip("pygame")
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    env = Billiards4BallInningEnv(render_mode="human")
+    env.reset(seed=0)
+    env.step(np.zeros(4, dtype=np.float32))
+    shown = pygame.surfarray.array3d(pygame.display.get_surface()).swapaxes(0, 1)
+    env.unwrapped.render_mode = "rgb_array"
+    frame = env.render()
+    assert shown.shape == frame.shape
+    assert (shown == frame).all(-1).mean() > 0.98  # the frame (up to the display's colour conversion)
+    env.close()
+
+
+def test_rgb_array_shows_the_last_shot():
+    from billiards.render import table_rgb_array
+
+    env = Billiards4BallInningEnv(render_mode="rgb_array")
+    env.reset(seed=0)
+    np.testing.assert_array_equal(env.render(), table_rgb_array(env.positions, env.params))  # balls at rest
+    env.step(np.array([0.2, 0.5, 0.0, 0.0], dtype=np.float32))
+    after = env.render()
+    still = table_rgb_array(env.positions, env.params)  # the same rest table without the shot
+    assert after.shape == still.shape
+    assert (np.abs(after.astype(int) - still.astype(int)).sum(-1) > 60).sum() > 200  # the paths and start balls

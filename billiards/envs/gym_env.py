@@ -13,6 +13,7 @@ mean exactly what they mean in :func:`billiards.envs.make_env`.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import ClassVar
 
 import gymnasium as gym
@@ -80,7 +81,8 @@ class Billiards4BallInningEnv(gym.Env):
     reset the per-shot entries read "no shot yet": False, -1 and zeros.
     """
 
-    metadata: ClassVar[dict] = {"render_modes": ["rgb_array"], "render_fps": 2}
+    metadata: ClassVar[dict] = {"render_modes": ["rgb_array", "human"], "render_fps": 2}
+    _spec: gym.envs.registration.EnvSpec | None = None
 
     def __init__(
         self,
@@ -104,8 +106,10 @@ class Billiards4BallInningEnv(gym.Env):
             raise ValueError("give the physics once: physics= (or its older spelling params=), not both")
         params = get_params(physics if physics is not None else params)
         self.max_shots = check_inning_options(start, on_miss, max_shots)
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
+        self._window = _open_window() if render_mode == "human" else None
+        self._last_shot = None
         self.start, self.on_miss, self.params, self.render_mode = start, on_miss, params, render_mode
         self.constrain_aim, self.extra_features = bool(constrain_aim), bool(extra_features)
         self.normalize_actions = bool(normalize_actions)
@@ -150,6 +154,21 @@ class Billiards4BallInningEnv(gym.Env):
         return obs
 
     @property
+    def spec(self):
+        """The EnvSpec ``gym.make`` set, with the physics in JSON-able form (a preset's name, or
+        the dict of all fields), so that ``EnvSpec.to_json()`` and ``gym.make(spec)`` work for
+        any physics."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, spec) -> None:
+        if spec is not None and ("physics" in spec.kwargs or "params" in spec.kwargs):
+            kwargs = {k: v for k, v in spec.kwargs.items() if k != "params"}
+            kwargs["physics"] = self.params.preset_name() or self.params.to_dict()
+            spec = dataclasses.replace(spec, kwargs=kwargs)
+        self._spec = spec
+
+    @property
     def positions(self) -> np.ndarray:
         """The current table, (4, 2) float64 (a copy)."""
         return self._positions.copy()
@@ -167,7 +186,9 @@ class Billiards4BallInningEnv(gym.Env):
             self._positions = pos.copy()
         else:
             self._positions = initial_racks(self.np_random, self.start, 1, self.params)[0]
-        self._shot = 0
+        self._shot, self._last_shot = 0, None
+        if self.render_mode == "human":
+            self.render()
         return self._obs(), self._info()
 
     def _raw_action(self, action) -> np.ndarray:
@@ -210,6 +231,7 @@ class Billiards4BallInningEnv(gym.Env):
     def step(self, action):
         act = self._raw_action(action)
         res = simulate_batch(self._positions[None], act[None], self.params)
+        self._last_shot = (self._positions, act)
         self._positions = res.positions[0]
         self._shot += 1
         reward = domain.shaped_reward(res.score, res.foul, act[None, 1], res.hits, res.closest,
@@ -218,8 +240,54 @@ class Billiards4BallInningEnv(gym.Env):
         return self._obs(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), self._info(res, act)
 
     def render(self):
-        if self.render_mode != "rgb_array":
+        """``rgb_array``: an (H, W, 3) uint8 frame of the table, with the last shot's ball paths
+        after a step; ``human``: the same frame in a pygame window (drawn on reset and step)."""
+        if self.render_mode is None:
             return None
         from billiards.render import table_rgb_array
 
-        return table_rgb_array(self._positions, self.params)
+        frame = table_rgb_array(self._positions, self.params, last_shot=self._last_shot)
+        if self.render_mode == "rgb_array":
+            return frame
+        self._window.show(frame)
+        return None
+
+    def close(self):
+        if getattr(self, "_window", None) is not None:
+            self._window.close()
+            self._window = None
+        super().close()
+
+
+class _Window:
+    """A pygame window showing rgb frames (``render_mode="human"``)."""
+
+    def __init__(self, pygame):
+        self.pygame, self.screen = pygame, None
+
+    def show(self, frame: np.ndarray) -> None:
+        pg = self.pygame
+        if self.screen is None:
+            pg.display.init()
+            pg.display.set_caption("Billiards4Ball-v0")
+            self.screen = pg.display.set_mode((frame.shape[1], frame.shape[0]))
+        pg.event.pump()
+        self.screen.blit(pg.surfarray.make_surface(frame.swapaxes(0, 1)), (0, 0))
+        pg.display.flip()
+
+    def close(self) -> None:
+        if self.screen is not None:
+            self.pygame.display.quit()
+            self.screen = None
+
+
+def _open_window() -> _Window:
+    """The human-render window, or an error naming the optional dependency it needs."""
+    try:
+        import pygame
+    except ImportError:
+        raise gym.error.DependencyNotInstalled(
+            'render_mode="human" needs pygame, an optional dependency: pip install "billiards[render]" '
+            '(or pip install pygame); render_mode="rgb_array" needs nothing more'
+        ) from None
+    return _Window(pygame)
