@@ -192,7 +192,7 @@ def test_physics_reaches_the_envs_the_verifier_and_the_rm_data(tmp_path):
     expect = simulate_batch(np.repeat(rack[None], 16, 0), td["action"].double().numpy(), I).positions
     np.testing.assert_array_equal(out, expect)
 
-    genv = gym.make("Billiards4Ball-v0", physics="international")
+    genv = gym.make("Billiards4Ball-v0", physics="international", normalize_actions=False)  # raw actions
     assert genv.unwrapped.params is I
     genv.reset(options={"positions": rack})
     info = genv.step(acts[0].astype(np.float32))[4]
