@@ -86,6 +86,7 @@ def main() -> None:
     sys.path.insert(0, str(ROOT))
     from billiards.provenance import git_commit
 
+    commit = git_commit()  # before the runs: the code they measure
     roots = {"before": str(Path(args.before).resolve()), "after": str(ROOT)}
     runs = {(label, mode): [] for label in roots for mode in MODES}
     for _ in range(args.repeats):
@@ -101,10 +102,10 @@ def main() -> None:
         for label, m in (("before", b), ("after", a)):
             rows.append(f"| {mode} | {label} | {m['import_s']:.2f} | {m['torch_loaded']} | {m['start_method']} "
                         f"| {m['start_s']:.2f} | {m['steps_per_s']:.0f} |")
-        rows.append(f"| {mode} | after/before | {a['import_s'] / b['import_s']:.2f}x | | | {a['start_s'] / b['start_s']:.2f}x "
-                    f"| {a['steps_per_s'] / b['steps_per_s']:.2f}x |")
+        rows.append(f"| {mode} | after/before | {a['import_s'] / b['import_s']:.3g}x | | | {a['start_s'] / b['start_s']:.3g}x "
+                    f"| {a['steps_per_s'] / b['steps_per_s']:.3g}x |")
     OUT.mkdir(parents=True, exist_ok=True)
-    record = dict(command=command, commit=git_commit(), repeats=args.repeats, steps=args.steps,
+    record = dict(command=command, commit=commit, repeats=args.repeats, steps=args.steps,
                   runs={f"{k[0]}/{k[1]}": v for k, v in runs.items()})
     (OUT / "gym_vector.json").write_text(json.dumps(record, indent=2) + "\n")
     text = [
