@@ -34,10 +34,10 @@ import torch
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # this checkout's billiards, not another installed one
 
-import billiards.envs  # noqa: F401  (registers Billiards4Ball-v0)
-from billiards.baselines import random_policy
-from billiards.evaluation import evaluate, numpy_policy
-from billiards.provenance import git_commit
+import billiards.envs  # noqa: F401, E402  (registers Billiards4Ball-v0)
+from billiards.baselines import random_policy  # noqa: E402
+from billiards.evaluation import evaluate, numpy_policy  # noqa: E402
+from billiards.provenance import git_commit  # noqa: E402
 
 OUT = ROOT / "results" / "sb3"
 ALGOS = ("ppo", "sac")

@@ -326,4 +326,5 @@ def make_env(
     return TransformedEnv(base, Compose(*transforms))
 
 
-__all__ = ["AimConstraint", "CaromFeatures", "NormalizedActions", "FoulPenalty", "GentleShotBonus", "NearMissBonus", "RewardModelBonus", "make_env"]
+__all__ = ["AimConstraint", "CaromFeatures", "NormalizedActions",
+           "FoulPenalty", "GentleShotBonus", "NearMissBonus", "RewardModelBonus", "make_env"]
