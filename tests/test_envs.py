@@ -202,6 +202,8 @@ def test_gym_shaping_and_constraint_match_domain():
         dict(near_miss=0.05),
         ALL_LAYERS,
         dict(ALL_LAYERS, paradigm="canonical-reset"),
+        dict(normalize_actions=True),
+        dict(ALL_LAYERS, normalize_actions=True),
     ],
 )
 def test_check_env_specs(layers):
@@ -209,8 +211,10 @@ def test_check_env_specs(layers):
     check_env_specs(env, seed=0)
     assert env.action_spec_unbatched.shape == (4,)
     expected_low = [-1.0 if layers.get("constrain_aim") else 0.0, 0.0, -1.0, -1.0]
-    np.testing.assert_array_equal(env.action_spec_unbatched.space.low.numpy(), expected_low)
     expected_high = [1.0 if layers.get("constrain_aim") else np.float32(2 * math.pi), 1.0, 1.0, 1.0]
+    if layers.get("normalize_actions"):
+        expected_low, expected_high = [-1.0] * 4, [1.0] * 4
+    np.testing.assert_array_equal(env.action_spec_unbatched.space.low.numpy(), expected_low)
     np.testing.assert_array_equal(env.action_spec_unbatched.space.high.numpy(), np.float32(expected_high))
     assert env.observation_spec["observation"].shape == (4, 32 if layers.get("extra_features") else 28)
 

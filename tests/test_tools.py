@@ -7,6 +7,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -114,6 +115,23 @@ def test_normalised_action_space_maps_to_the_documented_shot():
     assert raw.action_space.high[0] == np.float32(2 * math.pi) and raw.action_space.low[1] == 0
     with pytest.raises(ValueError, match=r"normalised.*\[-1, 1\]"):
         env.step(np.array([0.0, 1.5, 0.0, 0.0]))
+
+
+def test_gymnasium_and_sb3_checkers_have_no_advice_for_the_default_env():
+    from gymnasium.utils.env_checker import check_env
+
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+
+    def advice(env):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            check_env(env)
+            sb3_checker.check_env(env)
+        return [str(w.message) for w in caught]
+
+    assert advice(gym.make(GYM_ID).unwrapped) == []
+    assert advice(gym.make(GYM_ID, constrain_aim=True, extra_features=True).unwrapped) == []
+    assert any("symmetric and normalized Box" in m for m in advice(gym.make(GYM_ID, normalize_actions=False).unwrapped))
 
 
 def test_torchrl_normalized_actions_transform_plays_the_same_shots():
