@@ -95,7 +95,8 @@ def table() -> None:
         if not path.exists():
             continue
         rec = json.loads(path.read_text())
-        commands.append(f"- {name}: `{rec['command']}` (commit `{rec['commit']}`)")
+        cut = "" if name == "random" or rec.get("done") else f"; cut at {rec['evals'][-1]['steps']} of {rec['steps']} steps"
+        commands.append(f"- {name}: `{rec['command']}` (commit `{rec['commit']}`{cut})")
         for e in rec.get("evals", []):
             rows.append(
                 f"| {name} | {e['steps']} | {e.get('train_seconds', '')} | {e['mean']:.3f} ± {e['std']:.3f} | {e['best']} "
