@@ -43,9 +43,9 @@ OUT = ROOT / "results" / "sb3"
 ALGOS = ("ppo", "sac")
 
 
-def evaluate_model(model) -> dict:
+def evaluate_model(model, normalized: bool = True) -> dict:
     """The project's protocol on the model's deterministic action."""
-    result = evaluate(numpy_policy(lambda obs: model.predict(obs, deterministic=True)[0]))
+    result = evaluate(numpy_policy(lambda obs: model.predict(obs, deterministic=True)[0], normalized=normalized))
     return {k: v for k, v in result.__dict__.items() if k != "points"}
 
 
@@ -54,12 +54,12 @@ def write(record: dict) -> None:
     (OUT / f"{record['algo']}.json").write_text(json.dumps(record, indent=2) + "\n")
 
 
-def train(algo: str, steps: int, seed: int, eval_every: int, record: dict) -> None:
+def train(algo: str, steps: int, seed: int, eval_every: int, record: dict, raw: bool = False) -> None:
     import stable_baselines3 as sb3
     from stable_baselines3.common.callbacks import BaseCallback
 
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC}[algo]
-    env = gym.make("Billiards4Ball-v0")
+    env = gym.make("Billiards4Ball-v0", normalize_actions=not raw)
     model = cls("MlpPolicy", env, seed=seed, verbose=0, device="cpu")
     record.update(sb3_version=sb3.__version__, evals=[])
     ckpt = ROOT / "outputs" / "sb3"
@@ -67,10 +67,10 @@ def train(algo: str, steps: int, seed: int, eval_every: int, record: dict) -> No
     start = time.time()
 
     def checkpoint(n: int) -> None:
-        entry = dict(steps=n, train_seconds=round(time.time() - start, 1), **evaluate_model(model))
+        entry = dict(steps=n, train_seconds=round(time.time() - start, 1), **evaluate_model(model, not raw))
         record["evals"].append(entry)
         write(record)
-        model.save(ckpt / f"{algo}_seed{seed}_{n}")
+        model.save(ckpt / f"{record['algo']}_seed{seed}_{n}")
         print(f"[{algo}] {n} steps, {entry['train_seconds']} s: {entry['mean']:.3f} points/inning", flush=True)
 
     class EvalEvery(BaseCallback):
@@ -90,7 +90,7 @@ def train(algo: str, steps: int, seed: int, eval_every: int, record: dict) -> No
 def table() -> None:
     """results/sb3/README.md from the JSON files."""
     rows, commands = [], []
-    for name in ("random", *ALGOS):
+    for name in ("random", *ALGOS, *(a + "_raw" for a in ALGOS)):
         path = OUT / f"{name}.json"
         if not path.exists():
             continue
@@ -130,6 +130,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=100_000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--eval-every", type=int, default=20_000)
+    ap.add_argument("--raw", action="store_true", help="the paper's raw action box (normalize_actions=False), for comparison")
     ap.add_argument("--table", action="store_true", help="only rebuild results/sb3/README.md")
     args = ap.parse_args()
     if args.table:
@@ -138,14 +139,14 @@ def main() -> None:
         ap.error("--algo is required (or --table)")
     torch.set_num_threads(1)
     command = "python " + " ".join(shlex.quote(a) for a in sys.argv)
-    record = dict(algo=args.algo, command=command, commit=git_commit(), seed=args.seed, steps=args.steps)
+    record = dict(algo=args.algo + ("_raw" if args.raw and args.algo != "random" else ""), command=command, commit=git_commit(), seed=args.seed, steps=args.steps)
     if args.algo == "random":
         result = evaluate(random_policy(seed=args.seed))
         record["evals"] = [dict(steps=0, **{k: v for k, v in result.__dict__.items() if k != "points"})]
         write(record)
         print(result.summary())
     else:
-        train(args.algo, args.steps, args.seed, args.eval_every, record)
+        train(args.algo, args.steps, args.seed, args.eval_every, record, raw=args.raw)
     table()
 
 
