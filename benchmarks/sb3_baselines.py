@@ -109,7 +109,9 @@ def table() -> None:
         "`gym.make(\"Billiards4Ball-v0\")` (korean_medium table, random racks, continue-on-miss, 10-shot innings,",
         "normalised [-1, 1]^4 actions, raw carom reward), one seed, evaluated with the project's protocol",
         "(`billiards.evaluation.evaluate`: 100 innings x 10 shots, racks from seed 0, deterministic action).",
-        "Two shared CPU cores, `OMP_NUM_THREADS=1`; train_seconds is wall time including the evaluations.",
+        "Two shared CPU cores, `OMP_NUM_THREADS=1`; train_seconds is wall time including the evaluations, and depends",
+        "on the load other jobs put on the machine (high during the ppo and sac runs, low during ppo_raw).",
+        "`ppo_raw`: the same PPO on the paper's raw box (`normalize_actions=False`, `--raw`), for comparison.",
         "",
         "| policy | env steps | train s | points/inning | best | foul inn. (%) | foul/shot (%) | success/shot (%) |",
         "|---|---|---|---|---|---|---|---|",
@@ -119,6 +121,9 @@ def table() -> None:
         "",
         *commands,
         "- this table: `python benchmarks/sb3_baselines.py --table`",
+        "",
+        "`+dirty`: `billiards/` had uncommitted edits when the run started (see the commit that follows the named one).",
+        "A commit that is no longer on the branch was rebased; its change is the commit of the same message.",
         "",
     ]
     (OUT / "README.md").write_text("\n".join(text))
@@ -139,7 +144,8 @@ def main() -> None:
         ap.error("--algo is required (or --table)")
     torch.set_num_threads(1)
     command = "python " + " ".join(shlex.quote(a) for a in sys.argv)
-    record = dict(algo=args.algo + ("_raw" if args.raw and args.algo != "random" else ""), command=command, commit=git_commit(), seed=args.seed, steps=args.steps)
+    name = args.algo + ("_raw" if args.raw and args.algo != "random" else "")
+    record = dict(algo=name, command=command, commit=git_commit(), seed=args.seed, steps=args.steps)
     if args.algo == "random":
         result = evaluate(random_policy(seed=args.seed))
         record["evals"] = [dict(steps=0, **{k: v for k, v in result.__dict__.items() if k != "points"})]
