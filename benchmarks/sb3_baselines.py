@@ -96,7 +96,8 @@ def table() -> None:
             continue
         rec = json.loads(path.read_text())
         cut = "" if name == "random" or rec.get("done") else f"; cut at {rec['evals'][-1]['steps']} of {rec['steps']} steps"
-        commands.append(f"- {name}: `{rec['command']}` (commit `{rec['commit']}`{cut})")
+        note = f": {rec['commit_note']}" if rec.get("commit_note") else ""
+        commands.append(f"- {name}: `{rec['command']}` (commit `{rec['commit']}`{note}{cut})")
         for e in rec.get("evals", []):
             rows.append(
                 f"| {name} | {e['steps']} | {e.get('train_seconds', '')} | {e['mean']:.3f} ± {e['std']:.3f} | {e['best']} "
@@ -122,8 +123,7 @@ def table() -> None:
         *commands,
         "- this table: `python benchmarks/sb3_baselines.py --table`",
         "",
-        "`+dirty`: `billiards/` had uncommitted edits when the run started (see the commit that follows the named one).",
-        "A commit that is no longer on the branch was rebased; its change is the commit of the same message.",
+        "`+dirty`: `billiards/` had uncommitted edits when the run started.",
         "",
     ]
     (OUT / "README.md").write_text("\n".join(text))
