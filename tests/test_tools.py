@@ -61,6 +61,9 @@ def test_gym_info_has_the_same_numpy_keys_on_reset_and_step():
         assert np.shape(info0[key]) == np.shape(info1[key]), key
     assert not info0["score"] and info0["first_contact"] == -1 and info0["shot"] == 0
     assert info1["shot"] == 1 and info1["n_events"] > 0
+    envs = gym.make_vec(GYM_ID, num_envs=2, vectorization_mode="sync")  # stacks typed arrays, not objects
+    for info in (envs.reset(seed=0)[1], envs.step(np.zeros((2, 4), dtype=np.float32))[-1]):
+        assert info["score"].dtype == bool and info["hits"].shape == (2, 3) and info["positions"].dtype == np.float64
 
 
 def test_torchrl_gymenv_reads_score_and_foul_from_info():

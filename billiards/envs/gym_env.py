@@ -74,7 +74,8 @@ class Billiards4BallInningEnv(gym.Env):
 
     ``info``: the same keys after a reset and after a step (:data:`INFO_KEYS`), numpy values,
     so TorchRL's ``GymEnv(...).auto_register_info_dict()`` can read them: score, foul, miss
-    (bool), first_contact, second_red (int64; -1 for none), hits (3,) bool (yellow, red1, red2),
+    (0-d bool arrays: gymnasium's vector envs stack np.bool_ scalars as object arrays),
+    first_contact, second_red (int64; -1 for none), hits (3,) bool (yellow, red1, red2),
     closest (2,) float64 (gap to red1, red2 in m), cushions, n_events, shot (shots played)
     (int64), positions (4, 2) float64 (the exact table), theta (float64, the aim actually
     played) and raw_action (4,) float64 (the (theta, p, a, b) the simulator played). After a
@@ -203,19 +204,21 @@ class Billiards4BallInningEnv(gym.Env):
         return act
 
     def _info(self, res=None, act=None) -> dict:
-        """The info dict: the same keys and dtypes after reset (res None: "no shot yet") and step."""
+        """The info dict: the same keys and dtypes after reset (res None: "no shot yet") and step.
+        The flags are 0-d bool arrays, not np.bool_, which is no np.number: gymnasium's vector
+        envs would stack it into an object array."""
         if res is None:
             return {
-                "score": np.False_, "foul": np.False_, "miss": np.False_,
+                "score": np.array(False), "foul": np.array(False), "miss": np.array(False),
                 "first_contact": np.int64(-1), "second_red": np.int64(-1),
                 "hits": np.zeros(3, dtype=bool), "closest": np.zeros(2), "cushions": np.int64(0),
                 "n_events": np.int64(0), "shot": np.int64(self._shot), "positions": self.positions,
                 "theta": np.float64(0.0), "raw_action": np.zeros(domain.ACTION_DIM),
             }
         return {
-            "score": np.bool_(res.score[0]),
-            "foul": np.bool_(res.foul[0]),
-            "miss": np.bool_(res.miss[0]),
+            "score": np.array(bool(res.score[0])),
+            "foul": np.array(bool(res.foul[0])),
+            "miss": np.array(bool(res.miss[0])),
             "first_contact": np.int64(res.first_contact[0]),
             "second_red": np.int64(res.second_red[0]),
             "hits": res.hits[0].astype(bool),
