@@ -116,7 +116,7 @@ def main() -> None:
         "",
         "`gymnasium.make_vec(\"Billiards4Ball-v0\", num_envs=2, vectorization_mode=mode)`, each figure the median of",
         f"{args.repeats} fresh interpreters run alternately; steps/s are env steps over {args.steps} vector steps of",
-        "random actions after 50 warm-up steps; start s is make_vec plus the first reset. Two shared CPU cores (other jobs running).",
+        "random actions after 50 warm-up steps; start s is make_vec plus the first reset. Two shared CPU cores.",
         "",
         "| mode | checkout | import s | torch loaded | start method | start s | steps/s |",
         "|---|---|---|---|---|---|---|",
