@@ -60,3 +60,69 @@ def test_bad_noise_is_refused_naming_the_field():
     with pytest.raises(ValueError, match=r"unknown noise field\(s\) \['sigma_v'\]"):
         get_noise({"sigma_v": 0.1})
     assert get_noise({"sigma_aim_deg": 0.125, "sigma_speed": 0.075, "sigma_tip_mm": 0.5}) == NOISE_PRESETS["fastfiz"]
+
+
+def _rollout(env, actions):
+    import torch
+
+    td = env.reset()
+    out = []
+    for a in actions:
+        td["action"] = torch.as_tensor(a, dtype=torch.float32)
+        step = env.step(td)
+        out.append(step["next"].clone())
+        td = step["next"].select("positions", "positions_bits", "shot", "observation").clone()
+    return out
+
+
+def test_torchrl_env_plays_the_noisy_shot_and_records_it():
+    from torchrl.envs.utils import check_env_specs
+
+    from billiards.envs import make_env
+
+    B = 64
+    acts = np.random.default_rng(6).uniform([0, 0.2, -1, -1], [2 * np.pi, 1, 1, 1], (3, B, 4)).astype(np.float32)
+    exact = _rollout(make_env(B, seed=3), acts)
+    same = _rollout(make_env(B, seed=3, noise="none"), acts)
+    for a, b in zip(exact, same):  # noise off: bit-identical, no extra key
+        assert "played_action" not in b.keys()
+        assert (a == b).all()
+    noisy_env = make_env(B, seed=3, noise="fastfiz")
+    check_env_specs(noisy_env, seed=0)
+    first_reset = make_env(B, seed=3, noise="fastfiz").reset()["positions"]
+    np.testing.assert_array_equal(first_reset.numpy(), make_env(B, seed=3).reset()["positions"].numpy())  # racks unchanged
+    noisy = _rollout(make_env(B, seed=3, noise="fastfiz"), acts)
+    again = _rollout(make_env(B, seed=3, noise="fastfiz"), acts)
+    before = make_env(B, seed=3).reset()["positions"].numpy()
+    for t, (n, m) in enumerate(zip(noisy, again)):
+        assert (n == m).all()  # the same seed replays the same noisy inning
+        played = n["played_action"].numpy()
+        assert played.dtype == np.float64 and not np.allclose(played, acts[t].astype(np.float64))
+        np.testing.assert_array_equal(n["positions"].numpy(), simulate_batch(before, played, K).positions)
+        before = n["positions"].numpy()
+
+
+def test_gym_env_records_commanded_and_played_shots_and_replays_from_its_seed():
+    import gymnasium as gym
+
+    import billiards.envs  # noqa: F401
+
+    def inning(noise, seed):
+        env = gym.make("Billiards4Ball-v0", noise=noise, normalize_actions=False)
+        env.reset(seed=seed)
+        rng = np.random.default_rng(9)
+        infos = []
+        for _ in range(5):
+            infos.append(env.step(rng.uniform([0, 0.2, -1, -1], [2 * np.pi, 1, 1, 1]).astype(np.float32))[4])
+        return infos
+
+    plain = inning(None, 1)
+    assert all(np.array_equal(i["raw_action"], i["commanded_action"]) for i in plain)
+    noisy, again = inning("fastfiz_x5", 1), inning("fastfiz_x5", 1)
+    for i, j, p in zip(noisy, again, plain):
+        np.testing.assert_array_equal(i["raw_action"], j["raw_action"])
+        np.testing.assert_array_equal(i["commanded_action"], p["commanded_action"])
+        assert not np.array_equal(i["raw_action"], i["commanded_action"])
+    assert not np.array_equal(noisy[0]["raw_action"], inning("fastfiz_x5", 2)[0]["raw_action"])
+    with pytest.raises(ValueError, match="unknown noise preset"):
+        gym.make("Billiards4Ball-v0", noise="loud")

@@ -27,6 +27,8 @@ from billiards.physics import (
     simulate_batch,
 )
 
+from billiards.physics.noise import NoiseModel, get_noise
+
 from ._common import (
     check_inning_options,
     initial_racks,
@@ -36,7 +38,7 @@ from ._common import (
 
 
 INFO_KEYS = ("score", "foul", "miss", "first_contact", "second_red", "hits", "closest", "cushions",
-             "n_events", "shot", "positions", "theta", "raw_action")
+             "n_events", "shot", "positions", "theta", "raw_action", "commanded_action")
 
 
 class Billiards4BallInningEnv(gym.Env):
@@ -78,8 +80,14 @@ class Billiards4BallInningEnv(gym.Env):
     first_contact, second_red (int64; -1 for none), hits (3,) bool (yellow, red1, red2),
     closest (2,) float64 (gap to red1, red2 in m), cushions, n_events, shot (shots played)
     (int64), positions (4, 2) float64 (the exact table), theta (float64, the aim actually
-    played) and raw_action (4,) float64 (the (theta, p, a, b) the simulator played). After a
-    reset the per-shot entries read "no shot yet": False, -1 and zeros.
+    played) and raw_action (4,) float64 (the (theta, p, a, b) the simulator played), and
+    commanded_action (4,) float64 (the raw shot the agent asked for: raw_action unless execution
+    noise perturbed it). After a reset the per-shot entries read "no shot yet": False, -1 and zeros.
+
+    Execution noise: ``noise`` is a preset name (``"none"``, the default, ``"fastfiz"``,
+    ``"fastfiz_x5"``), a :class:`~billiards.physics.noise.NoiseModel` or a dict of sigmas
+    (:func:`billiards.physics.noise.get_noise`); the played shot is the commanded one perturbed
+    by it, drawn from the env's ``np_random`` (``reset(seed=s)`` replays the same noisy inning).
     """
 
     metadata: ClassVar[dict] = {"render_modes": ["rgb_array", "human"], "render_fps": 2}
@@ -102,7 +110,9 @@ class Billiards4BallInningEnv(gym.Env):
         physics: PhysicsParams | str | dict | None = None,
         params: PhysicsParams | str | dict | None = None,
         render_mode: str | None = None,
+        noise: NoiseModel | str | dict | None = None,
     ):
+        self.noise = get_noise(noise)
         if physics is not None and params is not None:
             raise ValueError("give the physics once: physics= (or its older spelling params=), not both")
         params = get_params(physics if physics is not None else params)
@@ -203,7 +213,7 @@ class Billiards4BallInningEnv(gym.Env):
             act[0] = domain.constrained_theta(self._positions, act[0], self.params.ball_radius)
         return act
 
-    def _info(self, res=None, act=None) -> dict:
+    def _info(self, res=None, act=None, commanded=None) -> dict:
         """The info dict: the same keys and dtypes after reset (res None: "no shot yet") and step.
         The flags are 0-d bool arrays, not np.bool_, which is no np.number: gymnasium's vector
         envs would stack it into an object array."""
@@ -214,6 +224,7 @@ class Billiards4BallInningEnv(gym.Env):
                 "hits": np.zeros(3, dtype=bool), "closest": np.zeros(2), "cushions": np.int64(0),
                 "n_events": np.int64(0), "shot": np.int64(self._shot), "positions": self.positions,
                 "theta": np.float64(0.0), "raw_action": np.zeros(domain.ACTION_DIM),
+                "commanded_action": np.zeros(domain.ACTION_DIM),
             }
         return {
             "score": np.array(bool(res.score[0])),
@@ -229,10 +240,12 @@ class Billiards4BallInningEnv(gym.Env):
             "positions": self.positions,
             "theta": np.float64(act[0]),
             "raw_action": act.astype(np.float64),
+            "commanded_action": (act if commanded is None else commanded).astype(np.float64),
         }
 
     def step(self, action):
-        act = self._raw_action(action)
+        commanded = self._raw_action(action)
+        act = self.noise.perturb(commanded, self.np_random, self.params)  # the shot played
         res = simulate_batch(self._positions[None], act[None], self.params)
         self._last_shot = (self._positions, act)
         self._positions = res.positions[0]
@@ -240,7 +253,7 @@ class Billiards4BallInningEnv(gym.Env):
         reward = domain.shaped_reward(res.score, res.foul, act[None, 1], res.hits, res.closest,
                                       res.positions, res.second_red, **self.shaping)
         terminated, truncated = terminated_truncated(res.score, np.array([self._shot]), self.on_miss, self.max_shots)
-        return self._obs(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), self._info(res, act)
+        return self._obs(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), self._info(res, act, commanded)
 
     def render(self):
         """``rgb_array``: an (H, W, 3) uint8 frame of the table, with the last shot's ball paths

@@ -56,6 +56,7 @@ from billiards.domain import (
     OBS_DIM,
     rest_observation,
 )
+from billiards.physics.noise import NoiseModel, get_noise
 from billiards.physics import (
     DEFAULT_PARAMS,
     PhysicsParams,
@@ -119,6 +120,11 @@ class BilliardsEnv(EnvBase):
         max_shots: shot budget of an inning (truncation), default 10.
         params: simulator parameters.
         seed: seed of the numpy Generator that draws racks (see :meth:`set_seed`).
+        noise: execution noise (:func:`billiards.physics.noise.get_noise`: None or ``"none"``,
+            the default, plays the commanded shot exactly; ``"fastfiz"``, ``"fastfiz_x5"``, a
+            NoiseModel or a dict of sigmas perturb it). With noise the output also holds
+            ``"played_action"`` (4,) float64, the shot the simulator played; its random draws
+            come from a generator of their own, seeded with the rack seed (racks are unchanged).
 
     Reset to a given table (``set_state=True`` is TorchRL's explicit form; without it
     TorchRL 0.14 still honours the state with a FutureWarning)::
@@ -142,7 +148,9 @@ class BilliardsEnv(EnvBase):
         max_shots: int = 10,
         params: PhysicsParams = DEFAULT_PARAMS,
         seed: int | None = None,
+        noise: NoiseModel | str | dict | None = None,
     ):
+        self.noise = get_noise(noise)
         if isinstance(batch_size, int):
             batch_size = [batch_size]
         batch_size = torch.Size(batch_size)
@@ -178,6 +186,8 @@ class BilliardsEnv(EnvBase):
             n_events=Unbounded(shape=(*B, 1), dtype=torch.int64),
             shape=B,
         )
+        if not self.noise.is_exact:
+            self.observation_spec["played_action"] = Unbounded(shape=(*B, ACTION_DIM), dtype=torch.float64)
         self.state_spec = Composite(positions=positions.clone(), positions_bits=bits.clone(), shot=shot.clone(), shape=B)
         self.action_spec = Bounded(
             torch.as_tensor(ACTION_LOW, dtype=torch.float32).expand(*B, ACTION_DIM),
@@ -193,8 +203,10 @@ class BilliardsEnv(EnvBase):
     # ------------------------------------------------------------------ seeding
 
     def _set_seed(self, seed: int | None) -> None:
-        """Racks are drawn from ``numpy.random.default_rng(seed)``; same seed, same racks."""
+        """Racks are drawn from ``numpy.random.default_rng(seed)``; same seed, same racks. The
+        execution noise draws from ``default_rng([seed, 1])``, so it never shifts the racks."""
         self.rng = np.random.default_rng(seed)
+        self.noise_rng = np.random.default_rng(None if seed is None else [seed, 1])
 
     # ------------------------------------------------------------------ step
 
@@ -206,6 +218,10 @@ class BilliardsEnv(EnvBase):
         if positions is None or shot is None:
             raise KeyError('BilliardsEnv.step needs "positions" and "shot" in the input: call env.reset() first')
         shot = shot.detach().numpy().reshape(B) + 1
+        noisy = {}
+        if not self.noise.is_exact:
+            action = self.noise.perturb(action, self.noise_rng, self.params)
+            noisy["played_action"] = action
         result = simulate_batch(positions, action, self.params)
         terminated, truncated = terminated_truncated(result.score, shot, self.on_miss, self.max_shots)
         return self._output(
@@ -222,6 +238,7 @@ class BilliardsEnv(EnvBase):
             hits=result.hits,
             closest=result.closest.astype(np.float32),
             n_events=result.n_events,
+            **noisy,
         )
 
     def _output(self, *, positions, shot, reward=None, terminated, truncated, **info) -> TensorDictBase:
@@ -275,6 +292,7 @@ class BilliardsEnv(EnvBase):
             hits=np.zeros((B, 3), dtype=bool),
             closest=np.zeros((B, 2), dtype=np.float32),
             n_events=np.zeros(B, dtype=np.int64),
+            **({} if self.noise.is_exact else {"played_action": np.zeros((B, ACTION_DIM))}),
         )
 
 

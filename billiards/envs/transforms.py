@@ -264,6 +264,7 @@ def make_env(
     rm_model=None,
     seed: int | None = None,
     params: PhysicsParams | str | dict | None = None,
+    noise=None,
 ) -> TransformedEnv:
     """The environment of every experiment: a :class:`BilliardsEnv` with the chosen layers.
 
@@ -287,6 +288,7 @@ def make_env(
         rm: beta of :class:`RewardModelBonus` (reward += beta * V_rm(s, a)); 0 disables it.
         rm_model: the reward model (a :class:`billiards.rm.RewardModel` or a path), needed if rm.
         seed: seed of the rack generator (``env.set_seed`` re-seeds it).
+        noise: execution noise of the played shots (:class:`BilliardsEnv`; default none).
         params: the physics: a preset name (``"korean_medium"``, the default, or
             ``"international"``), a :class:`~billiards.physics.PhysicsParams`, or a dict of fields
             (:func:`billiards.physics.get_params`).
@@ -305,7 +307,7 @@ def make_env(
         domain.check_coefficient(name, value)  # before anything is built, named as passed
     domain.check_coefficient("near_miss_sigma", near_miss_sigma, strict=True)
     params = get_params(params)
-    base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=max_shots, params=params, seed=seed)
+    base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=max_shots, params=params, seed=seed, noise=noise)
     transforms: list[Transform] = []
     if constrain_aim:
         transforms.append(AimConstraint(params.ball_radius))
