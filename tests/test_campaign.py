@@ -341,6 +341,11 @@ def test_a_run_left_by_a_killed_runner_is_adopted_not_started_twice(tmp_path):
     # a process standing in for the orphaned training run: its command line names the run dir
     orphan = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", f"hydra.run.dir={run_dir}"],
                               start_new_session=True)
+    from billiards.campaign.ledger import pid_alive
+
+    ready = time.time() + 10  # a loaded machine may take a moment to show the new command line
+    while not pid_alive(orphan.pid, run_dir) and time.time() < ready:
+        time.sleep(0.05)
     try:
         (root / LEDGER).write_text(json.dumps({"campaign": "tiny", "runs": {"t1/a/seed0": {
             "args": TINY_ARGS, "starts": [{"commit": "abc1234", "started": "x", "mode": "fresh", "frames": 0}],
