@@ -40,7 +40,26 @@ def _np(x: torch.Tensor) -> np.ndarray:
     return x.detach().cpu().numpy()
 
 
-class AimConstraint(Transform):
+class _ActionMap(Transform):
+    """Maps the policy's action to the one the next layer expects, before the step:
+    ``action <- _map(validated action, tensordict)``; a missing action is an error naming
+    the transform (unless ``missing_tolerance``)."""
+
+    def _map(self, action: np.ndarray, tensordict: TensorDictBase) -> np.ndarray:
+        raise NotImplementedError
+
+    def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = tensordict.get("action", None)
+        if action is None:
+            if self.missing_tolerance:
+                return tensordict
+            raise KeyError(f'{type(self).__name__} needs "action" in the input tensordict')
+        x = validate_action(_np(action), (*tensordict.batch_size, domain.ACTION_DIM))
+        tensordict.set("action", torch.from_numpy(self._map(x, tensordict)))
+        return tensordict
+
+
+class AimConstraint(_ActionMap):
     """First-contact aim constraint (paper §4.1).
 
     The policy's first action coordinate is ``u in [-1, 1]`` instead of theta. Before the
@@ -63,16 +82,9 @@ class AimConstraint(Transform):
         super().__init__()
         self.R = float(R)
 
-    def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase:
-        action = tensordict.get("action", None)
-        if action is None:
-            if self.missing_tolerance:
-                return tensordict
-            raise KeyError('AimConstraint needs "action" in the input tensordict')
-        u_action = validate_action(_np(action), (*tensordict.batch_size, domain.ACTION_DIM))
+    def _map(self, u_action, tensordict):
         u_action[..., 0] = domain.constrained_theta(exact_positions(tensordict), u_action[..., 0], self.R)
-        tensordict.set("action", torch.from_numpy(u_action))
-        return tensordict
+        return u_action
 
     def transform_input_spec(self, input_spec: Composite) -> Composite:
         input_spec = input_spec.clone()
@@ -83,7 +95,7 @@ class AimConstraint(Transform):
         return input_spec
 
 
-class NormalizedActions(Transform):
+class NormalizedActions(_ActionMap):
     """The policy acts in the normalised box [-1, 1]^4, as in the gymnasium env's default.
 
     Before the step the action x becomes the raw action by
@@ -98,15 +110,8 @@ class NormalizedActions(Transform):
         super().__init__()
         self.constrain_aim = bool(constrain_aim)
 
-    def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase:
-        action = tensordict.get("action", None)
-        if action is None:
-            if self.missing_tolerance:
-                return tensordict
-            raise KeyError('NormalizedActions needs "action" in the input tensordict')
-        x = validate_action(_np(action), (*tensordict.batch_size, domain.ACTION_DIM))
-        tensordict.set("action", torch.from_numpy(domain.unnormalize_action(x, self.constrain_aim)))
-        return tensordict
+    def _map(self, x, tensordict):
+        return domain.unnormalize_action(x, self.constrain_aim)
 
     def transform_input_spec(self, input_spec: Composite) -> Composite:
         input_spec = input_spec.clone()

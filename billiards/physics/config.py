@@ -63,6 +63,12 @@ def physics_errors(node: Any) -> list[str]:
 LEGACY_PHYSICS = "international"  # the table of files saved before the presets existed
 
 
+def physics_record(params: PhysicsParams) -> dict:
+    """What a result file records of its table: ``{"physics": label, "physics_params": fields}``
+    (read back by :func:`recorded_physics`)."""
+    return {"physics": params.describe(), "physics_params": params.to_dict()}
+
+
 def recorded_physics(record: dict | None) -> PhysicsParams:
     """The table a saved artefact (data set, model, policy) records as ``physics_params`` (a
     :meth:`PhysicsParams.to_dict`); artefacts saved before the presets existed record none
@@ -89,4 +95,4 @@ def warn_physics_mismatch(what: str, made_on: PhysicsParams, used_on: PhysicsPar
 
 
 __all__ = ["LEGACY_PHYSICS", "PhysicsConfig", "PhysicsMismatchWarning", "overrides_of", "params_from_config",
-           "physics_errors", "recorded_physics", "warn_physics_mismatch"]
+           "physics_errors", "physics_record", "recorded_physics", "warn_physics_mismatch"]

@@ -19,11 +19,11 @@ import torch
 from omegaconf import OmegaConf
 
 from billiards.files import atomic_open
-from billiards.physics import DEFAULT_PARAMS, PhysicsParams
-from billiards.physics.config import params_from_config, warn_physics_mismatch
+from billiards.physics import DEFAULT_PARAMS, PRESETS, PhysicsParams
+from billiards.physics.config import LEGACY_PHYSICS, params_from_config, warn_physics_mismatch
 
 from .checkpoint import CheckpointError, load_checkpoint
-from .config import CHECKPOINT_FILE, with_physics
+from .config import CHECKPOINT_FILE
 
 POLICY_FORMAT = "billiards-policy-1"
 
@@ -95,7 +95,8 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
 
 def policy_physics(cfg) -> PhysicsParams:
     """The table a run trained on (runs saved before the presets existed: ``international``)."""
-    return params_from_config(OmegaConf.create(with_physics(OmegaConf.to_container(cfg)))["physics"])
+    physics = cfg.get("physics")
+    return params_from_config(physics) if physics is not None else PRESETS[LEGACY_PHYSICS]
 
 
 def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | None = None):

@@ -34,7 +34,7 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from billiards.files import atomic_write_text
-from billiards.physics.config import params_from_config
+from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.warmup import warm_up
 
 from .checkpoint import CheckpointError, load_checkpoint, rng_state, save_checkpoint, set_rng_state
@@ -514,9 +514,9 @@ class Trainer:
                         self.run_dir, frames, EVAL_FILE, mean)
             return mean
         cfg, b = self.cfg, self.cfg.budget
-        log.info("output: %s (%s, %s steps, physics %s)", self.run_dir, self.algo, f"{b.total_steps:,}",
-                 params_from_config(cfg.physics).describe())
-        warm_up(params_from_config(cfg.physics), log=log.info)
+        params = params_from_config(cfg.physics)
+        log.info("output: %s (%s, %s steps, physics %s)", self.run_dir, self.algo, f"{b.total_steps:,}", params.describe())
+        warm_up(params, log=log.info)
         self._t0, self._c0 = time.perf_counter(), time.process_time()
         interactive = sys.stderr.isatty()
         with tqdm(total=b.total_steps, initial=self.frames, unit="shot", unit_scale=True, dynamic_ncols=True,
@@ -549,8 +549,7 @@ class Trainer:
             "seed": cfg.seed,
             "frames": self.frames,
             "updates": self.agent.n_updates,
-            "physics": params_from_config(cfg.physics).describe(),
-            "physics_params": params_from_config(cfg.physics).to_dict(),
+            **physics_record(params_from_config(cfg.physics)),
             "stopped_by": "total_steps" if self.frames >= cfg.budget.total_steps else "cpu_minutes",
             "train_seconds": round(train_seconds, 2),
             "cpu_seconds": round(cpu_seconds, 2),

@@ -36,7 +36,7 @@ from tqdm import tqdm
 from billiards.domain import ACTION_HIGH, ACTION_LOW
 from billiards.files import atomic_write_text
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params, random_racks, simulate_batch
-from billiards.physics.config import recorded_physics
+from billiards.physics.config import physics_record, recorded_physics
 from billiards.provenance import git_commit
 
 META_FILE = "meta.json"
@@ -197,8 +197,7 @@ def _start(out_dir: Path, n: int, seed: int, chunk: int, params: PhysicsParams) 
         "shots_per_s": None,
         "git_commit": git_commit(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "physics": params.describe(),
-        "physics_params": params.to_dict(),
+        **physics_record(params),
         "action_low": ACTION_LOW.tolist(),
         "action_high": ACTION_HIGH.tolist(),
         "sessions": [],

@@ -21,7 +21,7 @@ from torch import nn
 
 from billiards.files import atomic_open
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
-from billiards.physics.config import recorded_physics
+from billiards.physics.config import physics_record, recorded_physics
 
 N_FEATURES = 13  # 8 normalised coordinates + cos(theta), sin(theta), 2p - 1, a, b
 DEFAULT_HIDDEN = (128, 128)
@@ -128,8 +128,7 @@ def save_model(path, model: RewardModel, meta: dict | None = None) -> Path:
         "hidden": list(model.hidden),
         "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
         # the table its inputs are scaled to (metadata given by the caller may restate it)
-        "meta": json.loads(json.dumps({"physics": model.params.describe(), "physics_params": model.params.to_dict(),
-                                       **(meta or {})}, default=_plain)),
+        "meta": json.loads(json.dumps({**physics_record(model.params), **(meta or {})}, default=_plain)),
     }
     with atomic_open(path, "wb") as f:
         torch.save(payload, f)

@@ -27,7 +27,7 @@ from tqdm import tqdm
 from billiards.files import atomic_write_text
 from billiards.provenance import git_commit
 
-from billiards.physics.config import recorded_physics
+from billiards.physics.config import physics_record, recorded_physics
 
 from .data import load_dataset, read_meta
 from .model import DEFAULT_HIDDEN, RewardModel, rm_inputs, save_model
@@ -265,8 +265,7 @@ def train_rm(
         "train_rows": n_train,
         "heldout_rows": n_hold,
         "data_dir": str(data_dir.resolve()),
-        "physics": physics.describe(),
-        "physics_params": physics.to_dict(),
+        **physics_record(physics),
         "hidden": list(model.hidden),
         "epochs": epochs,
         "batch_size": batch_size,

@@ -11,7 +11,7 @@ from omegaconf import OmegaConf
 
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.warmup import warm_up
-from billiards.physics.config import params_from_config
+from billiards.physics.config import params_from_config, physics_record
 from billiards.files import atomic_write_text
 from billiards.provenance import ROOT, git_commit
 
@@ -108,8 +108,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     summary.update(
         proposer=cfg.proposer.name,
         search=cfg.search.kind,
-        physics=params.describe(),
-        physics_params=params.to_dict(),
+        **physics_record(params),
         config=OmegaConf.to_container(cfg, resolve=True),
         commit=git_commit(),
     )
