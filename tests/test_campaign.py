@@ -390,3 +390,68 @@ def test_a_stopped_search_is_not_done_and_p3_resumes(tmp_path):
     (p3 / "results.json").write_text(json.dumps({"shots": 900, "seconds": 30.0, "extra": {}}))
     states = {s.entry.key: s for s in entry_states(c, root, c.select(["table6"]))}
     assert states["table6/geometric/h2_p3"].state == "done" and states["table6/geometric/h2_p3"].frames == 900
+
+
+def _fake_run(run_dir: Path, table: str, seed: int, mean: float, best: int, canonical: float, frames: int) -> None:
+    """A finished training run's small files, as train.py writes them (the numbers made up)."""
+    run_dir.mkdir(parents=True)
+    config = {"seed": seed, "table": table, "algo": {"name": "sac"}, "env": {"paradigm": "random_continue"},
+              "physics": {"preset": "korean_medium"}, "budget": {"total_steps": frames}}
+    (run_dir / "config.yaml").write_text(yaml.safe_dump(config))
+    ev = {"mean": mean, "best": best, "foul_innings_pct": 50.0 + seed, "foul_per_shot_pct": 10.0 + seed,
+          "success_per_shot_pct": 4.0 + seed, "start": "random"}
+    (run_dir / "eval.json").write_text(json.dumps(ev))
+    (run_dir / "eval_canonical.json").write_text(json.dumps({**ev, "mean": canonical, "start": "canonical"}))
+    (run_dir / "summary.json").write_text(json.dumps({"frames": frames, "cpu_seconds": 1800.0 * (seed + 1),
+                                                       "physics": "korean_medium"}))
+    (run_dir / "checkpoint.pt").write_bytes(b"weights")
+    (run_dir / STARTS).write_text(json.dumps({"commit": f"c{seed}", "mode": "fresh"}) + "\n")
+
+
+def test_report_writes_reproduction_rows_from_finished_runs(tmp_path):
+    """`report`: Table 1's row aggregates the finished seeds (mean, population std, max, CPU-hours),
+    Table 2's shared row reads the same runs, Table 6 rows come from results.json; the small
+    files are copied, the checkpoints are not; unfinished rows say so."""
+    spec = tmp_path / "mini.yaml"
+    spec.write_text(yaml.safe_dump({"name": "mini", "runs": [
+        *({"table": "table1", "variant": "sac", "seed": s, "steps": 400, "cost": "sac", "args": ["algo=sac"]} for s in range(3)),
+        *({"table": "table2", "variant": "random_continue", "seed": s, "same_as": f"table1/sac/seed{s}"} for s in range(2)),
+        {"table": "table6", "variant": "geometric/h2_p3", "kind": "search", "steps": 10, "cost": "h2", "args": ["search=h2"]},
+        {"table": "table6", "variant": "geometric/puct_p1", "kind": "search", "steps": 10, "cost": "puct", "args": ["search=puct"]},
+    ]}))
+    root, out = tmp_path / "state", tmp_path / "results"
+    for seed, mean, best, canonical in ((0, 0.5, 3, 1.0), (1, 0.3, 4, 0.0)):
+        _fake_run(root / "table1" / "sac" / f"seed{seed}", "table1", seed, mean, best, canonical, 400)
+    search_dir = root / "table6" / "geometric" / "h2_p3"
+    search_dir.mkdir(parents=True)
+    (search_dir / "results.json").write_text(json.dumps({
+        "protocol": "p3", "search": "h2", "proposer": "geometric", "mean": 228.9, "max": 496.0, "seconds": 36.0,
+        "shots": 2289, "physics": "korean_medium", "sims_per_decision": 400,
+        "extra": {"cap": 10000, "seeds": list(range(10)), "reached_cap": 0}}))
+
+    rc, text = cli("report", "--spec", str(spec), "--root", str(root), "--out", str(out))
+    assert rc == 0, text
+    data = json.loads((out / "reproduction.json").read_text())
+    rows = {(r["table"], r.get("variant") or f"{r['proposer']}/{r['method']}_{r['protocol']}"): r for r in data["rows"]}
+    sac = rows[(1, "sac")]
+    assert sac["seeds"] == [0, 1] and sac["seeds_planned"] == [0, 1, 2] and not sac["complete"]
+    assert sac["ours"]["mean"] == pytest.approx(0.4) and sac["ours"]["std"] == pytest.approx(0.1)
+    assert sac["ours"]["max"] == 4 and sac["ours"]["foul_inn"] == pytest.approx(50.5)
+    assert sac["paper"]["mean"] == 0.418 and sac["steps"] == 400 and sac["physics"] == "korean_medium"
+    assert sac["cpu_hours"] == pytest.approx(1.5) and sac["commits"] == []  # no ledger starts: commits come from the runner
+    shared = rows[(2, "random_continue")]
+    assert shared["complete"] and shared["shared_with"] == ["table1/sac"]
+    assert shared["ours"]["canonical"] == pytest.approx(0.5) and shared["ours"]["mean"] == pytest.approx(0.4)
+    h2 = rows[(6, "geometric/h2_p3")]
+    assert h2["complete"] and (h2["mean"], h2["max"], h2["cap"], h2["seeds"]) == (228.9, 496.0, 10000, list(range(10)))
+    assert h2["proposer_steps"] == 0 and h2["paper"] is None and h2["cpu_hours"] == pytest.approx(0.01)
+    assert not rows[(6, "geometric/puct_p1")]["complete"]
+    copied = out / "training" / "mini" / "table1" / "sac" / "seed1"
+    assert (copied / "eval_canonical.json").is_file() and (copied / STARTS).is_file()
+    assert not (copied / "checkpoint.pt").exists()
+    assert (out / "search" / "mini" / "table6" / "geometric" / "h2_p3" / "results.json").is_file()
+    md = (out / "reproduction.md").read_text()
+    assert "| sac | 2/3 | 400 | 0.400 ± 0.100 \\| 0.418 ± 0.038 |" in md and "| geometric | h2 | p3 | 228.9 (496) |" in md
+
+    rc, text = cli("report", "--spec", str(spec), "--root", str(tmp_path / "nowhere"), "--out", str(out))
+    assert rc == 2 and "has not started" in text

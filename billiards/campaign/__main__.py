@@ -3,6 +3,7 @@
     python -m billiards.campaign run paper [--jobs 2] [--hours H | --until HH:MM] [--only table1,table2] [--dry-run]
     python -m billiards.campaign status paper [--only ...] [-v]
     python -m billiards.campaign stop paper [--now]   # the active runner drains (or stops all now) and exits
+    python -m billiards.campaign report paper [--out results]  # reproduction.json / .md and the runs' small files
     python -m billiards.campaign run --spec tiny.yaml --root /tmp/tiny
 
 ``paper`` is the built-in campaign (billiards/campaign/spec.py); ``--spec FILE`` reads another
@@ -28,7 +29,8 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m billiards.campaign", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     for name, help_ in (("run", "run the unfinished entries"), ("status", "done / running / left, CPU-hours"),
-                        ("stop", "ask the active runner to drain and exit")):
+                        ("stop", "ask the active runner to drain and exit"),
+                        ("report", "write reproduction.json / .md and copy the finished runs' small files")):
         p = sub.add_parser(name, help=help_)
         p.add_argument("campaign", nargs="?", default=None, help="built-in campaign name (paper)")
         p.add_argument("--spec", type=Path, default=None, help="a campaign definition file (YAML or JSON)")
@@ -48,6 +50,9 @@ def _parser() -> argparse.ArgumentParser:
         if name == "stop":
             p.add_argument("--now", action="store_true",
                            help="stop every process at once (training loses up to budget.checkpoint_every steps)")
+        if name == "report":
+            p.add_argument("--out", type=Path, default=ROOT / "results",
+                           help="where reproduction.json/.md and training/<name>/, search/<name>/ go (default results/)")
         if name == "status":
             p.add_argument("-v", "--verbose", action="store_true", help="one line per entry")
             p.add_argument("--check-config", action="store_true",
@@ -99,6 +104,15 @@ def main(argv: list[str] | None = None) -> int:
                               for e in entries if e.kind == "train" and not e.same_as)
                 sys.stdout.write(drift_text(drift, checked))
                 return 4 if drift else 0
+            return 0
+        if args.command == "report":
+            from .reproduction import write_report
+
+            if not root.is_dir():
+                raise SpecError(f"{root} does not exist: the campaign has not started")
+            Ledger(root, campaign.name)
+            for path in write_report(campaign, root, args.out.resolve()):
+                print(f"wrote {path}")
             return 0
         if args.command == "stop":
             if not root.is_dir():

@@ -1,0 +1,244 @@
+"""``python -m billiards.campaign report paper``: the reproduction, table by table, from a
+campaign's run directories.
+
+It reads every finished entry (a training run's ``eval*.json`` and ``summary.json``, a search
+run's ``results.json``), copies their small files into ``<out>/training/<campaign>/<key>/`` and
+``<out>/search/<campaign>/<key>/`` (never the checkpoints), and writes
+
+* ``<out>/reproduction.json``: ``{"rows": [...]}``, one row per table variant (Tables 1-5) and
+  per proposer x method x protocol (Table 6), ours beside the paper's figures, with the seeds
+  finished and planned, the steps per seed, the physics, the CPU-hours and the commits;
+* ``<out>/reproduction.md``: the same as Markdown tables, and the CPU-hours per table.
+
+Rows whose seeds are not all finished are written with ``"complete": false``; the report
+can be rebuilt at any time while the campaign runs. Training figures are aggregated by
+:func:`billiards.report.aggregate` (the same arithmetic as ``python -m billiards.report``).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections import defaultdict
+from pathlib import Path
+
+from billiards.files import atomic_write_text
+from billiards.report import COLUMN_TITLES, PAPER, SMALL_RUN_FILES, aggregate, read_run
+from billiards.search.report import PAPER_TABLE6
+
+from .ledger import STARTS, entry_dir
+from .spec import Campaign, Entry
+from .status import entry_states
+
+# campaign table -> the paper's table number and its variants in the issue's spelling, each
+# with the paper's row it is compared with (PAPER's row key).
+TRAIN_TABLES: dict[str, tuple[int, dict[str, str]]] = {
+    "table1": (1, {"sac": "sac", "td3": "td3", "ppo": "ppo"}),
+    "table2": (2, {v: v for v in ("canonical_reset", "canonical_continue", "random_reset", "random_continue")}),
+    "table3": (3, {"plain": "plain", "staged": "staged", "rm": "rm", "rm_aim": "rm_aim"}),
+    "table4": (4, {"plain": "plain", "aim": "aim", "aim_features": "aim_features"}),
+    "table5": (5, {"aim_features": "none", "foul_penalty": "foul_penalty", "gentle": "gentle",
+                   "near_miss": "near_miss", "both": "both"}),
+}
+OUR_KEYS = ("mean", "std", "max", "foul_inn", "foul_sh", "succ_sh", "canonical")
+SEARCH_FILES = ("results.json", "chains.jsonl", "config.yaml", "search.log")
+TRAIN_EXTRA_FILES = (STARTS, "train.log")
+
+
+def _round(x):
+    return None if x is None else round(float(x), 4)
+
+
+def _copy(src_dir: Path, dest: Path, patterns: tuple[str, ...]) -> None:
+    dest.mkdir(parents=True, exist_ok=True)
+    for pattern in patterns:
+        for f in sorted(src_dir.glob(pattern)):
+            if f.is_file():
+                shutil.copy2(f, dest / f.name)
+
+
+def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out: Path | None) -> list[dict]:
+    """One row per (table, variant) of Tables 1-5 present in ``campaign``."""
+    groups: dict[tuple[str, str], list[Entry]] = defaultdict(list)
+    for e in campaign.entries:
+        if e.kind == "train" and e.table in TRAIN_TABLES and e.variant in TRAIN_TABLES[e.table][1]:
+            groups[(e.table, e.variant)].append(e)
+    rows = []
+    for (table, variant), entries in groups.items():
+        number, variants = TRAIN_TABLES[table]
+        paper_spec = PAPER[table]
+        runs, cpu_s, commits, shared = [], 0.0, [], set()
+        for e in entries:
+            src = campaign.source(e)
+            if e.same_as:
+                shared.add(src.key.rsplit("/seed", 1)[0])
+            state = states[src.key]
+            cpu_s += state.cpu_seconds
+            commits += list(state.commits)
+            run_dir = entry_dir(root, campaign, src)
+            run = read_run(run_dir) if (run_dir / "config.yaml").is_file() else None
+            if run is None or "summary.json" not in {p.name for p in run_dir.iterdir()}:
+                continue
+            runs.append(run)
+            if out is not None:
+                _copy(run_dir, out / "training" / campaign.name / src.key, SMALL_RUN_FILES + TRAIN_EXTRA_FILES)
+        paper_row = paper_spec["rows"].get(variants[variant], {})
+        columns = ["mean", *paper_spec["columns"]]
+        row = {
+            "table": number, "variant": variant,
+            "seeds": sorted(r.config.get("seed") for r in runs),
+            "seeds_planned": sorted(e.seed for e in entries),
+            "steps": max(e.steps if not e.same_as else campaign.source(e).steps for e in entries),
+            "physics": sorted({r.physics for r in runs}) if runs else None,
+            "ours": None, "paper": {k: paper_row[k] for k in ("mean", "std", *paper_spec["columns"]) if k in paper_row},
+            "cpu_hours": round(cpu_s / 3600, 3), "commits": list(dict.fromkeys(commits)),
+            "shared_with": sorted(shared) or None,
+        }
+        if runs:
+            agg = aggregate(runs)
+            row["ours"] = {k: _round(agg[k]) if k != "max" else agg[k] for k in OUR_KEYS
+                           if k in ("std", *columns) and agg.get(k) is not None}
+            row["steps_reached"] = agg["frames"]
+            row["physics"] = row["physics"][0] if len(row["physics"]) == 1 else row["physics"]
+        row["complete"] = len(runs) == len(entries)
+        rows.append(row)
+    return rows
+
+
+def search_rows(campaign: Campaign, root: Path, states: dict[str, object], out: Path | None) -> list[dict]:
+    """One row per Table 6 search entry (proposer x method x protocol)."""
+    rows = []
+    for e in campaign.entries:
+        if e.kind != "search":
+            continue
+        proposer, cell = e.variant.split("/", 1)
+        method, protocol = cell.rsplit("_", 1)
+        run_dir = entry_dir(root, campaign, e)
+        path = run_dir / "results.json"
+        res = json.loads(path.read_text()) if path.is_file() else None
+        if res is not None and res.get("extra", {}).get("partial"):
+            res = None
+        state = states[e.key]
+        row = {"table": 6, "proposer": proposer, "method": method, "protocol": protocol,
+               "complete": res is not None, "cpu_hours": round(state.cpu_seconds / 3600, 3),
+               "commits": list(state.commits), "proposer_steps": _proposer_steps(campaign, root, proposer)}
+        paper = PAPER_TABLE6.get(proposer, {}).get(f"{protocol}_{method}")
+        if protocol == "p1":
+            row["paper"] = None if paper is None else {"mean": paper}
+        else:
+            row["paper"] = None if paper is None else {"mean": paper[0], "max": paper[1]}
+        if res is not None:
+            extra = res.get("extra", {})
+            if protocol == "p1":
+                row.update(innings=extra.get("n_innings"), shots=extra.get("shots_per_inning"))
+            else:
+                row.update(cap=extra.get("cap"), seeds=extra.get("seeds"), reached_cap=extra.get("reached_cap"))
+            row.update(mean=_round(res["mean"]), max=res["max"], physics=res.get("physics"),
+                       sims_per_decision=res.get("sims_per_decision"))
+            if out is not None:
+                _copy(run_dir, out / "search" / campaign.name / e.key, SEARCH_FILES)
+        rows.append(row)
+    return rows
+
+
+def _proposer_steps(campaign: Campaign, root: Path, proposer: str) -> int:
+    """Training steps per seed behind a proposer: 0 for the training-free geometric one, else
+    the budget of the Table 5 runs its export names."""
+    export = campaign.by_key().get(f"table6/export/{proposer}")
+    if export is None:
+        return 0
+    sources = [a.split("{dir:", 1)[1].rstrip("}") for a in export.args if "{dir:" in a]
+    return max((campaign.by_key()[k].steps for k in sources), default=0)
+
+
+def reproduction(campaign: Campaign, root: Path, out: Path | None = None) -> dict:
+    """The rows of ``reproduction.json``; with ``out``, also copies the run files there."""
+    states = {s.entry.key: s for s in entry_states(campaign, root)}
+    return {"campaign": campaign.name,
+            "rows": training_rows(campaign, root, states, out) + search_rows(campaign, root, states, out),
+            "cpu_hours_by_table": _cpu_by_table(states)}
+
+
+def _cpu_by_table(states: dict) -> dict[str, float]:
+    by: dict[str, float] = defaultdict(float)
+    for s in states.values():
+        by[s.entry.table] += s.cpu_seconds / 3600
+    return {t: round(h, 3) for t, h in by.items()}
+
+
+# ----------------------------------------------------------------------------- Markdown
+
+def _fig(v, key: str) -> str:
+    if v is None:
+        return "–"
+    if key == "max":
+        return f"{v:.0f}"
+    if key in ("mean", "std"):
+        return f"{v:.3f}"
+    if key == "canonical":
+        return f"{v:.2f}"
+    return f"{v:.1f}"
+
+
+def markdown(data: dict) -> str:
+    rows = data["rows"]
+    parts = [f"# Reproduction of the paper's tables (campaign `{data['campaign']}`)", "",
+             "Ours | paper. mean ± std: points per inning over seeds (each seed's evaluation mean: 100 innings, "
+             "max_shots 10, deterministic policy); max: best inning over seeds; foul/inn: innings with a foul (%); "
+             "foul/sh, succ/sh: per shot (%); canonical: the same evaluation from the opening rack. "
+             "seeds: finished / planned.", ""]
+    for number in range(1, 6):
+        table = [r for r in rows if r["table"] == number]
+        if not table:
+            continue
+        spec = PAPER[f"table{number}"]
+        cols = spec["columns"]
+        parts += [f"## {spec['title']}", "",
+                  "| variant | seeds | steps | " + " | ".join(COLUMN_TITLES.get(c, c) for c in cols) + " | CPU-h | commits |",
+                  "|---|---|---|" + "---|" * len(cols) + "---|---|"]
+        for r in table:
+            ours, paper = r["ours"] or {}, r["paper"] or {}
+            cells = []
+            for c in cols:
+                if c == "mean":
+                    o = f"{_fig(ours.get('mean'), 'mean')} ± {_fig(ours.get('std'), 'std')}" if ours else "–"
+                    p = f"{_fig(paper.get('mean'), 'mean')} ± {_fig(paper.get('std'), 'std')}" if paper.get("std") is not None \
+                        else _fig(paper.get("mean"), "mean")
+                else:
+                    o, p = _fig(ours.get(c), c), _fig(paper.get(c), c)
+                cells.append(f"{o} \\| {p}")
+            shared = f" (= {', '.join(r['shared_with'])})" if r.get("shared_with") else ""
+            parts.append(f"| {r['variant']}{shared} | {len(r['seeds'])}/{len(r['seeds_planned'])} | {r['steps']:,} | "
+                         + " | ".join(cells) + f" | {r['cpu_hours']:.2f} | {', '.join(r['commits']) or '–'} |")
+        parts.append("")
+    t6 = [r for r in rows if r["table"] == 6]
+    if t6:
+        parts += ["## Table 6: proposers at 400 simulations per shot", "",
+                  "P1: points per 100-shot random-start inning; P3: canonical-start chain length before the first "
+                  "miss or foul, mean (longest).", "",
+                  "| proposer | method | protocol | ours | paper | proposer steps | CPU-h |", "|---|---|---|---|---|---|---|"]
+        for r in t6:
+            paper = r["paper"]
+            if r["protocol"] == "p1":
+                ours = f"{r['mean']:.2f}" if r["complete"] else "–"
+                ptxt = f"{paper['mean']:.2f}" if paper else "–"
+            else:
+                ours = f"{r['mean']:.1f} ({r['max']:.0f})" if r["complete"] else "–"
+                ptxt = f"{paper['mean']:g} ({paper['max']})" if paper else "–"
+            parts.append(f"| {r['proposer']} | {r['method']} | {r['protocol']} | {ours} | {ptxt} | "
+                         f"{r['proposer_steps']:,} | {r['cpu_hours']:.2f} |")
+        parts.append("")
+    parts += ["## CPU-hours per table", "", "| table | CPU-h |", "|---|---|"]
+    parts += [f"| {t} | {h:.2f} |" for t, h in data["cpu_hours_by_table"].items()]
+    parts.append(f"| total | {sum(data['cpu_hours_by_table'].values()):.2f} |")
+    return "\n".join(parts) + "\n"
+
+
+def write_report(campaign: Campaign, root: Path, out: Path) -> tuple[Path, Path]:
+    """Copy the finished runs' small files under ``out`` and write reproduction.json / .md."""
+    data = reproduction(campaign, root, out)
+    out.mkdir(parents=True, exist_ok=True)
+    json_path, md_path = out / "reproduction.json", out / "reproduction.md"
+    atomic_write_text(json_path, json.dumps(data, indent=2) + "\n")
+    atomic_write_text(md_path, markdown(data))
+    return json_path, md_path
