@@ -20,7 +20,7 @@ from billiards.envs import RewardModelBonus, make_env, reset_to
 from billiards.evaluation import EvalResult, evaluate
 from billiards.physics import random_racks
 from billiards.rl.curriculum import Curriculum, HoldActions, held_norm_values
-from billiards.rl.train import Trainer
+from billiards.rl.train import make_run, train_off_policy
 from billiards.rm import RewardModel, save_model
 
 REPO = Path(__file__).resolve().parents[1]
@@ -62,26 +62,26 @@ def test_held_values_map_onto_the_documented_env_action():
 def test_staged_curriculum_switches_at_the_configured_steps_and_keeps_the_weights(tmp_path):
     cfg = compose_cfg("curriculum=staged", "budget=smoke", "budget.eval_every=0", "budget.checkpoint_every=0",
                       "curriculum.switch_at=[0.25,0.5]", "progress=false", "logger=none")
-    trainer = Trainer(cfg, tmp_path / "run")
-    actor = trainer.agent.actor
+    run = make_run(cfg, tmp_path / "run")
+    actor = run.agent.actor
     snapshots = []  # (frames, stage before, params before, params after) at each switch
-    update = trainer._update_stage
+    update = run.stages.update
 
-    def spy():
-        before = (trainer.stage, [p.detach().clone() for p in actor.parameters()])
-        update()
-        if trainer.stage != before[0]:
-            snapshots.append((trainer.frames, before[1], [p.detach().clone() for p in actor.parameters()]))
+    def spy(frames, stage_log):
+        before = (run.stages.stage, [p.detach().clone() for p in actor.parameters()])
+        update(frames, stage_log)
+        if run.stages.stage != before[0]:
+            snapshots.append((run.state.frames, before[1], [p.detach().clone() for p in actor.parameters()]))
 
-    trainer._update_stage = spy
-    trainer.run()
+    run.stages.update = spy
+    train_off_policy(run)
 
     n = cfg.env.num_envs
     expected = [int(np.ceil(round(f * 2048) / n) * n) for f in (0.25, 0.5)]
-    assert [s["step"] for s in trainer.stage_log] == [0, *expected]
-    assert [s["free"] for s in trainer.stage_log] == [["aim"], ["aim", "power"], ["aim", "power", "english_a", "english_b"]]
+    assert [s["step"] for s in run.state.stage_log] == [0, *expected]
+    assert [s["free"] for s in run.state.stage_log] == [["aim"], ["aim", "power"], ["aim", "power", "english_a", "english_b"]]
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert summary["curriculum"] == trainer.stage_log
+    assert summary["curriculum"] == run.state.stage_log
     # the same actor carries over: a switch leaves its weights as they are ...
     assert [s[0] for s in snapshots] == expected
     for _, before, after in snapshots:
@@ -90,7 +90,7 @@ def test_staged_curriculum_switches_at_the_configured_steps_and_keeps_the_weight
     final = list(actor.parameters())
     assert any(not torch.equal(a, b) for a, b in zip(snapshots[-1][2], final))
     # the replay buffer stores the action played: held dims at their value until released
-    stored = trainer.rb.storage[: len(trainer.rb)]["action_norm"]
+    stored = run.rb.storage[: len(run.rb)]["action_norm"]
     first, second = expected
     assert torch.all(stored[:first, 1:] == 0) and stored[:first, 0].std() > 0
     assert torch.all(stored[first:second, 2:] == 0) and stored[first:second, 1].std() > 0

@@ -68,14 +68,20 @@ def check_finished(run_dir: Path, frames: int, innings: int = 10) -> EvalResult:
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
 def test_smoke_run_writes_eval_json(tmp_path, algo):
     run_dir = tmp_path / "run"
-    extra = ["logger=wandb"] if algo == "ppo" else []  # wandb offline: never a login prompt
+    # wandb offline: never a login prompt; device=cpu spelled out (the default, auto, is cpu here too)
+    extra = {"ppo": ["logger=wandb"], "td3": ["device=cpu"]}.get(algo, [])
     proc = ok(train(tmp_path, f"algo={algo}", "budget=smoke", f"hydra.run.dir={run_dir}", *extra))
     check_finished(run_dir, frames=2048)
+    import torch
+
+    expected_device = "cuda:0" if torch.cuda.is_available() and algo != "td3" else "cpu"
+    assert json.loads((run_dir / "summary.json").read_text())["device"] == expected_device
     # the run says where its output goes before it starts and where it went at the end
     assert f"output: {run_dir} ({algo}, 2,048 steps, physics korean_medium)" in proc.stdout
     assert f"done: eval.json, summary.json and checkpoint.pt in {run_dir}" in proc.stdout
-    if extra:
+    if algo == "ppo":
         assert list((run_dir / "wandb").glob("offline-run-*")), "no offline wandb run"
+    assert "budget" in yaml.safe_load((run_dir / "config.yaml").read_text()) and "kill_after_checkpoint" not in proc.stdout
     # the report reads the run (no paper table: grouped by settings)
     proc = subprocess.run([sys.executable, "-m", "billiards.report", str(run_dir)], cwd=tmp_path, env=ENV,
                           capture_output=True, text=True, timeout=180)
@@ -293,9 +299,35 @@ def run_files(run_dir: Path) -> dict[str, tuple[bytes, int]]:
     return {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in run_dir.iterdir() if p.is_file() and p.suffix != ".log"}
 
 
+# train.py, SIGKILLed by itself right after writing its first periodic checkpoint: a test hook
+# around the real entry point (the production config has no kill switch).
+KILL_AFTER_FIRST_CHECKPOINT = f"""
+import os, runpy, signal, sys
+sys.path.insert(0, {str(REPO)!r})
+import billiards.rl.train as train
+
+save = train.save_checkpoint
+
+def save_then_die(run_dir, state):
+    save(run_dir, state)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.kill(os.getpid(), signal.SIGKILL)
+
+train.save_checkpoint = save_then_die
+sys.argv[0] = {TRAIN!r}
+runpy.run_path({TRAIN!r}, run_name="__main__")
+"""
+
+
+def train_killed_after_first_checkpoint(tmp_path: Path, *overrides: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", KILL_AFTER_FIRST_CHECKPOINT, *overrides, "progress=false"],
+                          cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=240)
+
+
 def test_killed_run_resumes_and_finishes(tmp_path):
     run_dir = tmp_path / "run"
-    proc = train(tmp_path, "budget=smoke", "budget.kill_after_checkpoint=1", f"hydra.run.dir={run_dir}")
+    proc = train_killed_after_first_checkpoint(tmp_path, "budget=smoke", f"hydra.run.dir={run_dir}")
     assert proc.returncode == -9, proc.stderr[-3000:]  # SIGKILL right after the first checkpoint
     assert (run_dir / "checkpoint.pt").is_file() and not (run_dir / "eval.json").exists()
     assert not list(run_dir.glob("*.tmp"))
@@ -304,7 +336,7 @@ def test_killed_run_resumes_and_finishes(tmp_path):
     result = check_finished(run_dir, frames=2048)
     history = [json.loads(line) for line in (run_dir / "eval_history.jsonl").read_text().splitlines()]
     assert [h["step"] for h in history] == [1024, 2048]  # the pre-kill evaluation survives
-    assert (run_dir / ".hydra" / "overrides.yaml").read_text().count("kill_after_checkpoint") == 1
+    assert (run_dir / ".hydra" / "overrides.yaml").read_text().count("budget=smoke") == 1
     assert (run_dir / ".hydra_resume").is_dir()
 
     # resuming the finished run says so and changes none of its files (no second final evaluation)
@@ -340,18 +372,27 @@ def same(a, b) -> bool:
     return type(a) is type(b) and a == b
 
 
+def resumed(cfg, run_dir: Path):
+    """The parts of the run in ``run_dir`` as ``resume=<run_dir>`` rebuilds them."""
+    from billiards.rl.train import load_run_config, make_run
+
+    return make_run(*load_run_config(OmegaConf.merge(cfg, {"resume": str(run_dir)}), run_dir.parent / "unused"))
+
+
 def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_stay_put(tmp_path, monkeypatch, caplog):
     """In process, on a short SAC run: (1) what a resume restores from a checkpoint -- networks,
     optimizers, replay buffer, counters, every RNG -- is bit-identical to the state saved;
     (2) a checkpoint whose config predates algo.actor_ema and budget.cpu_minutes resumes with
-    their defaults; (3) resuming a finished run says so, evaluates nothing and writes nothing."""
+    their defaults, and one as the trainer wrote them before the redesign (its config with the
+    retired budget.kill_after_checkpoint, without device) resumes to the very same weights;
+    (3) resuming a finished run says so, evaluates nothing and writes nothing."""
     import copy
     import logging
     import shutil
 
     import billiards.rl.train as train_module
     from billiards.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint
-    from billiards.rl.train import Trainer, rack_rng
+    from billiards.rl.train import make_run, rack_rng, train_off_policy
 
     saved = []
 
@@ -359,28 +400,29 @@ def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_st
         path = save_checkpoint(run_dir, state)
         if not saved:
             saved.append(copy.deepcopy(state))
-            for name in ("killed", "old"):
+            for name in ("killed", "old", "old_format"):
                 shutil.copytree(run_dir, tmp_path / name)
         return path
 
     monkeypatch.setattr(train_module, "save_checkpoint", save_and_keep)
     cfg = compose_cfg("budget=smoke", "budget.total_steps=1024", "budget.init_random_steps=256", "budget.eval_every=512",
                       "budget.checkpoint_every=768", "budget.eval_innings=2", "budget.final_eval_innings=2", "progress=false")
-    Trainer(cfg, tmp_path / "run").run()
+    train_off_policy(make_run(cfg, tmp_path / "run"))
     (state,) = saved
     assert state["counters"]["frames"] == 768 and state["buffer"]["rows"] == 768 and state["agent_extra"]["n_updates"] > 0
 
     # (1) save -> load -> restore is bit-identical
     killed = tmp_path / "killed"
-    resumed = Trainer(OmegaConf.merge(cfg, {"resume": str(killed)}), tmp_path / "unused")
-    assert same(resumed.agent.state_dict(), state["agent"])
-    assert same(resumed.agent.state_dict_extra(), state["agent_extra"])
-    assert same(resumed.rb.storage[: len(resumed.rb)].to_dict(), state["buffer"]["data"])
-    assert same(resumed.rb.writer.state_dict(), state["buffer"]["writer"])
-    assert same(rng_state(rack_rng(resumed.env)), state["rng"])
-    assert (resumed.frames, resumed.owed, resumed.next_eval) == tuple(state["counters"][k] for k in ("frames", "owed", "next_eval"))
-    assert resumed.eval_history == state["eval_history"] and len(state["eval_history"]) == 1
-    resumed.run()
+    run = resumed(cfg, killed)
+    assert run.run_dir == killed
+    assert same(run.agent.state_dict(), state["agent"])
+    assert same(run.agent.state_dict_extra(), state["agent_extra"])
+    assert same(run.rb.storage[: len(run.rb)].to_dict(), state["buffer"]["data"])
+    assert same(run.rb.writer.state_dict(), state["buffer"]["writer"])
+    assert same(rng_state(rack_rng(run.env)), state["rng"])
+    assert (run.state.frames, run.state.owed, run.state.next_eval) == tuple(state["counters"][k] for k in ("frames", "owed", "next_eval"))
+    assert run.state.eval_history == state["eval_history"] and len(state["eval_history"]) == 1
+    train_off_policy(run)
     check_finished(killed, frames=1024, innings=2)
 
     # (2) a config written before algo.actor_ema and budget.cpu_minutes existed
@@ -388,18 +430,31 @@ def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_st
     ckpt = load_checkpoint(old)
     del ckpt["config"]["algo"]["actor_ema"], ckpt["config"]["budget"]["cpu_minutes"]
     save_checkpoint(old, ckpt)
-    trainer = Trainer(OmegaConf.merge(cfg, {"resume": str(old)}), tmp_path / "unused")
-    assert trainer.cfg.algo.actor_ema == 0.0 and trainer.cfg.budget.cpu_minutes == 0.0 and trainer.agent.actor_avg is None
-    trainer.run()
+    run = resumed(cfg, old)
+    assert run.cfg.algo.actor_ema == 0.0 and run.cfg.budget.cpu_minutes == 0.0 and run.agent.actor_avg is None
+    train_off_policy(run)
     check_finished(old, frames=1024, innings=2)
+    # ... and one as written before the redesign: the same weights at the end as (1)
+    old_format = tmp_path / "old_format"
+    ckpt = load_checkpoint(old_format)
+    del ckpt["config"]["device"]
+    ckpt["config"]["budget"]["kill_after_checkpoint"] = 0
+    save_checkpoint(old_format, ckpt)
+    run = resumed(cfg, old_format)
+    assert "kill_after_checkpoint" not in run.cfg.budget and run.cfg.device == cfg.device
+    train_off_policy(run)
+    check_finished(old_format, frames=1024, innings=2)
+    final, final_old = load_checkpoint(killed), load_checkpoint(old_format)
+    assert same(final_old["agent"], final["agent"]) and same(final_old["agent_extra"], final["agent_extra"])
+    assert same(final_old["buffer"], final["buffer"]) and same(final_old["rng"], final["rng"])
 
     # (3) the finished run again: nothing evaluated, nothing written
     before = run_files(killed)
-    final = EvalResult.from_json(killed / "eval.json").mean
+    mean = EvalResult.from_json(killed / "eval.json").mean
     monkeypatch.setattr(train_module, "evaluate_policy", lambda *a, **k: pytest.fail("evaluated a finished run"))
     with caplog.at_level(logging.WARNING, logger="billiards.rl.train"):
-        assert Trainer(OmegaConf.merge(cfg, {"resume": str(killed)}), killed).run() == final
-    assert f"{killed} is already finished (1024 frames, final evaluation in eval.json: {final:.3f}" in caplog.text
+        assert train_module.train(OmegaConf.merge(cfg, {"resume": str(killed)}), killed) == mean
+    assert f"{killed} is already finished (1024 frames, final evaluation in eval.json: {mean:.3f}" in caplog.text
     assert run_files(killed) == before
 
 
@@ -539,16 +594,16 @@ def test_averaged_actor_is_what_a_run_evaluates_checkpoints_and_exports(tmp_path
 
     from billiards.rl.checkpoint import load_checkpoint
     from billiards.rl.policy import export_policy, load_policy
-    from billiards.rl.train import Trainer
+    from billiards.rl.train import make_run, train_off_policy
 
     rate = 0.05
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base=None):
         cfg = compose("config", [f"algo={algo}", "budget=smoke", "env=aim_features", f"algo.actor_ema={rate}",
                                  "logger=csv", "progress=false"])
     run_dir = tmp_path / "run"
-    trainer = Trainer(cfg, run_dir)
-    agent = trainer.agent
-    trainer.run()
+    run = make_run(cfg, run_dir)
+    agent = run.agent
+    train_off_policy(run)
     check_finished(run_dir, frames=2048)
     history = [json.loads(line) for line in (run_dir / "eval_history.jsonl").read_text().splitlines()]
     assert len(history) == 2 and all(0 <= h["live_eval_mean"] <= 10 for h in history)
@@ -567,7 +622,7 @@ def test_averaged_actor_is_what_a_run_evaluates_checkpoints_and_exports(tmp_path
     # one more actor step (TD3 steps its actor every policy_delay-th update): the exact Polyak move
     avg0 = [p.clone() for p in avg]
     for _ in range(getattr(agent, "policy_delay", 1)):
-        agent.update(trainer.rb.sample())
+        agent.update(run.rb.sample())
     for a0, a1, l1 in zip(avg0, avg, live):
         torch.testing.assert_close(a1, a0 + rate * (l1 - a0), rtol=1e-5, atol=1e-7)
 
@@ -611,6 +666,9 @@ BAD = [
     (["physics.u_rol=0.1"], "Key 'u_rol' not in 'PhysicsConfig'"),
     (["physics=international", "physics.table_width=0.2"], "'spots' opening rack does not fit a 0.2 x 2.84 m table"),
     (["shaping.gentle_kind=soft"], "shaping.gentle_kind must be leave"),
+    (["device=gpu"], "device='gpu' is not a device: use auto, cpu, cuda or cuda:N"),
+    (["device=cpu:0"], "device='cpu:0' is not a device"),
+    (["budget.kill_after_checkpoint=1"], "Key 'kill_after_checkpoint' not in 'BudgetConfig'"),  # tests kill runs from outside
 ]
 
 
@@ -624,3 +682,127 @@ def test_bad_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message)
     assert "Traceback" not in proc.stderr
     assert elapsed < 30, f"took {elapsed:.1f}s to fail"  # ~1-3 s on a quiet machine; generous for loaded CI
     assert list(tmp_path.iterdir()) == [], f"wrote {list(tmp_path.rglob('*'))}"
+
+
+def _has_cuda() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
+
+
+@pytest.mark.skipif(_has_cuda(), reason="this machine has a CUDA GPU")
+@pytest.mark.parametrize("device", ["cuda", "cuda:3"])
+def test_cuda_without_a_gpu_fails_fast_and_writes_nothing(tmp_path, device):
+    proc = train(tmp_path, f"device={device}", timeout=60)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    assert f"device={device}: this machine has no CUDA GPU that torch can use" in proc.stderr, proc.stderr
+    assert "use device=cpu, or device=auto" in proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_device_spellings_resolve_and_importing_the_module_needs_no_torch(monkeypatch):
+    """``billiards.device``: ``auto`` is the CPU without a GPU and the current GPU with one,
+    ``cuda:N`` must name an existing GPU, anything else is refused with the allowed spellings;
+    importing it (and checking cpu / auto) leaves torch unimported."""
+    import torch
+
+    from billiards.device import device_error, resolve_device
+
+    code = ("import sys; from billiards.device import device_error; "
+            "assert device_error('cpu') is None and device_error('auto') is None; assert 'torch' not in sys.modules")
+    ok(subprocess.run([sys.executable, "-c", code], cwd=REPO, env=ENV, capture_output=True, text=True, timeout=60))
+
+    for bad in ("gpu", "CUDA", "cuda:", "cuda:x", "cpu:0", "auto:1", "", "cuda:0:1"):
+        assert device_error(bad) == f"device={bad!r} is not a device: use auto, cpu, cuda or cuda:N", bad
+        with pytest.raises(ValueError, match="is not a device"):
+            resolve_device(bad)
+    assert resolve_device("cpu") == torch.device("cpu")
+    if not torch.cuda.is_available():
+        assert resolve_device("auto") == torch.device("cpu")
+        assert "no CUDA GPU" in device_error("cuda") and "no CUDA GPU" in device_error("cuda:0")
+        with pytest.raises(ValueError, match="no CUDA GPU"):
+            resolve_device("cuda")
+    # a machine with two GPUs, the second one current
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    monkeypatch.setattr(torch.cuda, "current_device", lambda: 1)
+    assert resolve_device("auto") == resolve_device("cuda") == torch.device("cuda", 1)
+    assert resolve_device("cuda:0") == torch.device("cuda", 0) and device_error("cuda:1") is None
+    assert device_error("cuda:2") == "device=cuda:2: this machine has 2 CUDA GPU(s), cuda:0 to cuda:1"
+
+
+def test_agents_meet_their_interface_and_average_their_actor_bit_exactly():
+    """SAC and TD3 are OffPolicy agents, PPO an OnPolicy one; the averaged actor
+    (torch's AveragedModel with an EMA) moves by exactly the float32 rate, even for a rate
+    whose decay ``1 - rate`` does not round back to it."""
+    import numpy as np
+    import torch
+    from omegaconf import OmegaConf
+
+    from billiards.rl.agents import OffPolicy, OnPolicy, make_agent
+    from billiards.rl.config import ALGO_SCHEMAS
+
+    rate = next(r for r in np.geomspace(1e-7, 1e-4, 20_001) if np.float32(1 - (1 - r)) != np.float32(r))
+    spec_low, spec_high = torch.tensor([0.0, 0.0, -1.0, -1.0]), torch.tensor([6.283, 1.0, 1.0, 1.0])
+    from torchrl.data import Bounded
+
+    spec = Bounded(spec_low, spec_high, shape=(4,))
+    for name in ("sac", "td3", "ppo"):
+        algo = OmegaConf.structured(ALGO_SCHEMAS[name])
+        if name != "ppo":
+            algo.actor_ema = float(rate)
+        agent = make_agent(algo, 28, spec, num_envs=3)
+        kind, other = (OnPolicy, OffPolicy) if name == "ppo" else (OffPolicy, OnPolicy)
+        assert isinstance(agent, kind) and not isinstance(agent, other)
+        if name == "ppo":
+            assert agent.eval_actor is agent.actor and agent.eval_policy is agent.policy
+            continue
+        assert agent.eval_actor is agent.actor_avg
+        # the warm-up plays uniform actions on [-1, 1]^4, one per inning, on the agent's RNG
+        from tensordict import TensorDict
+
+        obs = TensorDict({"observation": torch.randn(3, 28)}, batch_size=[3])
+        torch.manual_seed(5)
+        warm = agent.explore(obs.clone())["action_norm"]
+        torch.manual_seed(5)
+        assert torch.equal(warm, torch.rand(3, 4) * 2 - 1)
+        with torch.no_grad():  # average 0, live 1: the move is the weight itself, to the last bit
+            for p in agent.actor_avg.parameters():
+                p.zero_()
+            for p in agent.actor.parameters():
+                p.fill_(1.0)
+        avg = [p.clone() for p in agent.actor_avg.parameters()]
+        agent._average_actor()
+        weight = float(np.float32(rate))  # what the old hand-written torch._foreach_lerp_ moved by
+        for a0, a1, live in zip(avg, agent.actor_avg.parameters(), agent.actor.parameters()):
+            assert torch.equal(a1, torch.lerp(a0, live, weight))
+
+
+
+def test_a_run_on_a_device_collects_with_the_agents_own_policy(tmp_path):
+    """device=cpu in process: the collector plays the agent's exploration policy itself on the
+    run's device (a device spelled without its index would make TorchRL play a stale copy),
+    stores batches there, and the evaluation wrapper returns the policy's own actions."""
+    import torch
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from billiards.rl.train import OnDevice, make_collector, make_run
+
+    cfg = compose_cfg("algo=sac", "budget=smoke", "logger=none", "device=cpu", "progress=false")
+    run = make_run(cfg, tmp_path / "run")
+    assert run.device == torch.device("cpu")
+    collector = make_collector(run, run.agent.explore, cfg.env.num_envs)
+    try:
+        assert collector.policy is run.agent.explore
+        assert (collector.policy_device, collector.storing_device, collector.env_device) == (run.device, run.device, torch.device("cpu"))
+        data = next(iter(collector))
+    finally:
+        collector.shutdown()
+    run.rb.extend(data.reshape(-1).select(*run.agent.replay_keys))
+    assert run.rb.sample()["observation"].device == run.device
+    obs = TensorDict({"observation": data["observation"][:5].clone()}, batch_size=[5])
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        wrapped = OnDevice(run.agent.eval_policy, run.device)(obs.clone())
+        direct = run.agent.eval_policy(obs.clone())
+    assert wrapped["action"].device == torch.device("cpu") and torch.equal(wrapped["action"], direct["action"])

@@ -6,8 +6,9 @@ one variant started before and after the change would train different configs. T
 each started training run's campaign arguments with the *current* ``conf/`` (Hydra's compose
 API, in this process) and lists every key whose value differs from the run's own
 ``config.yaml``, ignoring run-time switches (the trainer's ``RUNTIME_KEYS`` and
-``RESUME_KEYS``) and the logger. Runs with drift should start over (``--restart-stale`` after
-changing their arguments, or delete the run dir).
+``RESUME_KEYS``), keys the schema has retired (``RETIRED_KEYS``) and the logger. Runs with
+drift should start over (``--restart-stale`` after changing their arguments, or delete the
+run dir).
 """
 
 from __future__ import annotations
@@ -31,9 +32,9 @@ def config_drift(campaign: Campaign, root: Path, entries: list[Entry]) -> dict[s
     from omegaconf import OmegaConf
 
     import billiards.rl.config  # noqa: F401  (the schema and resolvers)
-    from billiards.rl.train import RESUME_KEYS, RUNTIME_KEYS
+    from billiards.rl.train import RESUME_KEYS, RETIRED_KEYS, RUNTIME_KEYS
 
-    ignored = set(RUNTIME_KEYS) | set(RESUME_KEYS) | {"resume"}
+    ignored = set(RUNTIME_KEYS) | set(RESUME_KEYS) | set(RETIRED_KEYS) | {"resume"}
     started = [(e, entry_dir(root, campaign, e) / "config.yaml") for e in entries
                if e.kind == "train" and not e.same_as]
     started = [(e, path) for e, path in started if path.is_file()]

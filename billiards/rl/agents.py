@@ -11,11 +11,21 @@ collector and :func:`billiards.evaluation.evaluate`.
 
 Specs. Built from ``env.action_spec_unbatched`` (shape (4,)), never the batched spec: a
 batched (B, 4) spec silently gives SAC a target entropy of -4B instead of -4.
+
+Interface. The training loops (:mod:`billiards.rl.train`), evaluations and checkpoints use an
+agent only through :class:`Agent` and its two kinds, :class:`OffPolicy` (SAC, TD3: a replay
+buffer and a warm-up of random actions) and :class:`OnPolicy` (PPO: advantages of a rollout).
+
+Device. :func:`make_agent` builds an agent on ``device``: networks, losses, optimizers, the
+action bounds its distributions and noise modules keep as plain tensors, and its warm-up
+sampler all live there; the env (the simulator) stays on the CPU and the collector moves each
+step's TensorDict across once.
 """
 
 from __future__ import annotations
 
-import copy
+from collections.abc import Mapping
+from typing import Any, Protocol, runtime_checkable
 
 import torch
 from tensordict import TensorDictBase
@@ -26,11 +36,13 @@ from tensordict.nn import (
     TensorDictSequential,
 )
 from torch import nn
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torchrl.data import Bounded
 from torchrl.modules import (
     MLP,
     AdditiveGaussianModule,
     ProbabilisticActor,
+    RandomPolicy,
     TanhModule,
     TanhNormal,
     ValueOperator,
@@ -46,6 +58,57 @@ from torchrl.objectives import (
 from .curriculum import HoldActions
 
 ACTION_NORM = "action_norm"
+
+
+@runtime_checkable
+class Agent(Protocol):
+    """What training, evaluation and checkpoints use of an agent (SAC, TD3, PPO).
+
+    ``policy`` plays the live actor and ``eval_policy`` what evaluations measure (the averaged
+    actor ``eval_actor`` when ``algo.actor_ema > 0``, else the live one); both read
+    ``"observation"`` and write ``"action"``, deterministic under
+    ``ExplorationType.DETERMINISTIC``. ``explore`` is the collection policy. ``update`` makes
+    one gradient step and returns its loss outputs (``metric_names`` among them).
+    ``state_dict`` holds the networks (modules), ``state_dict_extra`` the optimizers and
+    the update counter (plain types and tensors) -- the checkpoint's ``agent`` and ``agent_extra``.
+    """
+
+    metric_names: tuple[str, ...]
+    n_updates: int
+    policy: TensorDictModuleBase
+    eval_policy: TensorDictModuleBase
+    eval_actor: nn.Module
+    explore: TensorDictModuleBase
+    scale: ScaleAction
+
+    def update(self, batch: TensorDictBase) -> Mapping[str, torch.Tensor]: ...
+
+    def state_dict(self) -> dict[str, Any]: ...
+
+    def load_state_dict(self, state_dict: Mapping[str, Any]) -> Any: ...
+
+    def state_dict_extra(self) -> dict[str, Any]: ...
+
+    def load_state_dict_extra(self, state: dict[str, Any]) -> None: ...
+
+    def compile(self) -> None: ...
+
+
+@runtime_checkable
+class OffPolicy(Agent, Protocol):
+    """SAC, TD3: ``replay_keys`` are what the replay buffer stores of a frame; while
+    ``set_warmup(True)``, ``explore`` plays uniformly random actions."""
+
+    replay_keys: tuple
+
+    def set_warmup(self, warm: bool) -> None: ...
+
+
+@runtime_checkable
+class OnPolicy(Agent, Protocol):
+    """PPO: ``advantage`` adds GAE advantages and value targets to a rollout."""
+
+    def advantage(self, data: TensorDictBase) -> TensorDictBase: ...
 
 
 class ScaleAction(TensorDictModuleBase):
@@ -70,37 +133,32 @@ class ScaleAction(TensorDictModuleBase):
         return tensordict
 
 
-class UniformAction(TensorDictModuleBase):
-    """``action_norm ~ U[-1, 1]^dim`` (torch's global RNG): the off-policy warm-up policy."""
+class WarmUp(TensorDictModuleBase):
+    """Plays ``random`` (a :class:`~torchrl.modules.RandomPolicy` writing ``"action_norm"``)
+    while ``self.warm`` is True, then ``main`` (same output keys). ``random`` is no submodule,
+    so the state dict is that of ``main``."""
 
-    def __init__(self, dim: int):
+    def __init__(self, random: RandomPolicy, main: nn.Module, warm: bool):
         super().__init__()
-        self.dim = dim
-        self.in_keys, self.out_keys = ["observation"], [ACTION_NORM]
-
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        shape = (*tensordict.batch_size, self.dim)
-        tensordict.set(ACTION_NORM, torch.rand(shape) * 2 - 1)
-        return tensordict
-
-
-class Switch(TensorDictModuleBase):
-    """Runs ``warmup`` while ``self.warm`` is True, then ``main`` (same output keys)."""
-
-    def __init__(self, warmup: nn.Module, main: nn.Module, warm: bool):
-        super().__init__()
-        self.warmup, self.main, self.warm = warmup, main, warm
+        self.random, self.main, self.warm = random, main, warm
         self.in_keys, self.out_keys = list(main.in_keys), list(main.out_keys)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
-        return (self.warmup if self.warm else self.main)(tensordict)
+        return (self.random if self.warm else self.main)(tensordict)
 
 
-def normalized_spec(action_spec) -> Bounded:
-    """[-1, 1] box of the unbatched action spec's shape; rejects batched specs."""
+def warm_up_policy(norm_spec: Bounded, num_envs: int) -> RandomPolicy:
+    """Uniform actions on [-1, 1]^4 for a batch of ``num_envs`` innings (torch's RNG on the
+    spec's device; the same draws as ``torch.rand((num_envs, 4)) * 2 - 1``)."""
+    return RandomPolicy(norm_spec.expand(num_envs, *norm_spec.shape), action_key=ACTION_NORM)
+
+
+def normalized_spec(action_spec, device: torch.device | str = "cpu") -> Bounded:
+    """[-1, 1] box of the unbatched action spec's shape on ``device``; rejects batched specs."""
     if action_spec.shape != torch.Size([4]):
         raise ValueError(f"expected the unbatched (4,) action spec (env.action_spec_unbatched), got shape {tuple(action_spec.shape)}")
-    return Bounded(-torch.ones(action_spec.shape), torch.ones(action_spec.shape), shape=action_spec.shape, dtype=torch.float32)
+    ones = torch.ones(action_spec.shape, device=device)
+    return Bounded(-ones, ones, shape=action_spec.shape, dtype=torch.float32, device=device)
 
 
 def mlp(in_features: int, out_features: int, hidden: list[int]) -> MLP:
@@ -130,35 +188,54 @@ def _params(module_params) -> list[torch.Tensor]:
     return list(module_params.flatten_keys().values())
 
 
-class OffPolicyAgent(nn.Module):
-    """Common part of SAC and TD3: a loss module (actor, critics, targets), one optimizer and
-    a soft target update. ``policy`` (deterministic at eval) and ``explore`` (collection,
-    warm-up switch) both write ``"action"``.
+def _float32(x: float) -> float:
+    """``x`` rounded to float32, as torch rounds a scalar weight for float32 tensors."""
+    return torch.tensor(x, dtype=torch.float32).item()
 
-    With ``algo.actor_ema > 0`` the agent also keeps ``actor_avg``, a Polyak average of the
-    actor's parameters (``avg += actor_ema * (live - avg)`` after every actor update: every
-    gradient step for SAC, every ``policy_delay``-th for TD3), and
-    ``eval_policy`` plays it; without, ``eval_policy`` is ``policy``. The average is part of
-    the state dict, so checkpoints carry it."""
 
-    def _init_averaging(self, rate: float) -> None:
-        """Call after ``self.actor``, ``self.scale`` and ``self.policy`` exist, before the loss
-        module is built."""
-        self.ema_rate = float(rate)
-        if self.ema_rate > 0:
-            self.actor_avg = copy.deepcopy(self.actor).requires_grad_(False)
-            self.eval_policy = TensorDictSequential(self.actor_avg, self.scale)
-        else:
-            self.actor_avg = None
-            self.eval_policy = self.policy
+class _OffPolicyBase(nn.Module):
+    """Common part of SAC and TD3: a loss module (actor, critics, targets), a soft target
+    update, the warm-up switch of ``explore`` and the optional averaged actor.
 
-    @torch.no_grad()
-    def _average_actor(self) -> None:
-        if self.actor_avg is not None:
-            torch._foreach_lerp_(list(self.actor_avg.parameters()), list(self.actor.parameters()), self.ema_rate)
+    With ``algo.actor_ema > 0`` the agent also keeps ``actor_avg``, an exponential moving
+    average of the actor's parameters (``avg += actor_ema * (live - avg)`` after every actor
+    update: every gradient step for SAC, every ``policy_delay``-th for TD3), kept by
+    :class:`torch.optim.swa_utils.AveragedModel` with ``get_ema_multi_avg_fn``, and
+    ``eval_policy`` plays it; without, ``eval_policy`` is ``policy``. ``actor_avg`` is the
+    AveragedModel's module, registered under that name, so checkpoints carry it with the same
+    keys as before the library took over (its ``n_averaged`` counter only tells a first copy
+    from an average: it is set at construction and needs no saving)."""
 
     metric_names: tuple[str, ...] = ()
     replay_keys = ("observation", ACTION_NORM, ("next", "observation"), ("next", "reward"), ("next", "done"), ("next", "terminated"))
+
+    def _init_policies(self, exploring: nn.Module, rate: float, norm: Bounded, num_envs: int) -> None:
+        """``policy``, ``explore`` (random while warming up, then ``exploring``) and the
+        averaged actor. Call after ``self.actor`` and ``self.scale`` exist, before the loss
+        module is built."""
+        self.policy = TensorDictSequential(self.actor, self.scale)
+        self.explore = TensorDictSequential(WarmUp(warm_up_policy(norm, num_envs), exploring, warm=True), self.scale)
+        self.ema_rate = float(rate)
+        if self.ema_rate > 0:
+            # decay = 1 - rate is applied as the lerp weight 1 - decay; taking rate at float32
+            # first makes that weight exactly the float32 rate the tensors are moved by.
+            averager = AveragedModel(self.actor, multi_avg_fn=get_ema_multi_avg_fn(1.0 - _float32(self.ema_rate)))
+            averager.requires_grad_(False).update_parameters(self.actor)  # n_averaged 0 -> 1: a copy of the actor
+            object.__setattr__(self, "averager", averager)  # not a submodule: its module is actor_avg
+            self.actor_avg = averager.module
+            self.eval_policy = TensorDictSequential(self.actor_avg, self.scale)
+        else:
+            self.averager = self.actor_avg = None
+            self.eval_policy = self.policy
+
+    @property
+    def eval_actor(self) -> nn.Module:
+        """The actor ``eval_policy`` plays (a property: registering it twice would add keys)."""
+        return self.actor if self.actor_avg is None else self.actor_avg
+
+    def _average_actor(self) -> None:
+        if self.averager is not None:
+            self.averager.update_parameters(self.actor)
 
     def state_dict_extra(self) -> dict:
         return {"optimizer": self.optimizer.state_dict(), "n_updates": self.n_updates}
@@ -175,19 +252,17 @@ class OffPolicyAgent(nn.Module):
         self._step = torch.compile(self._step, **kwargs)
 
 
-class SACAgent(OffPolicyAgent):
+class SACAgent(_OffPolicyBase):
     metric_names = ("loss_actor", "loss_qvalue", "loss_alpha", "alpha", "entropy")
 
-    def __init__(self, cfg, obs_dim: int, action_spec):
+    def __init__(self, cfg, obs_dim: int, action_spec, num_envs: int = 1, device: torch.device | str = "cpu"):
         super().__init__()
-        norm = normalized_spec(action_spec)
+        norm = normalized_spec(action_spec, device)
         act_dim = norm.shape[-1]
         self.actor = gaussian_actor(obs_dim, norm, cfg.hidden_sizes, return_log_prob=False)
         self.critic = q_critic(obs_dim, act_dim, cfg.hidden_sizes)
         self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
-        self.policy = TensorDictSequential(self.actor, self.scale)
-        self._init_averaging(cfg.get("actor_ema", 0.0))  # absent from configs saved before it existed
-        self.explore = TensorDictSequential(Switch(UniformAction(act_dim), self.actor, warm=True), self.scale)
+        self._init_policies(self.actor, cfg.get("actor_ema", 0.0), norm, num_envs)  # absent from configs saved before it existed
         self.loss = SACLoss(
             self.actor,
             self.critic,
@@ -200,6 +275,7 @@ class SACAgent(OffPolicyAgent):
         self.loss.set_keys(action=ACTION_NORM)
         self.loss.make_value_estimator(ValueEstimators.TD0, gamma=cfg.gamma)
         _ = self.loss.target_entropy  # a lazily created buffer: create it now so state_dicts always match
+        self.to(device)
         self.target_update = SoftUpdate(self.loss, tau=cfg.tau)
         self.optimizer = torch.optim.Adam(
             [
@@ -226,12 +302,12 @@ class SACAgent(OffPolicyAgent):
         return out
 
 
-class TD3Agent(OffPolicyAgent):
+class TD3Agent(_OffPolicyBase):
     metric_names = ("loss_actor", "loss_qvalue")
 
-    def __init__(self, cfg, obs_dim: int, action_spec):
+    def __init__(self, cfg, obs_dim: int, action_spec, num_envs: int = 1, device: torch.device | str = "cpu"):
         super().__init__()
-        norm = normalized_spec(action_spec)
+        norm = normalized_spec(action_spec, device)
         act_dim = norm.shape[-1]
         self.actor = TensorDictSequential(
             TensorDictModule(mlp(obs_dim, act_dim, cfg.hidden_sizes), in_keys=["observation"], out_keys=["param"]),
@@ -239,13 +315,11 @@ class TD3Agent(OffPolicyAgent):
         )
         self.critic = q_critic(obs_dim, act_dim, cfg.hidden_sizes)
         self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
-        self.policy = TensorDictSequential(self.actor, self.scale)
-        self._init_averaging(cfg.get("actor_ema", 0.0))  # absent from configs saved before it existed
         noisy = TensorDictSequential(
             self.actor,
             AdditiveGaussianModule(spec=norm, sigma_init=1.0, sigma_end=1.0, std=cfg.exploration_noise, action_key=ACTION_NORM),
         )
-        self.explore = TensorDictSequential(Switch(UniformAction(act_dim), noisy, warm=True), self.scale)
+        self._init_policies(noisy, cfg.get("actor_ema", 0.0), norm, num_envs)  # absent from configs saved before it existed
         self.loss = TD3Loss(
             self.actor,
             self.critic,
@@ -257,12 +331,13 @@ class TD3Agent(OffPolicyAgent):
         )
         self.loss.set_keys(action=ACTION_NORM)
         self.loss.make_value_estimator(ValueEstimators.TD0, gamma=cfg.gamma)
+        self.to(device)
         self.target_update = SoftUpdate(self.loss, tau=cfg.tau)
         self.q_optimizer = torch.optim.Adam(_params(self.loss.qvalue_network_params), lr=cfg.lr)
         self.actor_optimizer = torch.optim.Adam(_params(self.loss.actor_network_params), lr=cfg.lr)
         self.policy_delay = cfg.policy_delay
         self.n_updates = 0
-        self._last_actor_loss = torch.zeros(())
+        self._last_actor_loss = torch.zeros((), device=device)
 
     def _critic_step(self, batch: TensorDictBase) -> torch.Tensor:
         q_loss, _ = self.loss.value_loss(batch)
@@ -305,14 +380,14 @@ class TD3Agent(OffPolicyAgent):
 
 
 class PPOAgent(nn.Module):
-    """Clipped PPO with GAE on a tanh-Gaussian policy (``"action_norm"`` log-probabilities)."""
+    """Clipped PPO with GAE on a tanh-Gaussian policy (``"action_norm"`` log-probabilities).
+    No averaged actor: ``eval_policy`` is ``policy`` and ``explore`` too (sampling)."""
 
     metric_names = ("loss_objective", "loss_critic", "loss_entropy", "entropy", "kl_approx", "clip_fraction")
-    actor_avg = None  # no averaged actor: eval_policy is policy
 
-    def __init__(self, cfg, obs_dim: int, action_spec):
+    def __init__(self, cfg, obs_dim: int, action_spec, num_envs: int = 1, device: torch.device | str = "cpu"):
         super().__init__()
-        norm = normalized_spec(action_spec)
+        norm = normalized_spec(action_spec, device)
         self.actor = gaussian_actor(obs_dim, norm, cfg.hidden_sizes, return_log_prob=True)
         self.critic = ValueOperator(mlp(obs_dim, 1, cfg.hidden_sizes), in_keys=["observation"])
         self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
@@ -330,9 +405,14 @@ class PPOAgent(nn.Module):
         )
         self.loss.set_keys(action=ACTION_NORM, sample_log_prob=self.actor.log_prob_keys[0])
         self.loss.make_value_estimator(ValueEstimators.GAE, gamma=cfg.gamma, lmbda=cfg.gae_lambda, average_gae=False)
+        self.to(device)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=cfg.lr)
         self.max_grad_norm = cfg.max_grad_norm
         self.n_updates = 0
+
+    @property
+    def eval_actor(self) -> nn.Module:
+        return self.actor
 
     @torch.no_grad()
     def advantage(self, data: TensorDictBase) -> TensorDictBase:
@@ -357,9 +437,6 @@ class PPOAgent(nn.Module):
     def compile(self, **kwargs) -> None:
         self._step = torch.compile(self._step, **kwargs)
 
-    def set_warmup(self, warm: bool) -> None:  # on-policy: no warm-up phase
-        pass
-
     def state_dict_extra(self) -> dict:
         return {"optimizer": self.optimizer.state_dict(), "n_updates": self.n_updates}
 
@@ -369,15 +446,12 @@ class PPOAgent(nn.Module):
 
 
 AGENTS = {"sac": SACAgent, "td3": TD3Agent, "ppo": PPOAgent}
+OFF_POLICY = ("sac", "td3")
 
 
-def make_agent(algo_cfg, obs_dim: int, action_spec) -> nn.Module:
-    """The agent of ``algo_cfg.name`` for an env with ``obs_dim`` observations and the
-    unbatched action spec ``action_spec`` (``env.action_spec_unbatched``)."""
-    return AGENTS[algo_cfg.name](algo_cfg, obs_dim, action_spec)
+def make_agent(algo_cfg, obs_dim: int, action_spec, *, num_envs: int = 1, device: torch.device | str = "cpu") -> Agent:
+    """The agent of ``algo_cfg.name`` on ``device`` for an env with ``obs_dim`` observations,
+    the unbatched action spec ``action_spec`` (``env.action_spec_unbatched``) and
+    ``num_envs`` innings per step (the batch of the warm-up's random actions)."""
+    return AGENTS[algo_cfg.name](algo_cfg, obs_dim, action_spec, num_envs=num_envs, device=device)
 
-
-def metrics_of(out, names) -> dict[str, float]:
-    """Floats of the named loss outputs (a TensorDict or a dict of tensors)."""
-    keys = out.keys()
-    return {k: float(out[k]) for k in names if k in keys}

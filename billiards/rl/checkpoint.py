@@ -1,4 +1,6 @@
-"""Checkpoints of a training run: one file, ``<run dir>/checkpoint.pt``, replaced atomically.
+"""Checkpoints of a training run: one file, ``<run dir>/checkpoint.pt``, replaced atomically,
+and :class:`RunState`, everything a resume needs, captured into it and restored from it here
+and nowhere else.
 
 Contents (a dict of tensors and plain Python types only: dict, list, tuple, str, int, float,
 bool, None, so that it loads with ``torch.load(..., weights_only=True)`` and loading never
@@ -6,15 +8,20 @@ runs code from the file):
 
 * ``config``: the resolved training config (plain containers);
 * ``agent``: the agent's ``state_dict`` (actor, critics, target critics / target actor,
-  SAC's log-temperature) and ``agent_extra`` (optimizer states, update counter);
+  SAC's log-temperature, the averaged actor) and ``agent_extra`` (optimizer states, update
+  counter);
 * ``buffer``: the filled part of the replay buffer as a nested dict of tensors, its row
   count and its write cursor (off-policy, unless ``checkpoint.save_buffer=false``), or None;
 * ``counters``: env frames, fractional update debt, next log/eval/checkpoint steps,
-  accumulated training seconds;
-* ``eval_history``: every periodic evaluation so far;
+  accumulated training seconds (wall-clock and CPU);
+* ``eval_history``: every evaluation so far;
 * ``rng``: torch, numpy, python and the training env's rack generator states
-  (:func:`rng_state`: numpy arrays as lists of ints);
-* ``wandb_id``: to continue the same wandb run.
+  (:func:`rng_state`: numpy arrays as lists of ints), and the CUDA generator's of a run on a GPU;
+* ``wandb_id``: to continue the same wandb run;
+* ``stage_log``: the curriculum stages entered so far.
+
+Tensors are saved as they are and loaded onto the CPU (``map_location``); restoring copies
+them onto the run's device, so a run can resume on another device than it started on.
 
 File layout (format 2)::
 
@@ -34,9 +41,13 @@ from __future__ import annotations
 
 import hashlib
 import io
+import logging
+import math
 import pickle
 import random
 import re
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +65,8 @@ _HEADER_MAX = 128  # bytes: the header is about 94
 _ZIP = b"PK\x03\x04"  # what format 1 (a bare torch.save) starts with
 _PLAIN = (str, int, float, bool, type(None), bytes, torch.Tensor)
 REQUIRED = ("config", "agent", "agent_extra", "counters", "rng")
+
+log = logging.getLogger(__name__)
 
 
 class CheckpointError(RuntimeError):
@@ -74,25 +87,143 @@ def _plain_array(value: Any) -> Any:
     return value
 
 
-def rng_state(env_rng: np.random.Generator) -> dict[str, Any]:
+def rng_state(env_rng: np.random.Generator, device: torch.device | None = None) -> dict[str, Any]:
     """Every random state a training run draws from, as tensors and plain types: torch's,
-    numpy's global one, Python's ``random`` and the training env's rack generator."""
+    numpy's global one, Python's ``random``, the training env's rack generator and, on a CUDA
+    ``device``, that GPU's generator."""
     version, internal, gauss_next = random.getstate()
-    return {
+    state = {
         "torch": torch.get_rng_state(),
         "numpy": _plain_array(np.random.get_state(legacy=False)),
         "python": {"version": version, "internal": list(internal), "gauss_next": gauss_next},
         "env": _plain_array(env_rng.bit_generator.state),
     }
+    if device is not None and torch.device(device).type == "cuda":
+        state["cuda"] = torch.cuda.get_rng_state(device)
+    return state
 
 
-def set_rng_state(state: dict[str, Any], env_rng: np.random.Generator) -> None:
-    """Restore what :func:`rng_state` saved (numpy accepts its states with lists for arrays)."""
+def set_rng_state(state: dict[str, Any], env_rng: np.random.Generator, device: torch.device | None = None) -> None:
+    """Restore what :func:`rng_state` saved (numpy accepts its states with lists for arrays);
+    a saved CUDA generator state goes to a CUDA ``device`` (a CPU run has none to restore)."""
     torch.set_rng_state(state["torch"])
     np.random.set_state(state["numpy"])
     py = state["python"]
     random.setstate((py["version"], tuple(py["internal"]), py["gauss_next"]))
     env_rng.bit_generator.state = state["env"]
+    if "cuda" in state and device is not None and torch.device(device).type == "cuda":
+        torch.cuda.set_rng_state(state["cuda"], device)
+
+
+# ----------------------------------------------------------------------------- the run state
+
+
+@dataclass
+class RunState:
+    """Everything of a training run that is not its config and that a resume needs, with
+    :meth:`capture` (into the checkpoint dict) and :meth:`restore` (out of it) side by side.
+
+    Plain fields are the run's counters; the agent (networks, optimizers), the replay buffer
+    and the random generators are captured from and restored into the objects the run is
+    made of. ``next_*`` are the frame counts at which the next metric row, periodic evaluation
+    and checkpoint are due (``inf``: never). ``train_seconds`` and ``cpu_seconds`` are the
+    wall-clock and process CPU seconds of the run's earlier processes; :meth:`times` adds this
+    process's since :meth:`start_clock`.
+    """
+
+    frames: int = 0
+    owed: float = 0.0  # fractional gradient updates carried over (off-policy)
+    train_seconds: float = 0.0
+    cpu_seconds: float = 0.0
+    next_log: float = 0
+    next_eval: float = math.inf
+    next_ckpt: float = math.inf
+    eval_history: list[dict] = field(default_factory=list)
+    stage_log: list[dict] = field(default_factory=list)  # {"stage", "from_step", "free", "step"} at each stage entry
+    wandb_id: str | None = None
+    _t0: float = field(default=0.0, repr=False)
+    _c0: float = field(default=0.0, repr=False)
+
+    @classmethod
+    def fresh(cls, budget) -> RunState:
+        """The state of a run that has not started (``budget``: the config's budget node)."""
+        return cls(next_log=budget.log_every, next_eval=budget.eval_every or math.inf,
+                   next_ckpt=budget.checkpoint_every or math.inf)
+
+    def start_clock(self) -> None:
+        self._t0, self._c0 = time.perf_counter(), time.process_time()
+
+    def times(self) -> tuple[float, float]:
+        """Training wall-clock and CPU seconds so far, over all processes of this run."""
+        return (self.train_seconds + time.perf_counter() - self._t0,
+                self.cpu_seconds + time.process_time() - self._c0)
+
+    def take_updates(self, amount: float) -> int:
+        """Whole gradient updates owed after adding ``amount`` (utd x frames); the fraction
+        is carried over to the next batch."""
+        self.owed += amount
+        k = int(self.owed)
+        self.owed -= k
+        return k
+
+    def capture(self, config: dict, agent, rb, env_rng: np.random.Generator, *, save_buffer: bool = True,
+                device: torch.device | None = None) -> dict[str, Any]:
+        """The checkpoint dict (see the module docstring) of this state, ``config`` (plain),
+        the agent, the replay buffer ``rb`` (None for PPO; left out unless ``save_buffer``)
+        and every random generator."""
+        buffer = None
+        if rb is not None and save_buffer and len(rb):
+            n = len(rb)  # a TensorDict is no plain type: its nested dict of tensors and its length
+            rows = rb.storage[:n]
+            rows = rows.clone() if rows.device in (None, torch.device("cpu")) else rows.to("cpu")  # a compact CPU copy
+            buffer = {"data": rows.to_dict(), "rows": n, "writer": rb.writer.state_dict()}
+        train_seconds, cpu_seconds = self.times()
+        return {
+            "config": config,
+            "agent": agent.state_dict(),
+            "agent_extra": agent.state_dict_extra(),
+            "buffer": buffer,
+            "counters": {
+                "frames": self.frames,
+                "owed": self.owed,
+                "train_seconds": train_seconds,
+                "cpu_seconds": cpu_seconds,
+                "next_log": self.next_log,
+                "next_eval": self.next_eval,
+                "next_ckpt": self.next_ckpt,
+            },
+            "eval_history": self.eval_history,
+            "rng": rng_state(env_rng, device),
+            "wandb_id": self.wandb_id,
+            "stage_log": self.stage_log,
+        }
+
+    @classmethod
+    def restore(cls, ckpt: dict[str, Any], agent, rb, env_rng: np.random.Generator,
+                device: torch.device | None = None) -> RunState:
+        """Puts a checkpoint's networks, optimizers, replay buffer and random generators back
+        into the run's objects and returns its counters. Reads checkpoints of every earlier
+        version of format 2 (e.g. those written before ``stage_log`` existed)."""
+        try:
+            agent.load_state_dict(ckpt["agent"])
+            agent.load_state_dict_extra(ckpt["agent_extra"])
+        except (RuntimeError, KeyError, ValueError) as err:
+            raise CheckpointError(f"cannot resume: the checkpoint's networks do not fit this config ({err})") from None
+        c = ckpt["counters"]
+        state = cls(frames=int(c["frames"]), owed=float(c["owed"]), train_seconds=float(c["train_seconds"]),
+                    cpu_seconds=float(c["cpu_seconds"]), next_log=c["next_log"], next_eval=c["next_eval"],
+                    next_ckpt=c["next_ckpt"], eval_history=list(ckpt.get("eval_history") or []),
+                    stage_log=list(ckpt.get("stage_log") or []), wandb_id=ckpt.get("wandb_id"))
+        buffer = ckpt.get("buffer")
+        if rb is not None and buffer is not None:
+            from tensordict import TensorDict
+
+            rb.extend(TensorDict(buffer["data"], batch_size=[buffer["rows"]]))
+            rb.writer.load_state_dict(buffer["writer"])
+        elif rb is not None:
+            log.warning("resume: the checkpoint has no replay buffer (checkpoint.save_buffer=false); refilling from scratch")
+        set_rng_state(ckpt["rng"], env_rng, device)
+        return state
 
 
 # ----------------------------------------------------------------------------- the file

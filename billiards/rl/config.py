@@ -31,6 +31,7 @@ from hydra.core.config_store import ConfigStore
 from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from billiards.device import device_error
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
 
 CHECKPOINT_FILE = "checkpoint.pt"
@@ -38,6 +39,9 @@ CONFIG_FILE = "config.yaml"  # the resolved training config, written into the ru
 EVAL_FILE = "eval.json"
 EVAL_HISTORY_FILE = "eval_history.jsonl"
 METRICS_FILE = "metrics.csv"
+# Keys that configs saved by earlier versions have and the schema no longer does; a resume
+# drops them (the test-only kill switch left the schema: tests kill runs from outside).
+RETIRED_KEYS = ("budget.kill_after_checkpoint",)
 
 
 class Paradigm(str, enum.Enum):
@@ -199,7 +203,6 @@ class BudgetConfig:
     # also stop training once this run has used this many process CPU minutes (0 = no limit);
     # the final evaluation follows
     cpu_minutes: float = 0.0
-    kill_after_checkpoint: int = 0  # debug: SIGKILL the run right after writing its n-th checkpoint (0 = never)
 
 
 @dataclass
@@ -232,6 +235,9 @@ class Config:
     seed: int = 0
     threads: int = 1  # torch (intra-op) and numba threads of this run; 1 when jobs run in parallel
     compile: bool = False  # torch.compile the update step (slow to start; see the README)
+    # where the networks, losses and replay buffer live: auto (a CUDA GPU when torch sees one,
+    # else the CPU), cpu, cuda, cuda:N; the simulator always runs on the CPU
+    device: str = "auto"
     progress: bool = True  # tqdm progress bar on stderr
     table: Optional[str] = None  # the paper table an experiment preset reproduces (for the report)
     paper_steps: int = 1_000_000  # the paper's budget for the table (budget=paper trains this long)
@@ -310,7 +316,7 @@ def _errors(cfg: DictConfig) -> list[str]:
 
     b, a, e = cfg.budget, cfg.algo, cfg.env
     positive("budget.total_steps", b.total_steps)
-    for key in ("init_random_steps", "eval_every", "checkpoint_every", "kill_after_checkpoint"):
+    for key in ("init_random_steps", "eval_every", "checkpoint_every"):
         positive(f"budget.{key}", b[key], strict=False)
     for key in ("eval_innings", "final_eval_innings", "log_every"):
         positive(f"budget.{key}", b[key])
@@ -324,6 +330,7 @@ def _errors(cfg: DictConfig) -> list[str]:
     need(0 <= cfg.seed < 2**32, f"seed must be an integer in [0, 2**32 - 1] (a numpy seed), got {cfg.seed!r}")
     need(cfg.eval.seed >= 0, f"eval.seed must be an integer >= 0 (a numpy seed), got {cfg.eval.seed!r}")
     positive("threads", cfg.threads)
+    errs.extend(filter(None, [device_error(cfg.device)]))
     positive("paper_steps", cfg.paper_steps)
     for key in ("foul_penalty", "gentle", "near_miss"):
         positive(f"shaping.{key}", cfg.shaping[key], strict=False)
@@ -533,6 +540,24 @@ def with_physics(container: dict) -> dict:
     if "physics" in container:
         return container
     return {**container, "physics": {"preset": LEGACY_PHYSICS}}
+
+
+def without_retired(container: dict) -> dict:
+    """A saved config without the :data:`RETIRED_KEYS` (a copy where it had any)."""
+    out = container
+    for key in RETIRED_KEYS:
+        *parents, leaf = key.split(".")
+        node = out
+        for p in parents:
+            node = node.get(p) if isinstance(node, dict) else None
+        if isinstance(node, dict) and leaf in node:
+            out = _without(out, [*parents, leaf])
+    return out
+
+
+def _without(d: dict, path: list[str]) -> dict:
+    head, *rest = path
+    return {k: (_without(v, rest) if k == head and rest else v) for k, v in d.items() if rest or k != head}
 
 
 def env_paradigm(paradigm: Paradigm | str) -> str:

@@ -22,12 +22,15 @@ ignored until that dimension is released.
 from __future__ import annotations
 
 import bisect
+import logging
 
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
 ACTION_NAMES = ("aim", "power", "english_a", "english_b")
+
+log = logging.getLogger(__name__)
 
 
 class HoldActions(TensorDictModuleBase):
@@ -53,7 +56,8 @@ class HoldActions(TensorDictModuleBase):
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         if self.mask is not None:
             action = tensordict.get(self.key)
-            tensordict.set(self.key, torch.where(self.mask, self.held_norm.to(action.dtype), action))
+            held = self.held_norm.to(action.device, action.dtype)
+            tensordict.set(self.key, torch.where(self.mask.to(action.device), held, action))
         return tensordict
 
 
@@ -86,21 +90,44 @@ class Curriculum:
 def held_norm_values(scale, hold_power: float, hold_english: float) -> torch.Tensor:
     """The held values (p, a, b in env units; theta is never held) in ``"action_norm"`` units
     of the agent's :class:`~billiards.rl.agents.ScaleAction` (``norm = (v - mid) / half``)."""
-    env_values = torch.tensor([0.0, hold_power, hold_english, hold_english])
+    env_values = torch.tensor([0.0, hold_power, hold_english, hold_english], device=scale.mid.device)
     norm = (env_values - scale.mid) / scale.half_range
     norm[0] = 0.0
     return norm
 
 
-def make_curriculum(cfg, agent) -> tuple[Curriculum, HoldActions] | None:
-    """The run's curriculum and the agent's :class:`HoldActions`, or None without one."""
+class Stages:
+    """A run's curriculum as it goes: :meth:`update` frees the action dimensions of the stage
+    in force at a frame count and records each stage entered in ``stage_log`` (the run
+    state's, so a resume goes on with the same log). The agent -- networks, optimizer, replay
+    buffer -- carries over unchanged: the warm start."""
+
+    def __init__(self, curriculum: Curriculum, hold: HoldActions):
+        self.curriculum, self.hold = curriculum, hold
+        self.stage: int | None = None
+
+    def update(self, frames: int, stage_log: list[dict]) -> None:
+        stage = self.curriculum.stage_at(frames)
+        if stage == self.stage:
+            return
+        self.stage = stage
+        self.hold.set_free(self.curriculum.free_dims(stage))
+        entry = self.curriculum.describe()[stage] | {"step": frames}
+        if not stage_log or stage_log[-1]["stage"] != stage:
+            stage_log.append(entry)
+        log.info("curriculum: stage %d from step %d, free action dims %s", stage, frames, entry["free"])
+
+
+def make_curriculum(cfg, agent) -> Stages | None:
+    """The run's curriculum, holding the agent's actions (its :class:`HoldActions`), or None
+    without one."""
     c = cfg.curriculum
     if c.name == "none":
         return None
     curriculum = Curriculum(c.stages, c.switch_at, cfg.budget.total_steps)
     hold = agent.scale.hold
     hold.held_norm = held_norm_values(agent.scale, c.hold_power, c.hold_english)
-    return curriculum, hold
+    return Stages(curriculum, hold)
 
 
-__all__ = ["Curriculum", "HoldActions", "held_norm_values", "make_curriculum", "ACTION_NAMES"]
+__all__ = ["Curriculum", "HoldActions", "Stages", "held_norm_values", "make_curriculum", "ACTION_NAMES"]

@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import math
 import numbers
+import time
 from pathlib import Path
 from typing import Any
 
@@ -160,3 +161,52 @@ def eval_row(result) -> dict[str, float]:
         "eval_foul_pct": result.foul_per_shot_pct,
         "eval_success_pct": result.success_per_shot_pct,
     }
+
+
+class Window:
+    """Training statistics since the last metric row: frames collected, their reward, score
+    and foul sums, the last update's loss outputs (``metrics``), and the update count and
+    time at the window's start (for updates and frames per second)."""
+
+    def __init__(self, n_updates: int):
+        self.reset(n_updates)
+
+    def reset(self, n_updates: int) -> None:
+        self.frames, self.updates0, self.t0 = 0, n_updates, time.perf_counter()
+        self.reward = self.score = self.foul = 0.0
+        self.metrics: Any = None
+
+    def add(self, data) -> None:
+        """Adds a collected batch (its ``("next", "reward" / "score" / "foul")``)."""
+        nxt = data.get("next")
+        self.frames += data.numel()
+        self.reward += float(nxt.get("reward").sum())
+        self.score += float(nxt.get("score").sum())
+        self.foul += float(nxt.get("foul").sum())
+
+    def ups(self, n_updates: int) -> float:
+        return (n_updates - self.updates0) / max(time.perf_counter() - self.t0, 1e-9)
+
+    def row(self, step: int, n_updates: int, times: tuple[float, float], metric_names: tuple[str, ...],
+            stage: int | None = None) -> dict[str, Any]:
+        """The metrics.csv row at ``step`` frames (``times``: wall-clock and CPU seconds)."""
+        dt = max(time.perf_counter() - self.t0, 1e-9)
+        n = max(self.frames, 1)
+        wall, cpu = times
+        row = {
+            "step": step,
+            "updates": n_updates,
+            "wall_time": round(wall, 3),
+            "cpu_time": round(cpu, 3),
+            "fps": round(self.frames / dt, 1),
+            "ups": round((n_updates - self.updates0) / dt, 2),
+            "train_reward": self.reward / n,
+            "train_score_pct": 100.0 * self.score / n,
+            "train_foul_pct": 100.0 * self.foul / n,
+        }
+        if stage is not None:
+            row["stage"] = stage
+        if self.metrics is not None:
+            keys = self.metrics.keys()
+            row.update({k: float(self.metrics[k]) for k in metric_names if k in keys})
+        return row

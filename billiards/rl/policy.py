@@ -82,7 +82,7 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
         "format": POLICY_FORMAT,
         "config": state["config"],
         # the actor the run's evaluations measure: the averaged one when algo.actor_ema > 0
-        "actor": {k: v.clone() for k, v in (agent.actor if agent.actor_avg is None else agent.actor_avg).state_dict().items()},
+        "actor": {k: v.clone() for k, v in agent.eval_actor.state_dict().items()},
         "eval": read("eval.json"),
         "summary": read("summary.json"),
         "source": str(run_dir),

@@ -1,18 +1,24 @@
-"""The training loop behind ``train.py``: SAC / TD3 (off-policy, replay) and PPO (on-policy).
+"""The training loops behind ``train.py``: SAC / TD3 (off-policy, replay) and PPO (on-policy).
 
 One env frame is one shot of one of the ``env.num_envs`` innings played side by side, the
-paper's "step". Off-policy: a TorchRL :class:`~torchrl.collectors.Collector` steps the
-batched env with the exploration policy (uniform random actions for
-``budget.init_random_steps`` frames), every frame goes into a replay buffer
-(:class:`~torchrl.data.LazyTensorStorage`, uniform sampling), and after the warm-up
-``algo.utd`` gradient updates are made per collected frame. PPO: rollouts of
-``algo.frames_per_batch`` frames, GAE, ``algo.epochs`` passes of minibatches.
+paper's "step". A run is read in three places:
 
-Along the way: a metric row every ``budget.log_every`` frames (metrics.csv, wandb), an
-evaluation with the unified protocol every ``budget.eval_every`` frames
-(eval_history.jsonl), a checkpoint every ``budget.checkpoint_every`` frames; at the end the
-final evaluation (eval.json, eval_<start>.json for further starts), summary.json and a last
-checkpoint. ``resume=<run dir>`` rebuilds everything from the checkpoint and goes on.
+* :func:`make_run` builds its parts -- the env (the simulator, on the CPU), the agent and the
+  replay buffer (on ``device``), the metric logger, the curriculum -- and its
+  :class:`~billiards.rl.checkpoint.RunState`, fresh or restored from ``resume=<run dir>``;
+* :func:`train_off_policy` (SAC, TD3) and :func:`train_ppo` are the loops, one each, top to
+  bottom. Off-policy: a TorchRL :class:`~torchrl.collectors.Collector` steps the batched env
+  with the exploration policy (uniform random actions for ``budget.init_random_steps``
+  frames), every frame goes into the replay buffer and after the warm-up ``algo.utd``
+  gradient updates are made per collected frame. PPO: rollouts of ``algo.frames_per_batch``
+  frames, GAE, ``algo.epochs`` passes of minibatches;
+* :func:`periodic` is the cadence both loops call once per batch: a metric row every
+  ``budget.log_every`` frames (metrics.csv, wandb, TensorBoard), an evaluation with the
+  unified protocol every ``budget.eval_every`` (eval_history.jsonl), a checkpoint every
+  ``budget.checkpoint_every``; :func:`finish` makes the final evaluation (eval.json,
+  eval_<start>.json for further starts), summary.json and the last checkpoint.
+
+A killed run keeps its last checkpoint and goes on from it with ``resume=<run dir>``.
 """
 
 from __future__ import annotations
@@ -20,45 +26,55 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import random
-import signal
 import sys
-import time
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
 from tqdm import tqdm
 
+from billiards.device import resolve_device
 from billiards.files import atomic_write_text
 from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.warmup import warm_up
 
-from .checkpoint import CheckpointError, load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from .agents import OFF_POLICY, Agent, make_agent
+from .checkpoint import CheckpointError, RunState, load_checkpoint, save_checkpoint
 from .config import (
     ALGO_SCHEMAS,
     CONFIG_FILE,
     EVAL_FILE,
     EVAL_HISTORY_FILE,
+    RETIRED_KEYS,
     Config,
     ConfigError,
     env_paradigm,
     resolve_rm_model,
     validate,
     with_physics,
+    without_retired,
 )
-from .metrics import MetricLogger, eval_row
+from .curriculum import Stages, make_curriculum
+from .metrics import MetricLogger, Window, eval_row
 
 log = logging.getLogger(__name__)
 
 # Keys taken from the command line when resuming (everything else comes from the checkpoint).
-RUNTIME_KEYS = ("threads", "progress", "compile", "budget.kill_after_checkpoint")
+RUNTIME_KEYS = ("threads", "progress", "compile", "device")
 # Keys a resume takes from the command line only when given there (else the checkpoint's value):
 # a killed run can be given a CPU-time limit, e.g. to end it within one CPU hour.
 RESUME_KEYS = ("budget.cpu_minutes",)
+
+__all__ = ["RESUME_KEYS", "RETIRED_KEYS", "RUNTIME_KEYS", "OnDevice", "Run", "finish", "load_run_config", "make_collector",
+           "make_replay_buffer", "make_run", "periodic", "train", "train_off_policy", "train_ppo"]
 
 
 # ----------------------------------------------------------------------------- setup helpers
@@ -97,6 +113,7 @@ def env_kwargs(cfg) -> dict[str, Any]:
 
 
 def make_train_env(cfg, seed: int):
+    """The batched training env; it (the simulator) always runs on the CPU."""
     from billiards.envs import make_env
 
     return make_env(cfg.env.num_envs, seed=seed, **env_kwargs(cfg))
@@ -136,7 +153,7 @@ def _typed(container: dict) -> DictConfig:
     keys added to the schema after the run started (e.g. ``algo.actor_ema``) take their
     documented defaults."""
     schema = OmegaConf.structured(Config)
-    container = with_physics(container)
+    container = without_retired(with_physics(container))
     algo = (container.get("algo") or {}).get("name")
     if algo in ALGO_SCHEMAS:
         schema.algo = OmegaConf.structured(ALGO_SCHEMAS[algo])
@@ -187,400 +204,341 @@ def finished_result(ckpt: dict[str, Any], cfg: DictConfig, run_dir: Path) -> tup
     return None
 
 
-# ----------------------------------------------------------------------------- the trainer
+# ----------------------------------------------------------------------------- the run's parts
 
 
-class Trainer:
-    """One training run in ``run_dir``; :meth:`run` trains to the budget and returns the final
-    mean points per inning of the primary evaluation start."""
+def make_replay_buffer(cfg, device: torch.device):
+    """Uniform replay over the last ``algo.buffer_size`` frames (at most the budget), stored
+    on ``device``."""
+    from torchrl.data import LazyTensorStorage, RandomSampler, ReplayBuffer
 
-    def __init__(self, cfg: DictConfig, run_dir: Path):
-        self.run_dir = Path(run_dir)
-        ckpt = None
-        if cfg.resume:
-            ckpt = load_checkpoint(cfg.resume)
-            if Path(cfg.resume).resolve() != self.run_dir.resolve():
-                log.info("resume: continuing %s (this invocation's own dir is %s)", cfg.resume, self.run_dir)
-                self.run_dir = Path(cfg.resume)
-            cfg = resume_config(ckpt["config"], cfg)
-        validate(cfg)
-        self.cfg = cfg
-        self.algo = cfg.algo.name
-        self.off_policy = self.algo in ("sac", "td3")
-        # Resuming a finished run builds and writes nothing: run() says so and returns its result.
-        self.finished = finished_result(ckpt, cfg, self.run_dir) if ckpt is not None else None
-        if self.finished is not None:
-            return
-        set_threads(cfg.threads)
-        seed_everything(cfg.seed)
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        if ckpt is None:
-            atomic_write_text(self.run_dir / CONFIG_FILE, OmegaConf.to_yaml(_plain(cfg)))
+    capacity = min(cfg.algo.buffer_size, cfg.budget.total_steps)
+    return ReplayBuffer(storage=LazyTensorStorage(capacity, device=device), sampler=RandomSampler(),
+                        batch_size=cfg.algo.batch_size)
 
-        from billiards.rl.agents import make_agent
 
-        self.env = make_train_env(cfg, seed=cfg.seed)
-        obs_dim = self.env.observation_spec_unbatched["observation"].shape[-1]
-        self.agent = make_agent(cfg.algo, obs_dim, self.env.action_spec_unbatched)
-        if cfg.compile:
-            self.agent.compile()
-        from billiards.rl.curriculum import make_curriculum
+def make_collector(run: Run, policy, frames_per_batch: int):
+    """A Collector stepping the run's env (CPU) with ``policy`` (on the run's device) until
+    the budget's frames are collected: each step's TensorDict crosses to the device and back
+    once, and the batches it yields are stored on the device."""
+    from torchrl.collectors import Collector
 
-        self.curriculum = make_curriculum(cfg, self.agent)
-        self.stage: int | None = None
-        self.stage_log: list[dict] = []  # {"stage", "step", "free"} at each stage entry
+    remaining = run.cfg.budget.total_steps - run.state.frames
+    total = math.ceil(remaining / frames_per_batch) * frames_per_batch
+    return Collector(run.env, policy, frames_per_batch=frames_per_batch, total_frames=total,
+                     env_device="cpu", policy_device=run.device, storing_device=run.device,
+                     trust_policy=True, auto_register_policy_transforms=False)
 
-        b = cfg.budget
-        self.frames = 0
-        self.owed = 0.0  # fractional gradient updates carried over (off-policy)
-        self.train_seconds = 0.0  # wall-clock and CPU (process) seconds of earlier processes of this run
-        self.cpu_seconds = 0.0
-        self.next_log = b.log_every
-        self.next_eval = b.eval_every or math.inf
-        self.next_ckpt = b.checkpoint_every or math.inf
-        self.n_ckpt = 0
-        self.eval_history: list[dict] = []
-        self.latest_eval: float | None = None
-        self.rb = self._make_buffer() if self.off_policy else None
-        wandb_id = None
-        if ckpt is not None:
-            wandb_id = self._restore(ckpt)
-        metric_names = self.agent.metric_names + (("stage",) if self.curriculum else ())
-        self.logger = MetricLogger(cfg, self.run_dir, metric_names,
-                                   resume_step=self.frames if ckpt is not None else None, wandb_id=wandb_id)
-        if ckpt is not None:  # the history file reads as one run, like metrics.csv
-            self._write_eval_history()
-            self.stage_log = list(ckpt.get("stage_log") or [])
-        self._update_stage()
-        self._window_reset()
 
-    # -------------------------------------------------------------- curriculum
+class OnDevice(TensorDictModuleBase):
+    """``policy`` (on ``device``) for an env on the CPU: each step's TensorDict goes to the
+    device, the policy's outputs come back (used by evaluations; on the CPU, moves nothing)."""
 
-    def _update_stage(self) -> None:
-        """Frees the action dimensions of the curriculum stage in force at ``self.frames``
-        (a no-op without a curriculum). The agent -- networks, optimizer, replay buffer --
-        carries over unchanged: the warm start."""
-        if self.curriculum is None:
-            return
-        curriculum, hold = self.curriculum
-        stage = curriculum.stage_at(self.frames)
-        if stage == self.stage:
-            return
-        self.stage = stage
-        hold.set_free(curriculum.free_dims(stage))
-        entry = curriculum.describe()[stage] | {"step": self.frames}
-        if not self.stage_log or self.stage_log[-1]["stage"] != stage:
-            self.stage_log.append(entry)
-        log.info("curriculum: stage %d from step %d, free action dims %s", stage, self.frames, entry["free"])
+    def __init__(self, policy: TensorDictModuleBase, device: torch.device):
+        super().__init__()
+        self.policy, self.device = policy, device
+        self.in_keys, self.out_keys = list(policy.in_keys), list(policy.out_keys)
 
-    # -------------------------------------------------------------- buffer and state
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        return tensordict.update(self.policy(tensordict.to(self.device)).to("cpu"))
 
-    def _make_buffer(self):
-        from torchrl.data import LazyTensorStorage, RandomSampler, ReplayBuffer
 
-        capacity = min(self.cfg.algo.buffer_size, self.cfg.budget.total_steps)
-        return ReplayBuffer(storage=LazyTensorStorage(capacity), sampler=RandomSampler(),
-                            batch_size=self.cfg.algo.batch_size)
+@dataclass
+class Run:
+    """One training run in ``run_dir``: what :func:`make_run` builds, what the loops use."""
 
-    def _state(self) -> dict[str, Any]:
-        buffer = None
-        if self.rb is not None and self.cfg.checkpoint.save_buffer and len(self.rb):
-            n = len(self.rb)  # a TensorDict is no plain type: its nested dict of tensors and its length
-            buffer = {"data": self.rb.storage[:n].clone().to_dict(), "rows": n, "writer": self.rb.writer.state_dict()}
-        return {
-            "config": _plain(self.cfg),
-            "agent": self.agent.state_dict(),
-            "agent_extra": self.agent.state_dict_extra(),
-            "buffer": buffer,
-            "counters": {
-                "frames": self.frames,
-                "owed": self.owed,
-                "train_seconds": self._times()[0],
-                "cpu_seconds": self._times()[1],
-                "next_log": self.next_log,
-                "next_eval": self.next_eval,
-                "next_ckpt": self.next_ckpt,
-            },
-            "eval_history": self.eval_history,
-            "rng": rng_state(rack_rng(self.env)),
-            "wandb_id": self.logger.wandb_id,
-            "stage_log": self.stage_log,
-        }
+    cfg: DictConfig
+    run_dir: Path
+    device: torch.device
+    env: Any  # the batched TorchRL env (on the CPU)
+    agent: Agent
+    rb: Any  # the replay buffer (off-policy), None for PPO
+    state: RunState
+    logger: MetricLogger
+    stages: Stages | None  # the curriculum, None without one
+    window: Window
 
-    def _restore(self, ckpt: dict[str, Any]) -> str | None:
-        try:
-            self.agent.load_state_dict(ckpt["agent"])
-            self.agent.load_state_dict_extra(ckpt["agent_extra"])
-        except (RuntimeError, KeyError, ValueError) as err:
-            raise CheckpointError(f"cannot resume: the checkpoint's networks do not fit this config ({err})") from None
-        c = ckpt["counters"]
-        self.frames, self.owed = int(c["frames"]), float(c["owed"])
-        self.train_seconds, self.cpu_seconds = float(c["train_seconds"]), float(c["cpu_seconds"])
-        self.next_log, self.next_eval, self.next_ckpt = c["next_log"], c["next_eval"], c["next_ckpt"]
-        self.eval_history = list(ckpt.get("eval_history") or [])
-        if self.eval_history:
-            self.latest_eval = self.eval_history[-1]["eval_mean"]
-        buffer = ckpt.get("buffer")
-        if self.rb is not None and buffer is not None:
-            from tensordict import TensorDict
+    def budget_spent(self) -> bool:
+        """The training budget is spent: budget.total_steps frames or budget.cpu_minutes."""
+        return self.state.frames >= self.cfg.budget.total_steps or self.cpu_spent()
 
-            self.rb.extend(TensorDict(buffer["data"], batch_size=[buffer["rows"]]))
-            self.rb.writer.load_state_dict(buffer["writer"])
-        elif self.rb is not None:
-            log.warning("resume: the checkpoint has no replay buffer (checkpoint.save_buffer=false); refilling from scratch")
-        set_rng_state(ckpt["rng"], rack_rng(self.env))
-        log.info("resumed from %s at %d frames, %d updates", self.run_dir, self.frames, self.agent.n_updates)
-        return ckpt.get("wandb_id")
-
-    def _checkpoint(self) -> None:
-        save_checkpoint(self.run_dir, self._state())
-        self.n_ckpt += 1
-        kill = self.cfg.budget.kill_after_checkpoint
-        if kill and self.n_ckpt >= kill:
-            log.warning("budget.kill_after_checkpoint=%d: killing the run (SIGKILL) after checkpoint %d", kill, self.n_ckpt)
-            self.logger.close()
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os.kill(os.getpid(), signal.SIGKILL)
-
-    def _write_eval_history(self) -> None:
-        text = "".join(json.dumps(e) + "\n" for e in self.eval_history)
-        atomic_write_text(self.run_dir / EVAL_HISTORY_FILE, text)
-
-    # -------------------------------------------------------------- bookkeeping
-
-    def _times(self) -> tuple[float, float]:
-        """Training wall-clock and CPU seconds so far, over all processes of this run."""
-        return (self.train_seconds + time.perf_counter() - self._t0,
-                self.cpu_seconds + time.process_time() - self._c0)
-
-    def _cpu_spent(self) -> bool:
+    def cpu_spent(self) -> bool:
         """True once budget.cpu_minutes (if set) of process CPU time are used up."""
         limit = self.cfg.budget.cpu_minutes
-        return bool(limit) and self._times()[1] >= 60.0 * limit
+        return bool(limit) and self.state.times()[1] >= 60.0 * limit
 
-    def _finished(self) -> bool:
-        """The training budget is spent: budget.total_steps frames or budget.cpu_minutes."""
-        return self.frames >= self.cfg.budget.total_steps or self._cpu_spent()
+    def update_stage(self) -> None:
+        """Frees the action dimensions of the curriculum stage in force (no-op without one)."""
+        if self.stages is not None:
+            self.stages.update(self.state.frames, self.state.stage_log)
 
-    def _window_reset(self) -> None:
-        self._w_frames, self._w_updates, self._w_t = 0, self.agent.n_updates, time.perf_counter()
-        self._w_reward = self._w_score = self._w_foul = 0.0
-        self._w_metrics: Any = None
+    def log_window(self) -> None:
+        """A metric row of the frames since the last one."""
+        stage = None if self.stages is None else self.stages.stage
+        self.logger.log(self.window.row(self.state.frames, self.agent.n_updates, self.state.times(),
+                                        self.agent.metric_names, stage))
+        self.window.reset(self.agent.n_updates)
 
-    def _window_add(self, data) -> None:
-        nxt = data.get("next")
-        self._w_frames += data.numel()
-        self._w_reward += float(nxt.get("reward").sum())
-        self._w_score += float(nxt.get("score").sum())
-        self._w_foul += float(nxt.get("foul").sum())
-
-    def _log_row(self) -> dict[str, Any]:
-        dt = max(time.perf_counter() - self._w_t, 1e-9)
-        n = max(self._w_frames, 1)
-        wall, cpu = self._times()
-        row = {
-            "step": self.frames,
-            "updates": self.agent.n_updates,
-            "wall_time": round(wall, 3),
-            "cpu_time": round(cpu, 3),
-            "fps": round(self._w_frames / dt, 1),
-            "ups": round((self.agent.n_updates - self._w_updates) / dt, 2),
-            "train_reward": self._w_reward / n,
-            "train_score_pct": 100.0 * self._w_score / n,
-            "train_foul_pct": 100.0 * self._w_foul / n,
-        }
-        if self.stage is not None:
-            row["stage"] = self.stage
-        if self._w_metrics is not None:
-            from billiards.rl.agents import metrics_of
-
-            row.update(metrics_of(self._w_metrics, self.agent.metric_names))
-        return row
-
-    def _periodic(self, bar) -> None:
-        b = self.cfg.budget
-        if self.frames >= self.next_log:
-            self.logger.log(self._log_row())
-            self._window_reset()
-            self.next_log = (self.frames // b.log_every + 1) * b.log_every
-        done = self._finished()  # the final evaluation and checkpoint follow
-        if self.frames >= self.next_eval and not done:
-            self._evaluate(b.eval_innings, eval_starts(self.cfg)[0], final=False)
-            self.next_eval = (self.frames // b.eval_every + 1) * b.eval_every
-        if self.frames >= self.next_ckpt and not done:
-            self.next_ckpt = (self.frames // b.checkpoint_every + 1) * b.checkpoint_every
-            self._checkpoint()
-        postfix = {"ups": f"{(self.agent.n_updates - self._w_updates) / max(time.perf_counter() - self._w_t, 1e-9):.0f}"}
-        if self.latest_eval is not None:
-            postfix["eval"] = f"{self.latest_eval:.2f}"
-        bar.set_postfix(postfix, refresh=False)
-
-    def _evaluate(self, n_innings: int, start: str, final: bool):
+    def evaluate(self, n_innings: int, start: str, final: bool):
         """Evaluates and records the agent's eval policy; with an averaged actor
         (algo.actor_ema > 0) also the live actor, recorded beside it under ``live_*`` keys.
         Returns ``(result, live result or None)``."""
-        result = evaluate_policy(self.cfg, self.agent.eval_policy, n_innings, start)
+        agent = self.agent
+        result = evaluate_policy(self.cfg, OnDevice(agent.eval_policy, self.device), n_innings, start)
         live = None
-        if self.agent.eval_policy is not self.agent.policy:
-            live = evaluate_policy(self.cfg, self.agent.policy, n_innings, start)
-        self._record_eval(result, final, live)
-        return result, live
-
-    def _record_eval(self, result, final: bool, live=None) -> None:
-        wall, cpu = self._times()
+        if agent.eval_policy is not agent.policy:
+            live = evaluate_policy(self.cfg, OnDevice(agent.policy, self.device), n_innings, start)
+        wall, cpu = self.state.times()
         entry = {
-            "step": self.frames,
-            "updates": self.agent.n_updates,
+            "step": self.state.frames,
+            "updates": agent.n_updates,
             "wall_time": round(wall, 3),
             "cpu_time": round(cpu, 3),
             "final": final,
             "start": result.start,
             "n_innings": result.n_innings,
-            **{k: v for k, v in eval_row(result).items()},
+            **eval_row(result),
         }
         if live is not None:
             entry |= {f"live_{k}": v for k, v in eval_row(live).items()}
-        self.eval_history.append(entry)
-        self._write_eval_history()
-        self.latest_eval = result.mean
+        self.state.eval_history.append(entry)
+        write_eval_history(self.run_dir, self.state.eval_history)
         self.logger.log({k: entry[k] for k in ("step", "updates", "wall_time", "cpu_time")} | eval_row(result))
-        log.info("eval @ %d frames: %s", self.frames, result.summary())
+        log.info("eval @ %d frames: %s", self.state.frames, result.summary())
         if live is not None:
-            log.info("eval @ %d frames, live actor: %s", self.frames, live.summary())
+            log.info("eval @ %d frames, live actor: %s", self.state.frames, live.summary())
+        return result, live
 
-    # -------------------------------------------------------------- loops
+    def checkpoint(self) -> Path:
+        """Writes checkpoint.pt: the run state with the config, agent, buffer and RNGs."""
+        state = self.state.capture(_plain(self.cfg), self.agent, self.rb, rack_rng(self.env),
+                                   save_buffer=self.cfg.checkpoint.save_buffer, device=self.device)
+        return save_checkpoint(self.run_dir, state)
 
-    def _collector(self, policy, frames_per_batch: int):
-        from torchrl.collectors import Collector
 
-        remaining = self.cfg.budget.total_steps - self.frames
-        total = math.ceil(remaining / frames_per_batch) * frames_per_batch
-        return Collector(self.env, policy, frames_per_batch=frames_per_batch, total_frames=total,
-                         trust_policy=True, auto_register_policy_transforms=False)
+def write_eval_history(run_dir: Path, history: list[dict]) -> None:
+    atomic_write_text(run_dir / EVAL_HISTORY_FILE, "".join(json.dumps(e) + "\n" for e in history))
 
-    def _off_policy(self, bar) -> None:
-        a, b = self.cfg.algo, self.cfg.budget
-        fpb = a.frames_per_batch or self.cfg.env.num_envs
-        self.agent.set_warmup(self.frames < b.init_random_steps)
-        collector = self._collector(self.agent.explore, fpb)
-        keys = self.agent.replay_keys
-        try:
-            for data in collector:
+
+def load_run_config(cfg: DictConfig, run_dir: Path) -> tuple[DictConfig, Path, dict | None]:
+    """``(config, run dir, checkpoint or None)`` of the run ``cfg`` asks for: a new run in
+    ``run_dir``, or with ``resume=<dir>`` that run's checkpointed config (see
+    :func:`resume_config`), dir and checkpoint. The config is validated (ConfigError)."""
+    ckpt = None
+    if cfg.resume:
+        ckpt = load_checkpoint(cfg.resume)
+        if Path(cfg.resume).resolve() != Path(run_dir).resolve():
+            log.info("resume: continuing %s (this invocation's own dir is %s)", cfg.resume, run_dir)
+            run_dir = Path(cfg.resume)
+        cfg = resume_config(ckpt["config"], cfg)
+    validate(cfg)
+    return cfg, Path(run_dir), ckpt
+
+
+def make_run(cfg: DictConfig, run_dir: Path, ckpt: dict | None = None) -> Run:
+    """The parts of a run (``cfg`` validated), fresh or from ``ckpt``; writes config.yaml
+    into a new run's dir."""
+    set_threads(cfg.threads)
+    seed_everything(cfg.seed)
+    device = resolve_device(cfg.device)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if ckpt is None:
+        atomic_write_text(run_dir / CONFIG_FILE, OmegaConf.to_yaml(_plain(cfg)))
+    env = make_train_env(cfg, seed=cfg.seed)
+    obs_dim = env.observation_spec_unbatched["observation"].shape[-1]
+    agent = make_agent(cfg.algo, obs_dim, env.action_spec_unbatched, num_envs=cfg.env.num_envs, device=device)
+    if cfg.compile:
+        agent.compile()
+    stages = make_curriculum(cfg, agent)
+    rb = make_replay_buffer(cfg, device) if cfg.algo.name in OFF_POLICY else None
+    if ckpt is None:
+        state = RunState.fresh(cfg.budget)
+    else:
+        state = RunState.restore(ckpt, agent, rb, rack_rng(env), device)
+        log.info("resumed from %s at %d frames, %d updates", run_dir, state.frames, agent.n_updates)
+    metric_names = agent.metric_names + (("stage",) if stages else ())
+    logger = MetricLogger(cfg, run_dir, metric_names, resume_step=None if ckpt is None else state.frames,
+                          wandb_id=state.wandb_id)
+    state.wandb_id = logger.wandb_id
+    if ckpt is not None:  # the history file reads as one run, like metrics.csv
+        write_eval_history(run_dir, state.eval_history)
+    run = Run(cfg, run_dir, device, env, agent, rb, state, logger, stages, Window(agent.n_updates))
+    run.update_stage()
+    return run
+
+
+# ----------------------------------------------------------------------------- the cadence
+
+
+def _next_multiple(frames: int, every: int) -> int:
+    return (frames // every + 1) * every
+
+
+def periodic(run: Run, bar) -> None:
+    """What is due after a batch, in this order: a metric row (every budget.log_every frames),
+    an evaluation (eval_every) and a checkpoint (checkpoint_every); the last two not once the
+    budget is spent, since the final evaluation and checkpoint follow. The steps at which each
+    is next due are in the run state, so a resumed run keeps the cadence."""
+    state, b = run.state, run.cfg.budget
+    if state.frames >= state.next_log:
+        run.log_window()
+        state.next_log = _next_multiple(state.frames, b.log_every)
+    done = run.budget_spent()
+    if state.frames >= state.next_eval and not done:
+        run.evaluate(b.eval_innings, eval_starts(run.cfg)[0], final=False)
+        state.next_eval = _next_multiple(state.frames, b.eval_every)
+    if state.frames >= state.next_ckpt and not done:
+        state.next_ckpt = _next_multiple(state.frames, b.checkpoint_every)
+        run.checkpoint()
+    postfix = {"ups": f"{run.window.ups(run.agent.n_updates):.0f}"}
+    if state.eval_history:
+        postfix["eval"] = f"{state.eval_history[-1]['eval_mean']:.2f}"
+    bar.set_postfix(postfix, refresh=False)
+
+
+@contextmanager
+def session(run: Run) -> Iterator[tqdm]:
+    """Around a loop: compiles the simulator's kernels, starts the run's clock and shows a
+    progress bar; closes the logger at the end."""
+    cfg, b = run.cfg, run.cfg.budget
+    params = params_from_config(cfg.physics)
+    log.info("output: %s (%s, %s steps, physics %s) on %s", run.run_dir, cfg.algo.name, f"{b.total_steps:,}",
+             params.describe(), run.device)
+    warm_up(params, log=log.info)
+    run.state.start_clock()
+    interactive = sys.stderr.isatty()
+    with tqdm(total=b.total_steps, initial=run.state.frames, unit="shot", unit_scale=True, dynamic_ncols=True,
+              mininterval=1.0 if interactive else 30.0, disable=not cfg.progress, file=sys.stderr,
+              desc=f"{cfg.algo.name} {run.run_dir.name}", smoothing=0.05) as bar:
+        yield bar
+    run.logger.close()
+    log.info("done: %s, summary.json and checkpoint.pt in %s", EVAL_FILE, run.run_dir)
+
+
+def finish(run: Run, bar) -> float:
+    """The final evaluation from every start (eval.json, eval_<start>.json), summary.json and
+    the last checkpoint; returns the primary start's mean points per inning."""
+    cfg, state, agent = run.cfg, run.state, run.agent
+    if run.window.frames:
+        run.log_window()
+    results, lives = [], {}
+    for i, start in enumerate(eval_starts(cfg)):
+        result, live = run.evaluate(cfg.budget.final_eval_innings, start, final=True)
+        results.append(result)
+        if live is not None:
+            lives[start] = eval_row(live)
+        result.to_json(run.run_dir / (EVAL_FILE if i == 0 else f"eval_{start}.json"))
+    train_seconds, cpu_seconds = state.times()
+    summary = {
+        "algo": cfg.algo.name,
+        "table": cfg.table,
+        "seed": cfg.seed,
+        "frames": state.frames,
+        "updates": agent.n_updates,
+        **physics_record(params_from_config(cfg.physics)),
+        "device": str(run.device),
+        "stopped_by": "total_steps" if state.frames >= cfg.budget.total_steps else "cpu_minutes",
+        "train_seconds": round(train_seconds, 2),
+        "cpu_seconds": round(cpu_seconds, 2),
+        "frames_per_second": round(state.frames / max(train_seconds, 1e-9), 1),
+        "updates_per_second": round(agent.n_updates / max(train_seconds, 1e-9), 2),
+        "eval": {r.start: eval_row(r) for r in results},
+    }
+    if lives:  # eval is the averaged actor's (algo.actor_ema); this, the live actor's
+        summary["eval_live"] = lives
+    if run.stages is not None:
+        summary["curriculum"] = state.stage_log
+    atomic_write_text(run.run_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    for r in results:
+        log.info("final eval (%s start): %s", r.start, r.summary())
+    bar.set_postfix(eval=f"{results[0].mean:.2f}")  # the final evaluation, not the last periodic one
+    run.checkpoint()
+    return results[0].mean
+
+
+# ----------------------------------------------------------------------------- the loops
+
+
+@contextmanager
+def collecting(run: Run, policy, frames_per_batch: int) -> Iterator[Iterable[TensorDictBase]]:
+    """The batches of a :func:`make_collector` until the budget's frames are collected (none
+    if the budget is already spent); the collector is shut down at the end."""
+    if run.budget_spent():
+        yield ()
+        return
+    collector = make_collector(run, policy, frames_per_batch)
+    try:
+        yield collector
+    finally:
+        collector.shutdown()
+
+
+def train_off_policy(run: Run) -> float:
+    """SAC and TD3 to the budget; returns the final mean points per inning."""
+    cfg, agent, rb, state = run.cfg, run.agent, run.rb, run.state
+    a, b = cfg.algo, cfg.budget
+    with session(run) as bar:
+        agent.set_warmup(state.frames < b.init_random_steps)
+        with collecting(run, agent.explore, a.frames_per_batch or cfg.env.num_envs) as batches:
+            for data in batches:
                 n = data.numel()
-                self.frames += n
-                self.rb.extend(data.reshape(-1).select(*keys))
-                self._window_add(data)
-                if self.frames >= b.init_random_steps:
-                    self.owed += a.utd * n
-                    k = int(self.owed)
-                    self.owed -= k
-                    for _ in range(k):
-                        self._w_metrics = self.agent.update(self.rb.sample())
-                self.agent.set_warmup(self.frames < b.init_random_steps)
-                self._update_stage()
+                state.frames += n
+                rb.extend(data.reshape(-1).select(*agent.replay_keys))
+                run.window.add(data)
+                if state.frames >= b.init_random_steps:
+                    for _ in range(state.take_updates(a.utd * n)):
+                        run.window.metrics = agent.update(rb.sample())
+                agent.set_warmup(state.frames < b.init_random_steps)
+                run.update_stage()
                 bar.update(n)
-                self._periodic(bar)
-                if self._cpu_spent():
+                periodic(run, bar)
+                if run.cpu_spent():
                     break
-        finally:
-            collector.shutdown()
+        return finish(run, bar)
 
-    def _ppo(self, bar) -> None:
-        a = self.cfg.algo
-        collector = self._collector(self.agent.explore, a.frames_per_batch)
-        try:
-            for data in collector:
+
+def train_ppo(run: Run) -> float:
+    """PPO to the budget; returns the final mean points per inning."""
+    cfg, agent, state = run.cfg, run.agent, run.state
+    a = cfg.algo
+    with session(run) as bar:
+        with collecting(run, agent.explore, a.frames_per_batch) as batches:
+            for data in batches:
                 n = data.numel()
-                self.frames += n
-                self._window_add(data)
+                state.frames += n
+                run.window.add(data)
                 for _ in range(a.epochs):
-                    flat = self.agent.advantage(data).reshape(-1)
-                    perm = torch.randperm(n)
+                    flat = agent.advantage(data).reshape(-1)
+                    perm = torch.randperm(n).to(flat.device)  # torch's CPU generator on every device
                     for i in range(0, n - a.minibatch_size + 1, a.minibatch_size):
-                        self._w_metrics = self.agent.update(flat[perm[i:i + a.minibatch_size]])
+                        run.window.metrics = agent.update(flat[perm[i:i + a.minibatch_size]])
                 bar.update(n)
-                self._periodic(bar)
-                if self._cpu_spent():
+                periodic(run, bar)
+                if run.cpu_spent():
                     break
-        finally:
-            collector.shutdown()
-
-    def run(self) -> float:
-        if self.finished is not None:
-            mean, frames = self.finished
-            log.warning("resume: %s is already finished (%d frames, final evaluation in %s: %.3f points per inning); "
-                        "nothing to do, nothing changed. Start a new run to train further.",
-                        self.run_dir, frames, EVAL_FILE, mean)
-            return mean
-        cfg, b = self.cfg, self.cfg.budget
-        params = params_from_config(cfg.physics)
-        log.info("output: %s (%s, %s steps, physics %s)", self.run_dir, self.algo, f"{b.total_steps:,}", params.describe())
-        warm_up(params, log=log.info)
-        self._t0, self._c0 = time.perf_counter(), time.process_time()
-        interactive = sys.stderr.isatty()
-        with tqdm(total=b.total_steps, initial=self.frames, unit="shot", unit_scale=True, dynamic_ncols=True,
-                  mininterval=1.0 if interactive else 30.0, disable=not cfg.progress, file=sys.stderr,
-                  desc=f"{self.algo} {self.run_dir.name}", smoothing=0.05) as bar:
-            if not self._finished():
-                (self._off_policy if self.off_policy else self._ppo)(bar)
-            results = self._final_eval()
-            bar.set_postfix(eval=f"{results[0].mean:.2f}")  # the final evaluation, not the last periodic one
-            save_checkpoint(self.run_dir, self._state())
-        self.logger.close()
-        log.info("done: %s, summary.json and checkpoint.pt in %s", EVAL_FILE, self.run_dir)
-        return results[0].mean
-
-    def _final_eval(self):
-        cfg = self.cfg
-        if self._w_frames:
-            self.logger.log(self._log_row())
-        results, lives = [], {}
-        for i, start in enumerate(eval_starts(cfg)):
-            result, live = self._evaluate(cfg.budget.final_eval_innings, start, final=True)
-            results.append(result)
-            if live is not None:
-                lives[start] = eval_row(live)
-            result.to_json(self.run_dir / (EVAL_FILE if i == 0 else f"eval_{start}.json"))
-        train_seconds, cpu_seconds = self._times()
-        summary = {
-            "algo": self.algo,
-            "table": cfg.table,
-            "seed": cfg.seed,
-            "frames": self.frames,
-            "updates": self.agent.n_updates,
-            **physics_record(params_from_config(cfg.physics)),
-            "stopped_by": "total_steps" if self.frames >= cfg.budget.total_steps else "cpu_minutes",
-            "train_seconds": round(train_seconds, 2),
-            "cpu_seconds": round(cpu_seconds, 2),
-            "frames_per_second": round(self.frames / max(train_seconds, 1e-9), 1),
-            "updates_per_second": round(self.agent.n_updates / max(train_seconds, 1e-9), 2),
-            "eval": {r.start: eval_row(r) for r in results},
-        }
-        if lives:  # eval is the averaged actor's (algo.actor_ema); this, the live actor's
-            summary["eval_live"] = lives
-        if self.curriculum is not None:
-            summary["curriculum"] = self.stage_log
-        atomic_write_text(self.run_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
-        for r in results:
-            log.info("final eval (%s start): %s", r.start, r.summary())
-        return results
+        return finish(run, bar)
 
 
 def train(cfg: DictConfig, run_dir: str | Path | None = None) -> float:
     """Train as configured; returns the final mean points per inning (primary eval start).
 
     ``run_dir`` defaults to Hydra's output dir of the job (or the resumed run's dir).
+    Resuming a finished run builds and writes nothing: it says so and returns its result.
     """
     if run_dir is None:
         from hydra.core.hydra_config import HydraConfig
 
         run_dir = HydraConfig.get().runtime.output_dir
     try:
-        trainer = Trainer(cfg, Path(run_dir))
+        cfg, run_dir, ckpt = load_run_config(cfg, Path(run_dir))
+        finished = finished_result(ckpt, cfg, run_dir) if ckpt is not None else None
+        if finished is not None:
+            mean, frames = finished
+            log.warning("resume: %s is already finished (%d frames, final evaluation in %s: %.3f points per inning); "
+                        "nothing to do, nothing changed. Start a new run to train further.",
+                        run_dir, frames, EVAL_FILE, mean)
+            return mean
+        run = make_run(cfg, run_dir, ckpt)
     except (CheckpointError, ConfigError) as err:
         raise SystemExit(f"Error: {err}") from None
-    return trainer.run()
-
-
-__all__ = ["Trainer", "train"]
+    return (train_off_policy if cfg.algo.name in OFF_POLICY else train_ppo)(run)
