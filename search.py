@@ -19,9 +19,7 @@ Thin entry point: composes conf/search.yaml and calls billiards.search.run.
 import hydra
 from hydra.core.hydra_config import HydraConfig
 
-from billiards.search.config import register
-
-register()
+import billiards.search.config  # noqa: F401  (registers the schema and resolvers before Hydra composes)
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="search")

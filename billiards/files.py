@@ -1,6 +1,10 @@
-"""Files the package writes and reads back: one atomic writer for every result file, and one
+"""Files the package writes and reads back: the repository root and paths relative to it, the
+names of the files a run directory holds, one atomic writer for every result file, and one
 loader for the small ``torch.save`` files with a format tag (exported policies, reward models)
 that turns every way such a file can be bad into one clear error.
+
+The lowest layer of the package: standard library only (torch lazily, in :func:`load_tagged`),
+so anything may import it.
 
 Atomic means a reader (or a kill at any moment) sees either the old file or the new one,
 never half of one: the content goes to a temporary file in the same directory, is flushed and
@@ -16,6 +20,28 @@ from pathlib import Path
 from typing import IO, Iterator
 
 TMP_SUFFIX = ".tmp"
+
+ROOT = Path(__file__).resolve().parent.parent  # the repository (a checkout; billiards/ is in it)
+
+# What a training run directory holds (billiards.rl) ...
+CONFIG_FILE = "config.yaml"  # the resolved config, written at start (training and search runs)
+CHECKPOINT_FILE = "checkpoint.pt"
+EVAL_FILE = "eval.json"
+EVAL_HISTORY_FILE = "eval_history.jsonl"
+METRICS_FILE = "metrics.csv"
+SUMMARY_FILE = "summary.json"
+# ... and a search run directory (billiards.search)
+RESULTS_FILE = "results.json"
+
+
+def repo_path(path) -> Path:
+    """A path a config or a command line gives: itself if it is absolute or exists (relative to
+    the working directory), else the same path under the repository root, so the shipped
+    ``results/...`` files are found from any working directory."""
+    p = Path(path)
+    if p.is_absolute() or p.exists():
+        return p
+    return ROOT / p
 
 
 @contextlib.contextmanager

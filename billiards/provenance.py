@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import subprocess
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from billiards.files import ROOT
+
+__all__ = ["ROOT", "git_commit"]
 
 
 def git_commit() -> str:

@@ -39,6 +39,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from billiards.files import CHECKPOINT_FILE, CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE, SUMMARY_FILE
+
 # The paper's figures (shared/paper.md). Keys are our variant names.
 PAPER = {
     "table1": {
@@ -252,7 +254,7 @@ def generic_label(c: dict) -> str:
 
 
 # Files a training run writes into its directory: any of them marks a run directory.
-RUN_FILES = ("config.yaml", "eval.json", "summary.json", "eval_history.jsonl", "metrics.csv", "checkpoint.pt")
+RUN_FILES = (CONFIG_FILE, EVAL_FILE, SUMMARY_FILE, EVAL_HISTORY_FILE, METRICS_FILE, CHECKPOINT_FILE)
 EVAL_KEYS = ("mean", "best", "foul_innings_pct", "foul_per_shot_pct", "success_per_shot_pct")
 
 
@@ -280,7 +282,7 @@ def _json_object(path: Path) -> dict:
 def read_config(run_dir: Path) -> dict:
     """The run's ``config.yaml`` as a dict; ValueError saying what is wrong if it is missing,
     unparsable or lacks an integer seed."""
-    path = run_dir / "config.yaml"
+    path = run_dir / CONFIG_FILE
     if not path.is_file():
         raise ValueError("no config.yaml (the run's settings)")
     try:
@@ -297,7 +299,7 @@ def read_run(run_dir: Path) -> Run | None:
     """The finished run in ``run_dir``, or None if it has no eval.json yet (unfinished).
     Raises ValueError (or OSError) saying what is wrong with a broken one."""
     config = read_config(run_dir)
-    eval_path = run_dir / "eval.json"
+    eval_path = run_dir / EVAL_FILE
     if not eval_path.is_file():
         return None
     result = _json_object(eval_path)
@@ -305,7 +307,7 @@ def read_run(run_dir: Path) -> Run | None:
     if missing:
         raise ValueError(f"eval.json lacks {missing}")
     extra = {p.stem[len("eval_"):]: _json_object(p) for p in run_dir.glob("eval_*.json")}
-    summary_path = run_dir / "summary.json"
+    summary_path = run_dir / SUMMARY_FILE
     summary = _json_object(summary_path) if summary_path.is_file() else {}
     run = Run(run_dir, config, result, extra, summary)
     _check_config(lambda: (run.variant(), run.frames, run.physics))
@@ -474,7 +476,7 @@ def report(dirs: list[Path]) -> str:
     return "\n".join(parts)
 
 
-SMALL_RUN_FILES = ("config.yaml", "eval.json", "eval_*.json", "summary.json", "eval_history.jsonl", "metrics.csv")
+SMALL_RUN_FILES = (CONFIG_FILE, EVAL_FILE, "eval_*.json", SUMMARY_FILE, EVAL_HISTORY_FILE, METRICS_FILE)
 
 
 @dataclass
@@ -502,8 +504,6 @@ class Curve:
 def read_curve(run_dir: Path) -> Curve | None:
     """The learning curve of the run in ``run_dir``, or None without evaluations yet. Raises
     ValueError (or OSError) saying what is wrong with a broken one."""
-    from billiards.rl.config import EVAL_HISTORY_FILE
-
     config = read_config(run_dir)
     hist = run_dir / EVAL_HISTORY_FILE
     if not hist.is_file():

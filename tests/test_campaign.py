@@ -285,9 +285,7 @@ def test_search_runs_compose_with_the_exported_policies(tmp_path):
     from hydra.core.global_hydra import GlobalHydra
 
     from billiards.campaign.ledger import fill
-    from billiards.search.config import register, validate
-
-    register()
+    from billiards.search.config import validate
     c = paper_campaign()
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):

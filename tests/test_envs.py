@@ -201,7 +201,7 @@ def test_gym_shaping_and_constraint_match_domain():
         dict(gentle=0.5, gentle_kind="power"),
         dict(near_miss=0.05),
         ALL_LAYERS,
-        dict(ALL_LAYERS, paradigm="canonical-reset"),
+        dict(ALL_LAYERS, paradigm="canonical_reset"),
         dict(normalize_actions=True),
         dict(ALL_LAYERS, normalize_actions=True),
     ],

@@ -239,7 +239,7 @@ def test_things_made_on_another_table_warn_loudly(tmp_path):
 
     from billiards.envs import make_env
     from billiards.physics.config import PhysicsMismatchWarning
-    from billiards.rl.policy import load_policy_proposer
+    from billiards.search.proposers import load_policy_proposer
     from billiards.rm import RewardModel, save_model
 
     model = RewardModel(hidden=(4,))

@@ -1,10 +1,12 @@
-"""Pictures: shot PNG, inning GIF, rgb_array, command line."""
+"""Pictures: shot PNG, inning GIF, rgb_array (billiards.render); playing an inning and the command line (billiards.pictures)."""
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
-from billiards import render
+from billiards import pictures, render
 from billiards.baselines import nearest_red_policy
 from billiards.envs import Billiards4BallInningEnv
 from billiards.physics import canonical_rack, simulate_shot
@@ -40,7 +42,7 @@ def test_table_rgb_array_and_gym_render():
 
 
 def test_play_and_render_inning_gif(tmp_path):
-    shots = render.play_inning(nearest_red_policy(), seed=1, max_shots=2)
+    shots = pictures.play_inning(nearest_red_policy(), seed=1, max_shots=2)
     assert len(shots) == 2
     pos0, act0 = shots[0]
     # the second shot starts where the first left the table
@@ -53,7 +55,7 @@ def test_play_and_render_inning_gif(tmp_path):
 
 def test_command_line(tmp_path, capsys):
     out = tmp_path / "cli.png"
-    render.main(["shot", "--out", str(out), "--seed", "0", "--policy", "nearest", "--dpi", "40"])
+    pictures.main(["shot", "--out", str(out), "--seed", "0", "--policy", "nearest", "--dpi", "40"])
     assert out.stat().st_size > 1000
     assert str(out) in capsys.readouterr().out
 
@@ -64,10 +66,10 @@ def test_render_draws_a_trained_policys_shots_on_its_own_table(tmp_path, capsys)
     from billiards.physics import PRESETS
 
     shipped = Path(__file__).resolve().parents[1] / "results" / "policies" / "base" / "seed0.pt"
-    policy, constrain_aim, extra_features, made_on = render.load_player(str(shipped))
+    policy, constrain_aim, extra_features, made_on = pictures.load_player(str(shipped))
     assert constrain_aim and extra_features and made_on == PRESETS["international"]
     out = tmp_path / "policy.png"
-    render.main(["shot", "--out", str(out), "--policy", str(shipped), "--seed", "2", "--dpi", "40"])
+    pictures.main(["shot", "--out", str(out), "--policy", str(shipped), "--seed", "2", "--dpi", "40"])
     assert out.is_file() and "first contact" in capsys.readouterr().out
     image = np.asarray(Image.open(out).convert("RGB"))
     # played on the international table: the cloth is 1.42 m wide at 3 inches per metre and 40 dpi
@@ -76,4 +78,14 @@ def test_render_draws_a_trained_policys_shots_on_its_own_table(tmp_path, capsys)
     cols = np.flatnonzero(cloth.any(0))
     assert cols[-1] - cols[0] + 1 == pytest.approx(1.42 * 3.0 * 40, rel=0.03)
     with pytest.raises(SystemExit, match="not nearest, random, or an existing"):
-        render.main(["shot", "--out", str(out), "--policy", "no/such/run"])
+        pictures.main(["shot", "--out", str(out), "--policy", "no/such/run"])
+
+
+def test_the_former_command_line_points_to_the_new_one():
+    """``python -m billiards.render`` only draws now; it says where the command line went."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "billiards.render", "shot", "--out", "x.png"], capture_output=True,
+                          text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert proc.returncode != 0 and "python -m billiards.pictures" in proc.stderr

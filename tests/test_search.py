@@ -15,6 +15,7 @@ import billiards.search.puct_reference as puct_reference_mod
 from billiards.physics import random_racks, simulate_batch
 from billiards.search import (GeometricProposer, H2Config, LookaheadActor, PolicyProposer, PUCTActor, PUCTConfig, h2_search,
                               puct_search, verifier_reward)
+from billiards.search.config import SHIPPED_PROPOSERS
 from billiards.search.protocols import run_chain, run_p1
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -265,7 +266,8 @@ def test_policy_proposer_from_a_training_run(tmp_path):
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
     from billiards import domain
-    from billiards.rl.policy import load_policy, load_policy_proposer
+    from billiards.rl.policy import load_policy
+    from billiards.search.proposers import load_policy_proposer
 
     run = tmp_path / "run"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
@@ -304,21 +306,20 @@ def test_policy_proposer_from_a_training_run(tmp_path):
         load_policy(tmp_path / "bad.pt")
 
 
-SHIPPED = sorted(p.stem for p in (ROOT / "conf" / "proposer").glob("*.yaml") if p.stem != "geometric")
+SHIPPED = sorted(SHIPPED_PROPOSERS)
 
 
 def test_shipped_proposers_work_out_of_the_box(tmp_path):
     """`python search.py proposer=<name>` runs from a fresh checkout: the exported policies
     of every conf/proposer/<name>.yaml are in the repository and load as one ensemble."""
-    import yaml
-
-    from billiards.rl.policy import load_policy_proposer
+    from billiards.search.config import shipped_proposer
+    from billiards.search.proposers import load_policy_proposer
 
     racks = random_racks(np.random.default_rng(5), 2)
     for name in SHIPPED:
-        cfg = yaml.safe_load((ROOT / "conf" / "proposer" / f"{name}.yaml").read_text())
-        assert cfg["kind"] == "policy" and len(cfg["checkpoints"]) == 3
-        prop = load_policy_proposer([ROOT / c for c in cfg["checkpoints"]], name=name)
+        cfg = shipped_proposer(name)
+        assert cfg.kind == "policy" and len(cfg.checkpoints) == 3
+        prop = load_policy_proposer([ROOT / c for c in cfg.checkpoints], name=name)
         res = h2_search(racks, prop, H2Config(k1=8, m1=2, k2=4), np.random.default_rng(1))
         assert res.actions.shape == (2, 4) and np.isfinite(res.actions).all()
     if SHIPPED:  # one through the entry point
@@ -331,7 +332,7 @@ def test_shipped_proposers_work_out_of_the_box(tmp_path):
 
 def test_a_missing_proposer_checkpoint_fails_fast(tmp_path):
     out = tmp_path / "never"
-    proc = run_search("proposer=geometric", "proposer.kind=policy", "proposer.checkpoints=[results/policies/none/seed0.pt]",
+    proc = run_search("proposer=policy", "proposer.checkpoints=[results/policies/none/seed0.pt]",
                       f"hydra.run.dir={out}")
     assert proc.returncode != 0 and "no checkpoint at results/policies/none/seed0.pt" in proc.stderr
     assert not out.exists()

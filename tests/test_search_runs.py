@@ -4,18 +4,19 @@
 import json
 
 import pytest
-from omegaconf import OmegaConf
 
 from billiards.search import run as search_run
-from billiards.search.config import Config
+from billiards.search.config import search_config
 from billiards.search.proposers import GeometricProposer
 
 
 def small_cfg(**protocol):
-    cfg = OmegaConf.structured(Config)
-    cfg.protocol.name = protocol.get("name", "p3")
-    cfg.protocol.seeds, cfg.protocol.cap = 4, 12
-    cfg.protocol.n_innings, cfg.protocol.shots = 3, 3
+    name = protocol.get("name", "p3")
+    cfg = search_config(protocol=name)
+    if name == "p3":
+        cfg.protocol.seeds, cfg.protocol.cap = 4, 12
+    else:
+        cfg.protocol.n_innings, cfg.protocol.shots = 3, 3
     cfg.search.budget, cfg.search.k1, cfg.search.m1 = 90, 60, 3
     cfg.progress, cfg.picture = False, False
     return cfg
@@ -90,6 +91,10 @@ SEARCH_BAD = [
     (["proposer.power_low=0.95"], "proposer.power_low and proposer.power_high must satisfy"),
     (["threads=0"], "threads must be >= 1"),
     (["physics=bogus"], "Could not find 'physics/bogus'"),
+    (["search=h2", "search.c_puct=5"], "Key 'c_puct' not in 'H2SearchConfig'"),  # a PUCT knob
+    (["search=h2", "+search.c_puct=5"], "search.c_puct: not a key of H2SearchConfig"),
+    (["protocol=p3", "protocol.shots=5"], "Key 'shots' not in 'P3Config'"),
+    (["-m", "search=puct,h2", "search.budget=401"], "job ['search=h2', 'search.budget=401']: invalid search config"),
 ]
 
 

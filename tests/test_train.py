@@ -644,7 +644,7 @@ BAD = [
     (["algo=dqn"], "Could not find 'algo/dqn'"),
     (["budget.total_steps=-5"], "budget.total_steps must be > 0, got -5"),
     (["env.paradigm=sideways"], "Invalid value 'sideways', expected one of [canonical_reset"),
-    (["foo=1"], "Key 'foo' not in 'Config'"),
+    (["foo=1"], "Key 'foo' not in 'TrainConfig'"),
     (["algo.lrr=0.1"], "Key 'lrr' not in 'SACConfig'"),
     (["algo=ppo", "algo.utd=2"], "Key 'utd' not in 'PPOConfig'"),
     (["env.num_envs=0"], "env.num_envs must be > 0"),

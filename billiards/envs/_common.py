@@ -13,12 +13,14 @@ from billiards.physics import (
 
 STARTS = ("random", "canonical")
 ON_MISS = ("continue", "reset")
-# The paper's four training paradigms (start x miss handling), by name.
+# The paper's four training paradigms (start x miss handling), by name: the one spelling of
+# make_env, the training config (env.paradigm) and the report. The hyphenated names the env
+# factory took before ("random-continue") are still accepted, with a DeprecationWarning.
 PARADIGMS = {
-    "canonical-reset": ("canonical", "reset"),
-    "canonical-continue": ("canonical", "continue"),
-    "random-reset": ("random", "reset"),
-    "random-continue": ("random", "continue"),
+    "canonical_reset": ("canonical", "reset"),
+    "canonical_continue": ("canonical", "continue"),
+    "random_reset": ("random", "reset"),
+    "random_continue": ("random", "continue"),
 }
 
 
@@ -34,10 +36,15 @@ def check_inning_options(start: str, on_miss: str, max_shots: int) -> int:
 
 
 def resolve_paradigm(paradigm: str | None, start: str | None, on_miss: str | None) -> tuple[str, str]:
-    """(start, on_miss) from a paradigm name such as ``"random-continue"`` and/or explicit values.
+    """(start, on_miss) from a paradigm name such as ``"random_continue"`` and/or explicit values.
 
     Explicit values must agree with the paradigm; unset ones default to random / continue.
     """
+    if isinstance(paradigm, str) and paradigm not in PARADIGMS and paradigm.replace("-", "_") in PARADIGMS:
+        import warnings
+
+        warnings.warn(f"paradigm {paradigm!r} is spelt {paradigm.replace('-', '_')!r} now", DeprecationWarning, stacklevel=3)
+        paradigm = paradigm.replace("-", "_")
     if paradigm is not None:
         if paradigm not in PARADIGMS:
             raise ValueError(f"paradigm must be one of {sorted(PARADIGMS)}, got {paradigm!r}")

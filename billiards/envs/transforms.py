@@ -278,8 +278,8 @@ def make_env(
         start: ``"random"`` (default) or ``"canonical"`` starting rack.
         on_miss: ``"continue"`` (default; innings always last ``max_shots``) or ``"reset"``
             (a miss or a foul terminates the inning).
-        paradigm: shorthand for (start, on_miss): ``"random-continue"``, ``"random-reset"``,
-            ``"canonical-continue"`` or ``"canonical-reset"``; explicit start/on_miss must agree.
+        paradigm: shorthand for (start, on_miss): ``"random_continue"``, ``"random_reset"``,
+            ``"canonical_continue"`` or ``"canonical_reset"``; explicit start/on_miss must agree.
         max_shots: shots per inning before truncation (default 10).
         constrain_aim: add :class:`AimConstraint` (action[0] is u in [-1, 1]).
         normalize_actions: add :class:`NormalizedActions` (the policy acts in [-1, 1]^4, as in

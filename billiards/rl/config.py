@@ -1,9 +1,10 @@
 """The training configuration schema: dataclasses registered in Hydra's ConfigStore.
 
-``conf/config.yaml`` starts its defaults list with ``schema`` (the :class:`Config` below) and
-every group option (``conf/algo/sac.yaml`` ...) starts with its own ``*_schema`` entry, so
-Hydra merges every YAML file and every command-line override into these typed, closed
-(struct) nodes:
+``conf/config.yaml`` starts its defaults list with ``schema`` (the :class:`TrainConfig` below)
+and every group option (``conf/algo/sac.yaml`` ...) starts with its own ``/schema/...`` entry,
+so Hydra merges every YAML file and every command-line override into these typed, closed
+(struct) nodes. Importing this module registers them, the idiom both apps share
+(:mod:`billiards.app_config`):
 
 * an unknown key (``algo.lrr=1``, ``foo=1``) or a key of another algorithm
   (``algo=sac algo.clip_epsilon=0.1``) is rejected while composing;
@@ -27,18 +28,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, List, Optional
 
-from hydra.core.config_store import ConfigStore
 from hydra.experimental.callback import Callback
-from omegaconf import MISSING, DictConfig, OmegaConf
+from omegaconf import MISSING, DictConfig
 
 from billiards.device import device_error
+from billiards.app_config import fixed_job_config as _fixed_job_config
+from billiards.app_config import job_configs as _job_configs
+from billiards.app_config import register_app
+from billiards.files import CHECKPOINT_FILE, repo_path
+from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
 
-CHECKPOINT_FILE = "checkpoint.pt"
-CONFIG_FILE = "config.yaml"  # the resolved training config, written into the run dir at start
-EVAL_FILE = "eval.json"
-EVAL_HISTORY_FILE = "eval_history.jsonl"
-METRICS_FILE = "metrics.csv"
 # Keys that configs saved by earlier versions have and the schema no longer does; a resume
 # drops them (the test-only kill switch left the schema: tests kill runs from outside).
 RETIRED_KEYS = ("budget.kill_after_checkpoint",)
@@ -222,7 +222,7 @@ class CheckpointConfig:
 
 
 @dataclass
-class Config:
+class TrainConfig:
     algo: Any = MISSING  # SACConfig | TD3Config | PPOConfig, chosen by the algo group
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
     env: EnvConfig = field(default_factory=EnvConfig)
@@ -244,56 +244,13 @@ class Config:
     resume: Optional[str] = None  # a run dir to continue from its last checkpoint
 
 
+Config = TrainConfig  # the former name (billiards/rl/train.py imports it)
+
 # algo.name -> its schema (the algo group's options)
 ALGO_SCHEMAS = {"sac": SACConfig, "td3": TD3Config, "ppo": PPOConfig}
 
-
-def register_configs() -> None:
-    cs = ConfigStore.instance()
-    # Outside the option groups, so `algo=...` lists only sac, td3, ppo.
-    cs.store(name="schema", node=Config)
-    for name, node in ALGO_SCHEMAS.items():
-        cs.store(group="schema/algo", name=name, node=node)
-    cs.store(group="schema", name="budget", node=BudgetConfig)
-    register_physics(cs)
-
-
-def register_physics(cs: ConfigStore) -> None:
-    """The ``physics`` option group's schema (conf/physics/*.yaml), shared by both apps."""
-    cs.store(group="schema", name="physics", node=PhysicsConfig)
-
-
-# ----------------------------------------------------------------------------- resolvers
-
-
-def _or(value: Any, default: str) -> str:
-    """``${billiards.or:${resume},outputs/...}``: the value unless it is null or empty."""
-    return str(value) if value else default
-
-
-def _output_subdir(resume: Optional[str]) -> str:
-    """hydra.output_subdir: a resume keeps the original ``.hydra`` and records its own beside it."""
-    return ".hydra_resume" if resume else ".hydra"
-
-
-def _job_tag() -> str:
-    """``[job N] `` inside a multirun job (prefixes its log lines), empty otherwise."""
-    from hydra.core.hydra_config import HydraConfig
-
-    if not HydraConfig.initialized():
-        return ""
-    num = OmegaConf.select(HydraConfig.get(), "job.num", default=None, throw_on_missing=False)
-    return "" if num is None else f"[job {num}] "
-
-
-def register_resolvers() -> None:
-    OmegaConf.register_new_resolver("billiards.or", _or, replace=True)
-    OmegaConf.register_new_resolver("billiards.job_tag", _job_tag, replace=True)
-    OmegaConf.register_new_resolver("billiards.output_subdir", _output_subdir, replace=True)
-
-
-register_configs()
-register_resolvers()
+# `schema` (the root), schema/algo/<name>, schema/budget, schema/physics and the resolvers
+register_app("schema", TrainConfig, {"algo": ALGO_SCHEMAS, "budget": BudgetConfig})
 
 
 # ----------------------------------------------------------------------------- validation
@@ -397,12 +354,7 @@ def _errors(cfg: DictConfig) -> list[str]:
 
 def resolve_rm_model(path: str) -> Path:
     """A reward-model path as given if it exists (or is absolute), else relative to the repo."""
-    from billiards.provenance import ROOT
-
-    p = Path(path)
-    if p.is_absolute() or p.exists():
-        return p
-    return ROOT / p
+    return repo_path(path)
 
 
 def _logger_errors(cfg: DictConfig) -> list[str]:
@@ -448,40 +400,6 @@ def validate(cfg: DictConfig) -> None:
     errs = _errors(cfg)
     if errs:
         raise ConfigError("invalid training config:\n  - " + "\n  - ".join(errs))
-
-
-def _fixed_job_config(config: DictConfig) -> tuple[DictConfig, set[str]]:
-    """For a sweeper that composes its own jobs (Optuna ...): the job config with every
-    override that is not a sweep applied, and the keys the sweeper will set (its
-    ``hydra.sweeper.params`` and the command line's sweep overrides)."""
-    from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    loader = GlobalHydra.instance().config_loader()
-    parser = OverridesParser.create(config_loader=loader)
-    swept = {str(k) for k in (config.hydra.sweeper.get("params") or {})}
-    fixed = []
-    for override in parser.parse_overrides(list(config.hydra.overrides.task)):
-        if override.is_sweep_override():
-            swept.add(override.key_or_group)
-        else:
-            fixed.append(override.input_line)
-    return loader.load_sweep_config(config, fixed), swept
-
-
-def _job_configs(config: DictConfig) -> list[DictConfig]:
-    """Every job config a multirun of ``config`` would launch (what Hydra's basic sweeper
-    composes, including ``hydra.sweeper.params`` of experiment presets)."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-    from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    loader = GlobalHydra.instance().config_loader()
-    arguments = [f"{k}={v}" for k, v in (config.hydra.sweeper.get("params") or {}).items()]
-    arguments += list(config.hydra.overrides.task)
-    overrides = OverridesParser.create(config_loader=loader).parse_overrides(arguments)
-    batches = BasicSweeper.split_arguments(overrides, None)
-    return [loader.load_sweep_config(config, list(job)) for batch in batches for job in batch]
 
 
 class ValidateConfig(Callback):
@@ -561,9 +479,8 @@ def _without(d: dict, path: list[str]) -> dict:
 
 
 def env_paradigm(paradigm: Paradigm | str) -> str:
-    """The env factory's spelling of a paradigm: ``random_continue`` -> ``random-continue``."""
-    value = paradigm.value if isinstance(paradigm, Paradigm) else str(paradigm)
-    return value.replace("_", "-")
+    """A paradigm as :func:`billiards.envs.make_env` takes it: the one spelling, ``random_continue``."""
+    return Paradigm(paradigm).value
 
 
 def wandb_env_defaults() -> None:

@@ -1,4 +1,5 @@
-"""Trained policies out of training runs, for evaluation and as search proposers.
+"""Trained policies out of training runs, for evaluation and for search (an ensemble of them
+becomes a proposer in :func:`billiards.search.proposers.load_policy_proposer`).
 
 A policy can be loaded from a run dir, its ``checkpoint.pt`` (everything needed to resume:
 networks, optimizers, replay buffer -- tens of MB), or a small exported policy file (the
@@ -18,12 +19,11 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 
-from billiards.files import atomic_open
-from billiards.physics import DEFAULT_PARAMS, PRESETS, PhysicsParams
-from billiards.physics.config import LEGACY_PHYSICS, params_from_config, warn_physics_mismatch
+from billiards.files import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE, atomic_open
+from billiards.physics import PRESETS, PhysicsParams
+from billiards.physics.config import LEGACY_PHYSICS, params_from_config
 
 from .checkpoint import CheckpointError, load_checkpoint
-from .config import CHECKPOINT_FILE
 
 POLICY_FORMAT = "billiards-policy-1"
 
@@ -83,8 +83,8 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
         "config": state["config"],
         # the actor the run's evaluations measure: the averaged one when algo.actor_ema > 0
         "actor": {k: v.clone() for k, v in agent.eval_actor.state_dict().items()},
-        "eval": read("eval.json"),
-        "summary": read("summary.json"),
+        "eval": read(EVAL_FILE),
+        "summary": read(SUMMARY_FILE),
         "source": str(run_dir),
     }
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -97,25 +97,6 @@ def policy_physics(cfg) -> PhysicsParams:
     """The table a run trained on (runs saved before the presets existed: ``international``)."""
     physics = cfg.get("physics")
     return params_from_config(physics) if physics is not None else PRESETS[LEGACY_PHYSICS]
-
-
-def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | None = None):
-    """A :class:`billiards.search.PolicyProposer` over the policies of several runs (e.g. the
-    three seeds of one Table 5 variant); they must share the observation and action layout.
-    ``params`` is the table it will propose for (default: the default preset); policies trained
-    on another table are used with a :class:`PhysicsMismatchWarning`."""
-    from billiards.search import PolicyProposer
-
-    params = DEFAULT_PARAMS if params is None else params
-    loaded = [load_policy(p) for p in paths]
-    layouts = {(bool(c.env.constrain_aim), bool(c.env.extra_features)) for _, c in loaded}
-    if len(layouts) != 1:
-        raise ValueError(f"proposer {name!r}: checkpoints mix observation/action layouts {sorted(layouts)}")
-    for path, (_, cfg) in zip(paths, loaded):
-        warn_physics_mismatch(f"proposer {name!r} policy {path}", policy_physics(cfg), params)
-    constrain_aim, extra_features = layouts.pop()
-    return PolicyProposer([p for p, _ in loaded], constrain_aim=constrain_aim, extra_features=extra_features, name=name,
-                          R=params.ball_radius)
 
 
 def main(argv: list[str] | None = None) -> None:

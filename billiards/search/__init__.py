@@ -10,6 +10,7 @@ _WHERE = {
     "LookaheadActor": "actors", "PUCTActor": "actors", "SearchActor": "actors", "make_search_collector": "actors",
     "H2Config": "lookahead", "SearchResult": "lookahead", "h2_search": "lookahead", "verifier_reward": "lookahead",
     "GeometricProposer": "proposers", "PolicyProposer": "proposers", "Proposer": "proposers",
+    "load_policy_proposer": "proposers",
     "PUCTConfig": "puct", "puct_search": "puct", "puct_reference": "puct_reference",
 }
 __all__ = sorted(_WHERE)

@@ -21,10 +21,11 @@ from .puct import PUCTConfig, puct_search
 
 
 class SearchActor(TensorDictModuleBase):
-    """Base class: ``positions`` in; ``action``, ``search_value``, ``search_r1`` out."""
+    """Base class: ``positions`` in; ``action`` and ``search_r1`` (the verified reward of the
+    chosen shot, which P1 checks against what the env played) out."""
 
     in_keys = ["positions"]
-    out_keys = ["action", "search_value", "search_r1"]
+    out_keys = ["action", "search_r1"]
 
     def __init__(self, proposer, cfg, seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
         super().__init__()
@@ -47,7 +48,6 @@ class SearchActor(TensorDictModuleBase):
         self.n_sims += result.n_sims
         self.n_decisions += int(np.prod(batch))
         tensordict.set("action", torch.from_numpy(result.actions.reshape(*batch, 4)))
-        tensordict.set("search_value", torch.from_numpy(result.value.reshape(*batch, 1)))
         tensordict.set("search_r1", torch.from_numpy(result.r1.reshape(*batch, 1)))
         return tensordict
 

@@ -1,75 +1,194 @@
-"""Search configuration schema (``conf/search.yaml``), registered in Hydra's ConfigStore.
+"""The search app's configuration (``conf/search.yaml``): typed schemas, registered in Hydra's
+ConfigStore when this module is imported (the idiom both apps share, :mod:`billiards.app_config`).
 
-Typed, closed nodes: an unknown key, a wrong type or an enum value outside its set fails while
-Hydra composes; :func:`validate` checks the rest (budget split, sizes) before anything runs.
+Every group option has its own closed schema, so a knob of another option fails while Hydra
+composes: ``search=h2 search.c_puct=5`` is rejected (``Key 'c_puct' not in
+'H2SearchConfig'``), ``search=puct search.c_puct=5`` works; likewise ``protocol=p3
+protocol.n_innings=5`` and ``proposer=geometric proposer.checkpoints=[...]``. The schemas of
+the options live at ``schema/<group>/<option>``, outside the option groups:
+
+* ``search``: ``h2`` (:class:`H2SearchConfig`) | ``puct`` (:class:`PUCTSearchConfig`),
+  ``conf/search/*.yaml``;
+* ``protocol``: ``p1`` (:class:`P1Config`) | ``p3`` (:class:`P3Config`), ``conf/protocol/*.yaml``;
+* ``proposer``: ``geometric`` (:class:`GeometricProposerConfig`) or a policy ensemble
+  (:class:`PolicyProposerConfig`). The shipped ensembles are one config parametrised by name,
+  :func:`shipped_proposer`: ``proposer=<name>`` for every name of :data:`SHIPPED_PROPOSERS`
+  plays ``results/policies/<name>/seed{0,1,2}.pt``. Policies of your own:
+  ``proposer=policy proposer.checkpoints=[a.pt,b.pt]`` (and ``proposer.name=...`` for the
+  results), or a YAML in ``conf/proposer/`` whose defaults list starts with
+  ``/schema/proposer/policy@_here_``.
+
+:func:`validate` checks what a type cannot express (budget split, sizes, files) before anything
+runs; :class:`ValidateSearchConfig` runs it before Hydra writes a directory, for every job of a
+multirun. The option schemas also build what they describe (:meth:`H2SearchConfig.settings`,
+:meth:`GeometricProposerConfig.build` ...): a closed table from kind to schema, not a
+``_target_`` read from a file, so loading a saved config (``resume=``, a picture of a search
+run) never runs code named in it. :func:`saved_config` reads one, including the form written
+before the per-option schemas (one union node per group).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
-from typing import List, Optional
+from pathlib import Path
+from typing import Any, List, Optional
 
-from hydra.core.config_store import ConfigStore
 from hydra.experimental.callback import Callback
-from omegaconf import OmegaConf
+from omegaconf import MISSING, DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
-from billiards.physics.config import PhysicsConfig, physics_errors
+from billiards.app_config import BASIC_SWEEPER, job_configs, register_app
+from billiards.files import CONFIG_FILE, repo_path
+from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
 
-
-SEARCH_KINDS = ("h2", "puct")
-PROPOSER_KINDS = ("geometric", "policy")
-PROTOCOLS = ("p1", "p3")
-
-
-@dataclass
-class ProposerConfig:
-    """``geometric`` needs no training; ``policy`` loads an ensemble of training checkpoints
-    (paths relative to the repository root, or absolute)."""
-
-    name: str = "geometric"
-    kind: str = "geometric"  # geometric | policy
-    checkpoints: List[str] = field(default_factory=list)
-    power_low: float = 0.15
-    power_high: float = 0.9
-    command: Optional[str] = None  # how the checkpoints were trained (documentation)
+# ----------------------------------------------------------------------------- search
 
 
 @dataclass
-class SearchConfig:
-    """h2: ``budget`` = k1 + m1 * k2 simulations per decision, k2 derived. puct: ``budget``
-    simulations per decision with progressive widening (pw_c, pw_alpha) over ``pool`` samples."""
+class H2SearchConfig:
+    """Greedy depth-2 K-expansion (paper §5): ``budget`` = k1 + m1 * k2 simulations per shot,
+    k2 derived (:meth:`billiards.search.lookahead.H2Config.from_budget`)."""
 
-    kind: str = "h2"  # h2 | puct
+    kind: str = "h2"
     budget: int = 400
     k1: int = 200
     m1: int = 10
     gamma: float = 0.99
     foul_penalty: float = 1.0
+
+    def settings(self):
+        """The :class:`~billiards.search.lookahead.H2Config` (ValueError if the split is invalid)."""
+        from .lookahead import H2Config
+
+        return H2Config.from_budget(self.budget, self.k1, self.m1, gamma=self.gamma, foul_penalty=self.foul_penalty)
+
+    def actor(self, proposer, seed: int, params):
+        from .actors import LookaheadActor
+
+        return LookaheadActor(proposer, self.settings(), seed=seed, params=params)
+
+
+@dataclass
+class PUCTSearchConfig:
+    """PUCT over sampled continuous actions: ``budget`` simulations per shot, progressive
+    widening (pw_c, pw_alpha) over ``pool`` proposer samples per node. The knobs are those of
+    :class:`billiards.search.puct.PUCTConfig`, by name."""
+
+    kind: str = "puct"
+    budget: int = 400
     c_puct: float = 1.0
     pw_c: float = 1.0
     pw_alpha: float = 0.5
     pool: int = 16
     max_depth: int = 8
+    gamma: float = 0.99
+    foul_penalty: float = 1.0
+
+    def settings(self):
+        """The :class:`~billiards.search.puct.PUCTConfig` (ValueError if a knob is out of range)."""
+        from .puct import PUCTConfig
+
+        return PUCTConfig(**{f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "kind"})
+
+    def actor(self, proposer, seed: int, params):
+        from .actors import PUCTActor
+
+        return PUCTActor(proposer, self.settings(), seed=seed, params=params)
+
+
+# ----------------------------------------------------------------------------- protocols
 
 
 @dataclass
-class ProtocolConfig:
-    """p1: ``n_innings`` random-start innings of ``shots`` shots. p3: ``seeds`` canonical-start
-    chains capped at ``cap`` shots."""
+class P1Config:
+    """P1: ``n_innings`` random-start innings of ``shots`` shots (continue-on-miss)."""
 
-    name: str = "p3"  # p1 | p3
+    name: str = "p1"
     n_innings: int = 100
     shots: int = 100
+
+
+@dataclass
+class P3Config:
+    """P3: ``seeds`` canonical-start chains (seeds ``seed`` ... ``seed + seeds - 1``), each
+    until the first miss or foul, capped at ``cap`` shots."""
+
+    name: str = "p3"
     seeds: int = 10
     cap: int = 10000
 
 
+# ----------------------------------------------------------------------------- proposers
+
+
 @dataclass
-class Config:
-    proposer: ProposerConfig = field(default_factory=ProposerConfig)
+class GeometricProposerConfig:
+    """No training: shots inside the aim-constraint cone of the nearest red."""
+
+    kind: str = "geometric"
+    name: str = "geometric"
+    power_low: float = 0.15
+    power_high: float = 0.9
+
+    def build(self, params):
+        from .proposers import GeometricProposer
+
+        return GeometricProposer(power_low=self.power_low, power_high=self.power_high, R=params.ball_radius)
+
+
+@dataclass
+class PolicyProposerConfig:
+    """An ensemble of trained policies: ``checkpoints`` are exported policy files, training run
+    dirs or their checkpoint.pt (a relative path: from the working directory if it exists
+    there, else from the repository root); ``command`` says how they were made."""
+
+    kind: str = "policy"
+    name: str = MISSING
+    checkpoints: List[str] = MISSING
+    command: Optional[str] = None  # how the checkpoints were trained (documentation)
+
+    def paths(self) -> list[str]:
+        return [str(repo_path(c)) for c in self.checkpoints]
+
+    def build(self, params):
+        from .proposers import load_policy_proposer
+
+        return load_policy_proposer(self.paths(), name=self.name, params=params)
+
+
+# The ensembles the repository ships (results/policies/<name>/seed{0,1,2}.pt, ~0.3 MB each):
+# the three seeds of a Table 5 variant (aim constraint + carom features, SAC lr 3e-4, gamma
+# 0.99, budget=quick), by the shaping each was trained with. Made on the international table
+# before the paper's table became the default: use them with physics=international (on another
+# table they warn, PhysicsMismatchWarning).
+SHIPPED_PROPOSERS = {
+    "base": "shaping=foul_penalty",  # the foul-penalty base of Table 5
+    "gentle": "shaping=gentle shaping.gentle=0.5 shaping.gentle_kind=power",  # + gentle-shot bonus
+    "near_miss": "shaping=near_miss shaping.near_miss=0.5 shaping.near_miss_sigma=0.05",  # + near-miss bonus
+    "both": "shaping=both shaping.gentle=0.5 shaping.gentle_kind=power shaping.near_miss=0.5 shaping.near_miss_sigma=0.05",
+}
+SHIPPED_SEEDS = (0, 1, 2)
+TRAIN_COMMAND = ("python train.py physics=international table=table5 env=aim_features {shaping} budget=quick algo.lr=3e-4 "
+                 "algo.gamma=0.99 seed=0,1,2 -m && python -m billiards.rl.policy export <the three run dirs> --out {out}")
+
+
+def shipped_proposer(name: str) -> PolicyProposerConfig:
+    """``proposer=<name>``: the shipped ensemble ``results/policies/<name>/``."""
+    out = f"results/policies/{name}"
+    return PolicyProposerConfig(name=name, checkpoints=[f"{out}/seed{s}.pt" for s in SHIPPED_SEEDS],
+                                command=TRAIN_COMMAND.format(shaping=SHIPPED_PROPOSERS[name], out=out))
+
+
+# ----------------------------------------------------------------------------- the app
+
+
+@dataclass
+class SearchAppConfig:
+    proposer: Any = MISSING  # GeometricProposerConfig | PolicyProposerConfig, chosen by proposer=
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
-    search: SearchConfig = field(default_factory=SearchConfig)
-    protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
+    search: Any = MISSING  # H2SearchConfig | PUCTSearchConfig, chosen by search=
+    protocol: Any = MISSING  # P1Config | P3Config, chosen by protocol=
     seed: int = 0
     threads: Optional[int] = None  # numba threads for simulate_batch (default: all cores)
     progress: bool = True
@@ -77,79 +196,193 @@ class Config:
     resume: Optional[str] = None  # a stopped search's run dir: continue it (P3: from its next chain)
 
 
-def validate(cfg) -> None:
-    """Checks a type cannot express; raises ValueError with the offending key."""
-    s, p = cfg.search, cfg.protocol
-    for key, value, allowed in (("search.kind", s.kind, SEARCH_KINDS), ("proposer.kind", cfg.proposer.kind, PROPOSER_KINDS),
-                                ("protocol.name", p.name, PROTOCOLS)):
-        if value not in allowed:
-            raise ValueError(f"{key} must be one of {', '.join(allowed)}; got {value!r}")
-    if s.budget < 1:
-        raise ValueError(f"search.budget must be >= 1, got {s.budget}")
-    if cfg.seed < 0:
-        raise ValueError(f"seed must be >= 0 (a numpy seed), got {cfg.seed}")
+# group -> (the key naming the option inside its node, {option: schema})
+OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
+    "search": ("kind", {"h2": H2SearchConfig, "puct": PUCTSearchConfig}),
+    "protocol": ("name", {"p1": P1Config, "p3": P3Config}),
+    "proposer": ("kind", {"geometric": GeometricProposerConfig, "policy": PolicyProposerConfig}),
+}
+
+# `search_schema` (the root), schema/{search,protocol,proposer}/<option>, schema/physics, the
+# resolvers; the proposer options themselves are stored nodes (conf/search/ and conf/protocol/
+# hold the other groups' options as YAML)
+def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConfig]:
+    """The ``proposer=`` options: ``geometric``, the shipped ensembles by name, and ``policy``
+    (``proposer=policy proposer.checkpoints=[a.pt,b.pt,...]``: an ensemble of your own)."""
+    return {"geometric": GeometricProposerConfig(), **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS},
+            "policy": PolicyProposerConfig(name="policy", checkpoints=[])}
+
+
+_store = register_app("search_schema", SearchAppConfig, {group: schemas for group, (_, schemas) in OPTIONS.items()})
+for _name, _node in proposer_options().items():
+    _store.store(group="proposer", name=_name, node=_node)
+
+
+class SearchConfigError(ValueError):
+    """An invalid search configuration; the message names the key and what is allowed."""
+
+
+def option_schema(group: str, node) -> type:
+    """The schema of a ``search`` / ``protocol`` / ``proposer`` node: its type if Hydra typed
+    it, else the one its ``kind`` (``name`` for a protocol) names."""
+    key, schemas = OPTIONS[group]
+    if isinstance(node, DictConfig) and OmegaConf.get_type(node) in schemas.values():
+        return OmegaConf.get_type(node)
+    value = node.get(key) if node is not None and hasattr(node, "get") else None
+    if value not in schemas:
+        raise SearchConfigError(f"{group}.{key} must be one of {', '.join(schemas)}; got {value!r}")
+    return schemas[value]
+
+
+def _extra_keys(node, schema: type, prefix: str) -> list[str]:
+    """Keys of ``node`` that ``schema`` does not have (Hydra's ``+key=value`` appends them even
+    to a closed node)."""
+    own = {f.name for f in dataclasses.fields(schema)}
+    return [f"{prefix}{k}" for k in node.keys() if k not in own]
+
+
+def option(group: str, node):
+    """The node as an instance of its option schema (a typed object with ``settings``,
+    ``actor`` or ``build``); a key the option does not take is a :class:`SearchConfigError`."""
+    schema = option_schema(group, node)
+    extra = _extra_keys(node, schema, f"{group}.")
+    if extra:
+        own = ", ".join(f.name for f in dataclasses.fields(schema))
+        raise SearchConfigError(f"{', '.join(extra)}: not a key of {schema.__name__} "
+                                f"({group}={node.get(OPTIONS[group][0])} takes {own})")
     try:
-        if s.kind == "h2":
-            from .lookahead import H2Config
+        return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(schema), node))
+    except OmegaConfBaseException as err:
+        raise SearchConfigError(f"{group} ({schema.__name__}): {err}") from None
 
-            H2Config.from_budget(s.budget, s.k1, s.m1, gamma=s.gamma, foul_penalty=s.foul_penalty)
+
+def typed(cfg) -> DictConfig:
+    """A whole search config -- Hydra's, or a plain one -- merged into the schema with every
+    option node typed: unknown keys and wrong types fail as while composing, and keys the config
+    leaves out take their defaults."""
+    cfg = cfg if isinstance(cfg, DictConfig) else OmegaConf.create(cfg)
+    schema = OmegaConf.structured(SearchAppConfig)
+    for group in OPTIONS:
+        schema[group] = OmegaConf.structured(option_schema(group, cfg.get(group)))
+    try:
+        return OmegaConf.merge(schema, cfg)
+    except OmegaConfBaseException as err:
+        raise SearchConfigError(str(err)) from None
+
+
+def search_config(search: str = "h2", protocol: str = "p3", proposer: str = "geometric") -> DictConfig:
+    """What ``python search.py search=<search> protocol=<protocol> proposer=<proposer>``
+    composes, without Hydra (for scripts and tests)."""
+    cfg = OmegaConf.structured(SearchAppConfig)
+    cfg.search = OmegaConf.structured(OPTIONS["search"][1][search])
+    cfg.protocol = OmegaConf.structured(OPTIONS["protocol"][1][protocol])
+    cfg.proposer = OmegaConf.structured(proposer_options()[proposer])
+    return cfg
+
+
+# Keys every node of a group had before each option got its own schema: a config saved then
+# (config.yaml of a search run, results.json's "config") has them all, and the option ignored
+# those that were not its own.
+LEGACY_UNION_KEYS = {
+    "search": ("k1", "m1", "c_puct", "pw_c", "pw_alpha", "pool", "max_depth"),
+    "protocol": ("n_innings", "shots", "seeds", "cap"),
+    "proposer": ("checkpoints", "command", "power_low", "power_high"),
+}
+
+
+def upgrade(saved: dict) -> dict:
+    """A saved search config (a plain dict) in today's form: the other options' keys of the
+    old union nodes dropped (those options never read them), and ``physics`` added for a
+    config saved before the presets (it played ``international``)."""
+    out = dict(saved)
+    for group, legacy in LEGACY_UNION_KEYS.items():
+        node = out.get(group)
+        if isinstance(node, dict):
+            own = {f.name for f in dataclasses.fields(option_schema(group, node))}
+            out[group] = {k: v for k, v in node.items() if k in own or k not in legacy}
+    out.setdefault("physics", {"preset": LEGACY_PHYSICS})
+    return out
+
+
+def saved_config(run_dir: str | Path) -> DictConfig:
+    """The typed config a search run saved (``<run_dir>/config.yaml``), in any form a run ever
+    wrote; :class:`SearchConfigError` if there is none or it does not fit the schema."""
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise SearchConfigError(f"resume={run_dir}: no {CONFIG_FILE} there (not a search run directory)")
+    saved = OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+    if not isinstance(saved, dict):
+        raise SearchConfigError(f"{path} is not a search config")
+    return typed(upgrade(saved))
+
+
+# ----------------------------------------------------------------------------- validation
+
+
+def errors(cfg) -> list[str]:
+    """Every problem of a composed search config that a type cannot express, each naming its key."""
+    errs: list[str] = []
+    extra = [k for k in _extra_keys(cfg, SearchAppConfig, "") if k != "hydra"]  # hydra: the callback's view
+    if extra:
+        errs.append(f"{', '.join(extra)}: not a key of SearchAppConfig")
+    nodes = {}
+    for group, (key, schemas) in OPTIONS.items():
+        try:
+            nodes[group] = option(group, OmegaConf.select(cfg, group) if isinstance(cfg, DictConfig) else cfg.get(group))
+        except SearchConfigError as err:
+            errs.append(str(err))
+            continue
+        chosen = next(name for name, schema in schemas.items() if isinstance(nodes[group], schema))
+        value = getattr(nodes[group], key)
+        if value not in schemas:
+            errs.append(f"{group}.{key} must be one of {', '.join(schemas)}, chosen with {group}=<option>; got {value!r}")
+        elif value != chosen:
+            errs.append(f"{group}.{key}={value!r} contradicts {group}={chosen} "
+                        f"(choose the {group} with {group}=<option>; {key} follows it)")
+    search, protocol, proposer = nodes.get("search"), nodes.get("protocol"), nodes.get("proposer")
+    if search is not None:
+        if search.budget < 1:
+            errs.append(f"search.budget must be >= 1, got {search.budget}")
         else:
-            from .puct import PUCTConfig
-
-            PUCTConfig(budget=s.budget, c_puct=s.c_puct, pw_c=s.pw_c, pw_alpha=s.pw_alpha, pool=s.pool,
-                       max_depth=s.max_depth, gamma=s.gamma, foul_penalty=s.foul_penalty)
-    except ValueError as err:
-        raise ValueError(f"search ({s.kind}): {err}") from None
-    pr = cfg.proposer
-    if not 0.0 <= pr.power_low <= pr.power_high <= 1.0:
-        raise ValueError(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
-                         f"got {pr.power_low}, {pr.power_high}")
-    for key in ("n_innings", "shots", "seeds", "cap"):
-        if getattr(p, key) < 1:
-            raise ValueError(f"protocol.{key} must be >= 1, got {getattr(p, key)}")
-    if cfg.proposer.kind == "policy" and not cfg.proposer.checkpoints:
-        raise ValueError(f"proposer {cfg.proposer.name!r} is a policy ensemble but lists no checkpoints")
-    if cfg.proposer.kind == "policy":
-        from pathlib import Path
-
-        from billiards.provenance import ROOT
-
-        missing = [c for c in cfg.proposer.checkpoints if not (Path(c) if Path(c).is_absolute() else ROOT / c).exists()]
+            try:
+                search.settings()
+            except ValueError as err:
+                errs.append(f"search ({search.kind}): {err}")
+    if cfg.seed < 0:
+        errs.append(f"seed must be >= 0 (a numpy seed), got {cfg.seed}")
+    if isinstance(proposer, GeometricProposerConfig) and not 0.0 <= proposer.power_low <= proposer.power_high <= 1.0:
+        errs.append(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
+                    f"got {proposer.power_low}, {proposer.power_high}")
+    if isinstance(proposer, PolicyProposerConfig):
+        if not proposer.checkpoints:
+            errs.append(f"proposer {proposer.name!r} is a policy ensemble but lists no checkpoints")
+        missing = [c for c, p in zip(proposer.checkpoints, proposer.paths()) if not Path(p).exists()]
         if missing:
-            how = f" (trained with: {cfg.proposer.command})" if cfg.proposer.command else ""
-            raise ValueError(f"proposer {cfg.proposer.name!r}: no checkpoint at {', '.join(missing)}{how}")
+            how = f" (trained with: {proposer.command})" if proposer.command else ""
+            errs.append(f"proposer {proposer.name!r}: no checkpoint at {', '.join(missing)}{how}")
+    if protocol is not None:
+        for key in (f.name for f in dataclasses.fields(protocol) if f.name != "name"):
+            if getattr(protocol, key) < 1:
+                errs.append(f"protocol.{key} must be >= 1, got {getattr(protocol, key)}")
     if cfg.threads is not None and cfg.threads < 1:
-        raise ValueError(f"threads must be >= 1, got {cfg.threads}")
-    if cfg.get("resume"):
-        from pathlib import Path
+        errs.append(f"threads must be >= 1, got {cfg.threads}")
+    if cfg.get("resume") and not (Path(cfg.resume) / CONFIG_FILE).is_file():
+        errs.append(f"resume={cfg.resume!r}: not a search run directory (no {CONFIG_FILE} there)")
+    errs.extend(physics_errors(cfg.physics))
+    return errs
 
-        if not (Path(cfg.resume) / "config.yaml").is_file():
-            raise ValueError(f"resume={cfg.resume!r}: not a search run directory (no config.yaml there)")
-    errs = physics_errors(cfg.physics)
+
+def validate(cfg) -> None:
+    """Raise :class:`SearchConfigError` listing every problem of a search config."""
+    errs = errors(cfg)
     if errs:
-        raise ValueError(errs[0])
-
-
-def _or(value, default: str) -> str:
-    """``${billiards.or:${resume},outputs/...}``: the value unless it is null or empty."""
-    return str(value) if value else default
-
-
-def register() -> None:
-    OmegaConf.register_new_resolver("billiards.or", _or, replace=True)
-    # a resume keeps the original .hydra and records its own beside it
-    OmegaConf.register_new_resolver("billiards.output_subdir", lambda r: ".hydra_resume" if r else ".hydra", replace=True)
-    cs = ConfigStore.instance()
-    cs.store(name="search_schema", node=Config)
-    cs.store(group="proposer", name="proposer_schema", node=ProposerConfig)
-    cs.store(group="search", name="search_schema", node=SearchConfig)
-    cs.store(group="protocol", name="protocol_schema", node=ProtocolConfig)
-    cs.store(group="schema", name="physics", node=PhysicsConfig)  # conf/physics/*.yaml, shared with train.py
+        raise SearchConfigError("invalid search config:\n  - " + "\n  - ".join(errs))
 
 
 class ValidateSearchConfig(Callback):
     """Hydra callback (``hydra.callbacks`` in conf/search.yaml): validates before Hydra creates
-    the run directory, so a bad command line fails at once and writes nothing."""
+    the run directory -- for a multirun, every job's config first -- so a bad command line fails
+    at once, writes nothing, and exits with the message (Hydra would only warn)."""
 
     def on_run_start(self, config, **kwargs) -> None:
         try:
@@ -158,4 +391,23 @@ class ValidateSearchConfig(Callback):
             raise SystemExit(f"Error: {err}") from None
 
     def on_multirun_start(self, config, **kwargs) -> None:
-        self.on_run_start(config)
+        if config.hydra.sweeper._target_ != BASIC_SWEEPER:
+            self.on_run_start(config)
+            return
+        try:
+            jobs = job_configs(config)
+        except Exception as err:  # a job that does not compose; Hydra would only warn and go on
+            raise SystemExit(f"Error: {err}") from None
+        errs = []
+        for job in jobs:
+            try:
+                validate(job)
+            except ValueError as err:
+                errs.append(f"job {list(job.hydra.overrides.task)}: {err}")
+        if errs:
+            raise SystemExit("Error: " + "\n".join(errs))
+
+
+__all__ = ["GeometricProposerConfig", "H2SearchConfig", "OPTIONS", "P1Config", "P3Config", "PUCTSearchConfig",
+           "PolicyProposerConfig", "SHIPPED_PROPOSERS", "SearchAppConfig", "SearchConfigError", "ValidateSearchConfig",
+           "errors", "option", "proposer_options", "saved_config", "shipped_proposer", "typed", "upgrade", "validate"]

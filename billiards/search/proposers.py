@@ -8,7 +8,8 @@ search with one candidate and no expansion plays exactly what the proposer would
 
 * :class:`GeometricProposer` needs no training: it samples inside the aim-constraint cone.
 * :class:`PolicyProposer` samples an ensemble of trained policies (e.g. the three seeds of
-  one Table 5 variant); see :func:`load_policy_proposer`.
+  one Table 5 variant); :func:`load_policy_proposer` makes one from training runs or exported
+  policy files (this adapter lives here: search builds on training, never the reverse).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 import torch
 
 from billiards import domain
-from billiards.physics import DEFAULT_PARAMS
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 
 
 class Proposer(Protocol):
@@ -263,4 +264,25 @@ class PolicyProposer:
         return out
 
 
-__all__ = ["EnsembleHeads", "GeometricProposer", "PolicyProposer", "Proposer"]
+def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | None = None) -> PolicyProposer:
+    """A :class:`PolicyProposer` over the policies of several runs (e.g. the three seeds of one
+    Table 5 variant): ``paths`` are training run dirs, their checkpoint.pt or exported policy
+    files (:func:`billiards.rl.policy.load_policy`); they must share the observation and
+    action layout. ``params`` is the table it will propose for (default: the default preset);
+    policies trained on another table are used with a :class:`PhysicsMismatchWarning`."""
+    from billiards.physics.config import warn_physics_mismatch
+    from billiards.rl.policy import load_policy, policy_physics
+
+    params = DEFAULT_PARAMS if params is None else params
+    loaded = [load_policy(p) for p in paths]
+    layouts = {(bool(c.env.constrain_aim), bool(c.env.extra_features)) for _, c in loaded}
+    if len(layouts) != 1:
+        raise ValueError(f"proposer {name!r}: checkpoints mix observation/action layouts {sorted(layouts)}")
+    for path, (_, cfg) in zip(paths, loaded):
+        warn_physics_mismatch(f"proposer {name!r} policy {path}", policy_physics(cfg), params)
+    constrain_aim, extra_features = layouts.pop()
+    return PolicyProposer([p for p, _ in loaded], constrain_aim=constrain_aim, extra_features=extra_features, name=name,
+                          R=params.ball_radius)
+
+
+__all__ = ["EnsembleHeads", "GeometricProposer", "PolicyProposer", "Proposer", "load_policy_proposer"]

@@ -1,5 +1,8 @@
 """``python search.py``: build the proposer and the search actor from a config, run a protocol,
-write ``results.json`` (and a picture of the longest chain's last shots) into the run dir."""
+write ``results.json`` (and a picture of the longest chain's last shots) into the run dir.
+
+The config's option nodes build what they describe (:mod:`billiards.search.config`): a
+proposer node ``.build(params)``, a search node ``.actor(proposer, seed, params)``."""
 
 from __future__ import annotations
 
@@ -9,43 +12,29 @@ from pathlib import Path
 import numba
 from omegaconf import OmegaConf
 
+from billiards.files import CONFIG_FILE, RESULTS_FILE, atomic_write_text
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
-from billiards.physics.warmup import warm_up
 from billiards.physics.config import params_from_config, physics_record
-from billiards.files import atomic_write_text
-from billiards.provenance import ROOT, git_commit
+from billiards.physics.warmup import warm_up
+from billiards.provenance import git_commit
 
-from .actors import LookaheadActor, PUCTActor, SearchActor
-from .config import validate
-from .lookahead import H2Config
-from .proposers import GeometricProposer
+from .actors import SearchActor
+from .config import option, saved_config, typed, validate
 from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, read_chains, run_p1, run_p3
-from .puct import PUCTConfig
 
-RESULTS_FILE = "results.json"
+__all__ = ["CONFIG_FILE", "RESULTS_FILE", "describe", "make_actor", "make_proposer", "resume_config", "run"]
 
 
 def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS):
     """The proposer a ``proposer`` config node describes, for the table ``params``."""
-    if cfg.kind == "geometric":
-        return GeometricProposer(power_low=cfg.power_low, power_high=cfg.power_high, R=params.ball_radius)
-    from billiards.rl.policy import load_policy_proposer
-
-    paths = [p if Path(p).is_absolute() else str(ROOT / p) for p in cfg.checkpoints]
-    return load_policy_proposer(paths, name=cfg.name, params=params)
+    return option("proposer", cfg).build(params)
 
 
 def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchActor:
-    s = cfg.search
-    if s.kind == "h2":
-        h2 = H2Config.from_budget(s.budget, s.k1, s.m1, gamma=s.gamma, foul_penalty=s.foul_penalty)
-        return LookaheadActor(proposer, h2, seed=cfg.seed, params=params)
-    puct = PUCTConfig(budget=s.budget, c_puct=s.c_puct, pw_c=s.pw_c, pw_alpha=s.pw_alpha, pool=s.pool,
-                      max_depth=s.max_depth, gamma=s.gamma, foul_penalty=s.foul_penalty)
-    return PUCTActor(proposer, puct, seed=cfg.seed, params=params)
+    """The search actor ``cfg.search`` describes, seeded with ``cfg.seed``, over ``proposer``."""
+    return option("search", cfg.search).actor(proposer, cfg.seed, params)
 
 
-CONFIG_FILE = "config.yaml"  # the resolved search config, written at start (what resume= continues)
 RUNTIME_KEYS = ("threads", "progress", "picture")  # taken from the command line when resuming
 
 
@@ -58,11 +47,9 @@ def describe(cfg, params) -> str:
 
 
 def resume_config(out_dir: Path, current):
-    """A stopped search's own config, with this command line's runtime keys."""
-    path = out_dir / CONFIG_FILE
-    if not path.is_file():
-        raise ValueError(f"resume={out_dir}: no {CONFIG_FILE} there (not a search run directory)")
-    saved = OmegaConf.load(path)
+    """A stopped search's own config (in whatever form it was saved), with this command line's
+    runtime keys."""
+    saved = saved_config(out_dir)
     for key in RUNTIME_KEYS:
         saved[key] = current[key]
     saved.resume = str(out_dir)
@@ -75,6 +62,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     ``results.json`` from what finished, marked ``partial``; ``resume=<out_dir>`` continues a
     stopped P3 from its next chain."""
     out_dir = Path(out_dir)
+    cfg = typed(cfg)
     if cfg.get("resume"):
         cfg = resume_config(out_dir, cfg)
     validate(cfg)
@@ -88,13 +76,13 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     warm_up(params, log=lambda msg: print(msg, flush=True))
     actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
     proto = cfg.protocol.name
-    seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
     ledger = out_dir / CHAINS_FILE
     interrupted = False
     if proto == "p1":
         result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress)
         interrupted = bool(result.extra.get("partial"))
     else:
+        seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
         if cfg.get("resume"):
             print(f"resume: {len(read_chains(ledger))} of {cfg.protocol.seeds} chains already finished", flush=True)
         picture = out_dir / "longest_chain.png" if cfg.picture else None

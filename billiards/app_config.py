@@ -1,0 +1,118 @@
+"""The one config dialect of the two Hydra apps: ``train.py`` (schema in
+:mod:`billiards.rl.config`) and ``search.py`` (:mod:`billiards.search.config`).
+
+* **Schemas** are dataclasses; a closed set of words is an ``enum`` or one typed schema per
+  group option. A group whose options take different keys (``algo``, ``search``, ``protocol``,
+  ``proposer``) is ``Any = MISSING`` in the root schema and each option's YAML (or stored
+  node) brings its own schema, so a key of another option (``algo=ppo algo.utd=2``,
+  ``search=h2 search.c_puct=5``) fails while Hydra composes.
+* **Registration** happens when the app's config module is imported (the entry point imports
+  it before ``@hydra.main``; tests and tools that compose import it too), through
+  :func:`register_app`: the root schema under the app's name, every option schema at
+  ``schema/<group>[/<option>]`` -- outside the option groups, so ``group=`` lists only real
+  options, and an option pulls its schema in with ``/schema/<group>/<option>@_here_`` in its
+  defaults list --, the physics schema both apps share and the resolvers their YAML uses.
+  The two apps' schemas have distinct names (``TrainConfig``, ``SearchAppConfig``) and live
+  side by side in one ConfigStore.
+* **Validation**: each app's ``validate(cfg)`` checks what a type cannot express; its Hydra
+  callback runs it before Hydra writes any directory, for every job of a multirun
+  (:func:`job_configs`), and exits with the message, no traceback.
+
+Imports Hydra and OmegaConf, not torch and not the simulator's kernels: loading it is fast.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import DictConfig, OmegaConf
+
+from billiards.physics.config import PhysicsConfig
+
+SCHEMA_GROUP = "schema"  # where option schemas live (outside the option groups)
+
+
+def _or(value: Any, default: str) -> str:
+    """``${billiards.or:${resume},outputs/...}``: the value unless it is null or empty."""
+    return str(value) if value else default
+
+
+def _output_subdir(resume: Optional[str]) -> str:
+    """hydra.output_subdir: a resume keeps the original ``.hydra`` and records its own beside it."""
+    return ".hydra_resume" if resume else ".hydra"
+
+
+def _job_tag() -> str:
+    """``[job N] `` inside a multirun job (prefixes its log lines), empty otherwise."""
+    from hydra.core.hydra_config import HydraConfig
+
+    if not HydraConfig.initialized():
+        return ""
+    num = OmegaConf.select(HydraConfig.get(), "job.num", default=None, throw_on_missing=False)
+    return "" if num is None else f"[job {num}] "
+
+
+RESOLVERS = {"billiards.or": _or, "billiards.output_subdir": _output_subdir, "billiards.job_tag": _job_tag}
+
+
+def register_resolvers() -> None:
+    for name, fn in RESOLVERS.items():
+        OmegaConf.register_new_resolver(name, fn, replace=True)
+
+
+def register_app(root_name: str, root: type, groups: dict[str, type | dict[str, type]]) -> ConfigStore:
+    """Store an app's schema in Hydra's ConfigStore (idempotent): ``root`` as ``root_name`` (the
+    first entry of the app's defaults list); for each group, one schema for all its options at
+    ``schema/<group>`` or one per option at ``schema/<group>/<option>``; ``schema/physics``;
+    and the resolvers. Returns the ConfigStore (for option nodes the app stores itself)."""
+    cs = ConfigStore.instance()
+    cs.store(name=root_name, node=root)
+    for group, schemas in groups.items():
+        if isinstance(schemas, dict):
+            for option, node in schemas.items():
+                cs.store(group=f"{SCHEMA_GROUP}/{group}", name=option, node=node)
+        else:
+            cs.store(group=SCHEMA_GROUP, name=group, node=schemas)
+    cs.store(group=SCHEMA_GROUP, name="physics", node=PhysicsConfig)  # conf/physics/*.yaml, both apps
+    register_resolvers()
+    return cs
+
+
+def fixed_job_config(config: DictConfig) -> tuple[DictConfig, set[str]]:
+    """For a sweeper that composes its own jobs (Optuna ...): the job config with every
+    override that is not a sweep applied, and the keys the sweeper will set (its
+    ``hydra.sweeper.params`` and the command line's sweep overrides)."""
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    loader = GlobalHydra.instance().config_loader()
+    parser = OverridesParser.create(config_loader=loader)
+    swept = {str(k) for k in (config.hydra.sweeper.get("params") or {})}
+    fixed = []
+    for override in parser.parse_overrides(list(config.hydra.overrides.task)):
+        if override.is_sweep_override():
+            swept.add(override.key_or_group)
+        else:
+            fixed.append(override.input_line)
+    return loader.load_sweep_config(config, fixed), swept
+
+
+def job_configs(config: DictConfig) -> list[DictConfig]:
+    """Every job config a multirun of ``config`` would launch (what Hydra's basic sweeper
+    composes, including ``hydra.sweeper.params`` of experiment presets)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    loader = GlobalHydra.instance().config_loader()
+    arguments = [f"{k}={v}" for k, v in (config.hydra.sweeper.get("params") or {}).items()]
+    arguments += list(config.hydra.overrides.task)
+    overrides = OverridesParser.create(config_loader=loader).parse_overrides(arguments)
+    batches = BasicSweeper.split_arguments(overrides, None)
+    return [loader.load_sweep_config(config, list(job)) for batch in batches for job in batch]
+
+
+BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
+
+__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "job_configs", "register_app", "register_resolvers"]

@@ -1,0 +1,267 @@
+"""One config dialect for train.py and search.py (billiards.app_config): typed schemas per
+group option, registered at import side by side, the proposers as one config parametrised by
+name, saved configs of every form loading, one spelling of the paradigms, one repo-path rule."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from hydra.errors import ConfigCompositionException
+from omegaconf import OmegaConf
+
+import billiards.rl.config as train_config
+import billiards.search.config as search_config
+from billiards.files import ROOT, repo_path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def compose_search(*overrides: str):
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        return compose("search", overrides=list(overrides))
+
+
+def group_options(group: str) -> list[str]:
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        return sorted(GlobalHydra.instance().config_loader().get_group_options(group))
+
+
+# ----------------------------------------------------------------------------- per-option schemas
+
+
+@pytest.mark.parametrize("overrides,key,schema", [
+    (["search=h2", "search.c_puct=5"], "c_puct", "H2SearchConfig"),
+    (["search=puct", "search.k1=50"], "k1", "PUCTSearchConfig"),
+    (["protocol=p3", "protocol.n_innings=5"], "n_innings", "P3Config"),
+    (["protocol=p1", "protocol.cap=5"], "cap", "P1Config"),
+    (["proposer=geometric", "proposer.checkpoints=[a.pt]"], "checkpoints", "GeometricProposerConfig"),
+    (["proposer=base", "proposer.power_low=0.2"], "power_low", "PolicyProposerConfig"),
+])
+def test_a_knob_of_another_option_fails_while_composing(overrides, key, schema):
+    with pytest.raises(ConfigCompositionException) as err:
+        compose_search(*overrides)
+    assert f"Key '{key}' not in '{schema}'" in str(err.value.__cause__)
+
+
+def test_each_option_takes_its_own_knobs():
+    cfg = compose_search("search=puct", "search.c_puct=5", "protocol=p1", "protocol.n_innings=3")
+    assert cfg.search.c_puct == 5.0 and cfg.protocol.n_innings == 3
+    assert OmegaConf.get_type(cfg.search) is search_config.PUCTSearchConfig
+    assert OmegaConf.get_type(cfg.protocol) is search_config.P1Config
+    search_config.validate(cfg)
+    assert search_config.option("search", cfg.search).settings().c_puct == 5.0
+    cfg = compose_search("search=h2", "search.k1=100", "search.m1=3", "search.budget=400")
+    h2 = search_config.option("search", cfg.search).settings()
+    assert (h2.k1, h2.m1, h2.k2) == (100, 3, 100)
+
+
+def test_appended_keys_and_contradicting_kinds_fail_validation():
+    """``+key=value`` appends even to a closed node; validation catches it (and a kind that
+    contradicts the chosen option) before anything runs."""
+    for overrides, message in [
+        (["search=h2", "+search.c_puct=5"], "search.c_puct: not a key of H2SearchConfig (search=h2 takes kind, budget, k1"),
+        (["+foo=1"], "foo: not a key of SearchAppConfig"),
+        (["search=h2", "search.kind=puct"], "search.kind='puct' contradicts search=h2"),
+        (["protocol=p1", "protocol.name=p3"], "protocol.name='p3' contradicts protocol=p1"),
+    ]:
+        with pytest.raises(search_config.SearchConfigError, match="invalid search config") as err:
+            search_config.validate(compose_search(*overrides))
+        assert message in str(err.value), (overrides, str(err.value))
+
+
+def test_option_groups_list_only_real_options():
+    """The schemas live under schema/, outside the option groups (no ``search_schema`` option)."""
+    assert group_options("search") == ["h2", "puct"]
+    assert group_options("protocol") == ["p1", "p3"]
+    assert group_options("proposer") == ["base", "both", "gentle", "geometric", "near_miss", "policy"]
+    assert group_options("algo") == ["ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
+    assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name
+
+
+# ----------------------------------------------------------------------------- proposers
+
+
+# The policy proposers' former YAML (conf/proposer/<name>.yaml), as composed before they became
+# one config: name, kind, checkpoints and command must come out the same.
+FORMER_COMMANDS = {
+    "base": "shaping=foul_penalty",
+    "gentle": "shaping=gentle shaping.gentle=0.5 shaping.gentle_kind=power",
+    "near_miss": "shaping=near_miss shaping.near_miss=0.5 shaping.near_miss_sigma=0.05",
+    "both": "shaping=both shaping.gentle=0.5 shaping.gentle_kind=power shaping.near_miss=0.5 shaping.near_miss_sigma=0.05",
+}
+
+
+@pytest.mark.parametrize("name", sorted(FORMER_COMMANDS))
+def test_proposer_by_name_composes_as_its_former_yaml(name):
+    cfg = compose_search(f"proposer={name}", "physics=international")
+    assert OmegaConf.to_container(cfg.proposer) == {
+        "kind": "policy", "name": name,
+        "checkpoints": [f"results/policies/{name}/seed{s}.pt" for s in range(3)],
+        "command": (f"python train.py physics=international table=table5 env=aim_features {FORMER_COMMANDS[name]} "
+                    f"budget=quick algo.lr=3e-4 algo.gamma=0.99 seed=0,1,2 -m && python -m billiards.rl.policy export "
+                    f"<the three run dirs> --out results/policies/{name}"),
+    }
+    search_config.validate(cfg)  # the shipped files are there
+
+
+def test_geometric_proposer_and_a_missing_checkpoint():
+    cfg = compose_search()
+    assert OmegaConf.to_container(cfg.proposer) == {"kind": "geometric", "name": "geometric", "power_low": 0.15,
+                                                     "power_high": 0.9}
+    cfg = compose_search("proposer=near_miss", "proposer.checkpoints=[nowhere/seed0.pt]")
+    with pytest.raises(search_config.SearchConfigError, match=r"proposer 'near_miss': no checkpoint at nowhere/seed0.pt "
+                                                               r"\(trained with: python train.py"):
+        search_config.validate(cfg)
+    with pytest.raises(search_config.SearchConfigError, match="proposer 'policy' is a policy ensemble but lists no checkpoints"):
+        search_config.validate(compose_search("proposer=policy"))
+    mine = compose_search("proposer=policy", "proposer.checkpoints=[results/policies/gentle/seed1.pt]", "proposer.name=mine")
+    search_config.validate(mine)
+    assert OmegaConf.get_type(mine.proposer) is search_config.PolicyProposerConfig and mine.proposer.command is None
+
+
+# ----------------------------------------------------------------------------- saved configs
+
+
+def shipped_search_results() -> list[Path]:
+    return sorted((REPO / "results" / "search").rglob("*.json"))
+
+
+def test_every_shipped_search_result_config_loads(tmp_path):
+    """results/search/*.json hold configs of the former union form (every group's node with
+    every option's keys), some from before the physics presets: each loads as a run's saved
+    config and rebuilds the same search, proposer, protocol and table."""
+    from billiards.search.lookahead import H2Config
+    from billiards.search.puct import PUCTConfig
+
+    files = shipped_search_results()
+    assert len(files) >= 20
+    forms = set()
+    for i, path in enumerate(files):
+        old = json.loads(path.read_text())["config"]
+        forms.add(("physics" in old, "c_puct" in old["search"], "checkpoints" in old["proposer"]))
+        run = tmp_path / str(i)
+        run.mkdir()
+        (run / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.create(old)))
+        cfg = search_config.saved_config(run)
+        search_config.validate(cfg)
+        s = old["search"]
+        expected = (H2Config.from_budget(s["budget"], s["k1"], s["m1"], gamma=s["gamma"], foul_penalty=s["foul_penalty"])
+                    if s["kind"] == "h2" else
+                    PUCTConfig(**{k: s[k] for k in ("budget", "c_puct", "pw_c", "pw_alpha", "pool", "max_depth", "gamma",
+                                                    "foul_penalty")}))
+        assert search_config.option("search", cfg.search).settings() == expected, path
+        assert cfg.proposer.name == old["proposer"]["name"] and cfg.protocol.name == old["protocol"]["name"]
+        if old["proposer"]["kind"] == "policy":
+            assert list(cfg.proposer.checkpoints) == old["proposer"]["checkpoints"]
+        for key in ("seeds", "cap") if old["protocol"]["name"] == "p3" else ("n_innings", "shots"):
+            assert cfg.protocol[key] == old["protocol"][key]
+        assert cfg.physics.preset == old.get("physics", {"preset": "international"})["preset"]
+    assert (False, True, True) in forms and (True, True, True) in forms  # pre-preset and preset-era union forms
+
+    bad = dict(old, search={**old["search"], "c_pcut": 2.0})  # a key no form ever had
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.create(bad)))
+    with pytest.raises(search_config.SearchConfigError, match="c_pcut"):
+        search_config.saved_config(tmp_path / "bad")
+
+
+def test_a_picture_of_a_search_run_saved_in_the_former_form(tmp_path):
+    from billiards import pictures
+    from billiards.physics import PRESETS
+
+    old = json.loads((REPO / "results" / "search" / "korean_medium" / "geometric_puct_p1.json").read_text())["config"]
+    (tmp_path / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.create(old)))
+    actor, constrain_aim, extra_features, made_on = pictures.load_player(str(tmp_path))
+    assert type(actor).__name__ == "PUCTActor" and actor.cfg.budget == old["search"]["budget"]
+    assert made_on == PRESETS["korean_medium"] and not constrain_aim and not extra_features
+
+
+# ----------------------------------------------------------------------------- registration
+
+
+def test_both_apps_register_side_by_side():
+    """Importing each app's config module registers its schema (distinct names) and the
+    resolvers; both compose in one process, in either order."""
+    assert train_config.TrainConfig.__name__ == "TrainConfig" and train_config.Config is train_config.TrainConfig
+    assert search_config.SearchAppConfig.__name__ == "SearchAppConfig"
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        search = compose("search", overrides=["resume=null"])
+        train = compose("config", overrides=["algo=td3"])
+        again = compose("search", overrides=["search=puct"])
+    assert OmegaConf.get_type(train.algo) is train_config.TD3Config and train.env.paradigm == train_config.Paradigm.random_continue
+    assert search.proposer.name == "geometric" and again.search.kind == "puct"
+    # the resolvers both apps' hydra.run.dir use
+    assert OmegaConf.create({"a": None, "b": "${billiards.or:${a},x}"}).b == "x"
+
+
+def test_registration_is_the_same_idiom_in_a_fresh_process():
+    """A fresh process that imports only billiards.search.config can compose search.py's config
+    (and only billiards.rl.config, train.py's): nothing else has to be called."""
+    for module, name in (("billiards.search.config", "search"), ("billiards.rl.config", "config")):
+        code = (f"import {module}\n"
+                "from hydra import compose, initialize_config_dir\n"
+                f"with initialize_config_dir(config_dir={str(REPO / 'conf')!r}, version_base='1.3'):\n"
+                f"    print('SEED', compose({name!r}).seed)\n")
+        proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0 and "SEED 0" in proc.stdout, proc.stderr[-2000:]
+
+
+def test_a_search_multirun_over_proposers_runs_and_a_bad_job_stops_it_first(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    search = [sys.executable, str(REPO / "search.py"), "-m"]
+    bad = subprocess.run([*search, "search=puct,h2", "search.c_puct=5", f"hydra.sweep.dir={tmp_path / 'bad'}"],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert bad.returncode != 0 and "Key 'c_puct' not in 'H2SearchConfig'" in bad.stderr, bad.stderr[-2000:]
+    assert "Traceback" not in bad.stderr and not (tmp_path / "bad").exists()
+    good = subprocess.run([*search, "proposer=geometric,base", "search=puct", "search.budget=4", "search.pool=2",
+                           "protocol=p1", "protocol.n_innings=1", "protocol.shots=1", "physics=international",
+                           "progress=false", f"hydra.sweep.dir={tmp_path / 'sweep'}"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert good.returncode == 0, good.stderr[-3000:]
+    results = {json.loads(p.read_text())["proposer"]: json.loads(p.read_text())
+               for p in (tmp_path / "sweep").glob("*/results.json")}
+    assert sorted(results) == ["base", "geometric"]
+    assert results["base"]["config"]["proposer"]["checkpoints"] == [f"results/policies/base/seed{s}.pt" for s in range(3)]
+    assert all(r["search"] == "puct" and r["sims_per_decision"] == 4 for r in results.values())
+
+
+# ----------------------------------------------------------------------------- one spelling, one path rule
+
+
+def test_one_spelling_of_the_paradigms():
+    from billiards.envs import PARADIGMS, make_env
+
+    assert sorted(PARADIGMS) == sorted(p.value for p in train_config.Paradigm)
+    assert train_config.env_paradigm(train_config.Paradigm.canonical_reset) == "canonical_reset"
+    assert train_config.env_paradigm("random_continue") == "random_continue"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = make_env(2, paradigm="canonical_reset")
+    assert (env.base_env.start, env.base_env.on_miss) == ("canonical", "reset")
+    with pytest.warns(DeprecationWarning, match="'canonical-reset' is spelt 'canonical_reset' now"):
+        old = make_env(2, paradigm="canonical-reset")
+    assert (old.base_env.start, old.base_env.on_miss) == ("canonical", "reset")
+    with pytest.raises(ValueError, match="paradigm must be one of"):
+        make_env(2, paradigm="canonical reset")
+
+
+def test_repo_path_is_the_one_rule(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert repo_path("results/policies/base/seed0.pt") == ROOT / "results/policies/base/seed0.pt"
+    (tmp_path / "mine.pt").write_bytes(b"x")
+    assert repo_path("mine.pt") == Path("mine.pt")  # the working directory first
+    assert repo_path(tmp_path / "elsewhere.pt") == tmp_path / "elsewhere.pt"
+    assert train_config.resolve_rm_model("results/rm/model.pt") == ROOT / "results/rm/model.pt"
+    cfg = search_config.option("proposer", {"kind": "policy", "name": "p", "checkpoints": ["mine.pt", "results/x.pt"]})
+    assert cfg.paths() == ["mine.pt", str(ROOT / "results/x.pt")]
