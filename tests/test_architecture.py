@@ -16,7 +16,7 @@ The allowed direction: a unit imports only units of lower layers (:data:`LAYERS`
 first; an import inside one layer is a cycle waiting to happen and is not allowed either)::
 
     campaign -> pictures, report -> search -> rl -> evaluation -> envs -> render, rm, baselines
-      -> domain, app_config -> physics, provenance -> files
+      -> domain, app_config -> physics, provenance -> files, device
 
 ``search`` may import ``rl`` (a trained policy as a proposer); ``rl`` never imports ``search``.
 ``render`` only draws (physics, domain): playing an inning for a picture is ``pictures``'.
@@ -127,7 +127,7 @@ def test_the_package_import_graph_is_acyclic():
 
 
 LAYERS = [  # lowest first; a new top-level module or subpackage takes its place here
-    ("billiards", "billiards.files"),
+    ("billiards", "billiards.files", "billiards.device"),
     ("billiards.physics", "billiards.provenance"),
     ("billiards.domain", "billiards.app_config"),
     ("billiards.render", "billiards.rm", "billiards.baselines"),
