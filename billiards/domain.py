@@ -31,10 +31,8 @@ import math
 import numpy as np
 
 from billiards.physics import DEFAULT_PARAMS, unhit_red_gap
-
-WHITE, YELLOW, RED1, RED2 = 0, 1, 2, 3
-N_BALLS = 4
-BALL_STATE_DIM = 7  # x, y, vx, vy, wx, wy, wz
+from billiards.physics.core import N_BALLS, RED1, RED2, WHITE, YELLOW  # noqa: F401  (the simulator's ball order)
+from billiards.physics.core import N_STATE as BALL_STATE_DIM  # x, y, vx, vy, wx, wy, wz
 OBS_DIM = N_BALLS * BALL_STATE_DIM  # 28
 N_CAROM_FEATURES = 4  # d1, d2, sin(phi), cos(phi)
 ACTION_DIM = 4  # theta, p, a, b
