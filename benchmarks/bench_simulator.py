@@ -24,7 +24,10 @@ from pathlib import Path
 import numba
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+# This checkout's benchmarks and package first (the figures are those of the code the script
+# lives beside, whatever billiards is installed).
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE), str(HERE.parent)]
 from _shots import ROOT, git_commit, write_json, random_shots, run_pooltool  # noqa: E402
 
 from billiards.physics import DEFAULT_PARAMS, simulate_batch, simulate_shot  # noqa: E402

@@ -11,9 +11,14 @@ same convention as the action's aim ``theta``.
 
 Contents
 --------
-* observation layout: :func:`rest_observation` (28 floats) and the action bounds;
-* the normalised action [-1, 1]^4 and its map to the raw shot: :func:`unnormalize_action`;
-* the aim constraint: :func:`nearest_red`, :func:`aim_window`, :func:`constrained_theta`;
+* the observation: :func:`observation` (the 28 floats of :func:`rest_observation`, then with
+  the carom features the 4 of :func:`feature_observation`) and its bounds,
+  :func:`observation_bounds`;
+* the action a policy emits and its bounds (:func:`action_bounds`), the normalised action
+  [-1, 1]^4 and its map to the raw shot (:func:`unnormalize_action`), and the whole map from a
+  policy's action to the shot the simulator plays, :func:`raw_action`;
+* the aim constraint: :func:`nearest_red`, :func:`aim_window`, :func:`constrained_theta`,
+  :func:`aim_action`;
 * the carom features: :func:`carom_features`;
 * reward shaping: :func:`foul_penalty`, :func:`gentle_bonus` (the paper's leave-position
   bonus) or :func:`gentle_power_bonus` (a power-based alternative), :func:`near_miss_bonus`,
@@ -31,10 +36,8 @@ import math
 import numpy as np
 
 from billiards.physics import DEFAULT_PARAMS, unhit_red_gap
-
-WHITE, YELLOW, RED1, RED2 = 0, 1, 2, 3
-N_BALLS = 4
-BALL_STATE_DIM = 7  # x, y, vx, vy, wx, wy, wz
+from billiards.physics.core import N_BALLS, RED1, RED2, WHITE, YELLOW  # noqa: F401  (the simulator's ball order)
+from billiards.physics.core import N_STATE as BALL_STATE_DIM  # x, y, vx, vy, wx, wy, wz
 OBS_DIM = N_BALLS * BALL_STATE_DIM  # 28
 N_CAROM_FEATURES = 4  # d1, d2, sin(phi), cos(phi)
 ACTION_DIM = 4  # theta, p, a, b
@@ -65,12 +68,53 @@ def rest_observation(positions: np.ndarray) -> np.ndarray:
     return obs.reshape(positions.shape[:-2] + (OBS_DIM,))
 
 
+def feature_observation(positions: np.ndarray) -> np.ndarray:
+    """The observation slots of the carom features: :func:`carom_features` as float32,
+    (..., 4), what the ``extra_features`` layer appends after the 28 rest floats."""
+    return carom_features(positions).astype(np.float32)
+
+
+def observation(positions: np.ndarray, extra_features: bool = False) -> np.ndarray:
+    """THE observation of a table at rest, float32 (..., 28), or (..., 32) with the carom
+    features: :func:`rest_observation`, then :func:`feature_observation`. The gymnasium env
+    returns it; the TorchRL env returns the 28 floats and its ``CaromFeatures`` transform
+    appends the 4 features (the same floats)."""
+    obs = rest_observation(positions)
+    if extra_features:
+        obs = np.concatenate([obs, feature_observation(positions)], axis=-1)
+    return obs
+
+
+def observation_bounds(params=DEFAULT_PARAMS, extra_features: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) float32 bounds of :func:`observation` on the table of ``params``.
+
+    Centres lie on the table; the velocity and spin slots (0 between shots) get a physical
+    envelope: the fastest cue-ball launch v_max = 2 V0_max / (1 + m/M) and spin 2.5 v_max / R.
+    The carom features: distances up to the table's diagonal, sin and cos in [-1, 1].
+    """
+    w, l = params.table_width, params.table_length
+    v_max = 2.0 * params.cue_speed_max / (1.0 + params.ball_mass / params.cue_mass)
+    w_max = 2.5 * v_max / params.ball_radius
+    ball_high = np.array([w, l, v_max, v_max, w_max, w_max, w_max])
+    ball_low = np.concatenate([[0.0, 0.0], -ball_high[2:]])
+    low, high = np.tile(ball_low, N_BALLS), np.tile(ball_high, N_BALLS)
+    if extra_features:
+        diag = float(np.hypot(w, l))
+        low = np.concatenate([low, [0.0, 0.0, -1.0, -1.0]])
+        high = np.concatenate([high, [diag, diag, 1.0, 1.0]])
+    return low.astype(np.float32), high.astype(np.float32)
+
+
 # ----------------------------------------------------------------------------- normalised action
 
 
-def action_bounds(constrain_aim: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(low, high) of the raw action: (theta, p, a, b) = ACTION_LOW/HIGH, or with the aim
-    constraint (u, p, a, b) with u in [-1, 1]. Fresh float64 arrays of shape (4,)."""
+def action_bounds(constrain_aim: bool = False, normalized: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) of the action a policy emits, fresh float64 arrays of shape (4,): the raw
+    action (theta, p, a, b) = ACTION_LOW/HIGH, or with the aim constraint (u, p, a, b) with u
+    in [-1, 1]; ``normalized``: [-1, 1]^4 either way (see :func:`unnormalize_action`). Every
+    action space and spec of the envs and transforms is built from it."""
+    if normalized:
+        return -np.ones(ACTION_DIM), np.ones(ACTION_DIM)
     low, high = ACTION_LOW.copy(), ACTION_HIGH.copy()
     if constrain_aim:
         low[0], high[0] = -1.0, 1.0
@@ -158,6 +202,26 @@ def constrained_theta(positions: np.ndarray, u: np.ndarray, R: float = DEFAULT_P
     """
     theta_target, half_width = aim_window(positions, R)
     return theta_target + np.asarray(u, dtype=np.float64) * half_width
+
+
+def aim_action(action: np.ndarray, positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius) -> np.ndarray:
+    """The aim-constrained action (u, p, a, b) (..., 4) as the raw (theta, p, a, b) on the
+    tables ``positions`` (..., 4, 2): theta = :func:`constrained_theta` of u; p, a, b pass
+    through. A new float64 array."""
+    raw = np.array(action, dtype=np.float64)
+    raw[..., 0] = constrained_theta(positions, raw[..., 0], R)
+    return raw
+
+
+def raw_action(action: np.ndarray, positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius,
+               constrain_aim: bool = False, normalized: bool = False) -> np.ndarray:
+    """THE map from a policy's action (..., 4) to the raw shot (theta, p, a, b) the simulator
+    plays on the tables ``positions`` (..., 4, 2): :func:`unnormalize_action` if the action is
+    ``normalized``, then :func:`aim_action` with ``constrain_aim``. The gymnasium env plays it
+    on a batch of one; the TorchRL ``NormalizedActions`` and ``AimConstraint`` transforms are
+    its two stages, in that order. A new float64 array."""
+    raw = unnormalize_action(action, constrain_aim) if normalized else np.array(action, dtype=np.float64)
+    return aim_action(raw, positions, R) if constrain_aim else raw
 
 
 # ----------------------------------------------------------------------------- carom features

@@ -29,6 +29,43 @@ def test_rest_observation_layout():
     assert domain.rest_observation(np.stack([HAND] * 3)).shape == (3, 28)
 
 
+
+def test_observation_is_the_rest_floats_then_the_carom_features():
+    batch = np.stack([HAND, HAND[[0, 1, 3, 2]]])
+    np.testing.assert_array_equal(domain.observation(batch), domain.rest_observation(batch))
+    full = domain.observation(batch, extra_features=True)
+    assert full.shape == (2, 32) and full.dtype == np.float32
+    np.testing.assert_array_equal(full[:, :28], domain.rest_observation(batch))
+    np.testing.assert_array_equal(full[:, 28:], domain.carom_features(batch).astype(np.float32))
+    np.testing.assert_array_equal(domain.feature_observation(batch), full[:, 28:])
+    np.testing.assert_array_equal(domain.observation(HAND, True), full[0])
+    low, high = domain.observation_bounds(DEFAULT_PARAMS, extra_features=True)
+    assert low.dtype == high.dtype == np.float32 and low.shape == high.shape == (32,)
+    assert ((low <= full) & (full <= high)).all()
+    v_max = 2 * DEFAULT_PARAMS.cue_speed_max / (1 + DEFAULT_PARAMS.ball_mass / DEFAULT_PARAMS.cue_mass)
+    assert high[:7].tolist() == pytest.approx([1.27, 2.54, v_max, v_max] + [2.5 * v_max / R] * 3, rel=1e-6)
+    assert high[28:].tolist() == pytest.approx([math.hypot(1.27, 2.54)] * 2 + [1, 1], rel=1e-6)
+    assert domain.observation_bounds(DEFAULT_PARAMS)[0].shape == (28,)
+
+
+def test_action_bounds_and_the_map_to_the_played_shot():
+    assert domain.action_bounds()[0].tolist() == [0, 0, -1, -1] and domain.action_bounds()[1][0] == 2 * math.pi
+    assert domain.action_bounds(True)[0].tolist() == [-1, 0, -1, -1] and domain.action_bounds(True)[1].tolist() == [1] * 4
+    for aim in (False, True):
+        assert [b.tolist() for b in domain.action_bounds(aim, normalized=True)] == [[-1] * 4, [1] * 4]
+    batch = np.stack([HAND, HAND[[0, 1, 3, 2]]])
+    x = np.array([[0.5, -0.2, 0.3, -0.9], [-1.0, 1.0, 0.0, 0.1]])
+    np.testing.assert_array_equal(domain.raw_action(x, batch, R), x)
+    np.testing.assert_array_equal(domain.raw_action(x, batch, R, normalized=True), domain.unnormalize_action(x))
+    aimed = domain.aim_action(x, batch, R)
+    np.testing.assert_array_equal(aimed[:, 0], domain.constrained_theta(batch, x[:, 0], R))
+    np.testing.assert_array_equal(aimed[:, 1:], x[:, 1:])
+    np.testing.assert_array_equal(domain.raw_action(x, batch, R, constrain_aim=True), aimed)
+    both = domain.raw_action(x, batch, R, constrain_aim=True, normalized=True)  # unnormalise, then aim
+    np.testing.assert_array_equal(both, domain.aim_action(domain.unnormalize_action(x, True), batch, R))
+    assert both[0, 1] == pytest.approx(0.4) and both[1, 0] == domain.constrained_theta(batch[1], -1.0, R)
+    assert not np.shares_memory(domain.raw_action(x, batch, R), x)
+
 def test_nearest_red_and_ties():
     assert domain.nearest_red(HAND) == 2
     swapped = HAND[[0, 1, 3, 2]]

@@ -187,6 +187,105 @@ def test_gym_shaping_and_constraint_match_domain():
         assert reward == pytest.approx(expected)
 
 
+# ----------------------------------------------------------------------------- gymnasium = TorchRL
+
+SHAPED = dict(constrain_aim=True)  # shaping on aimed shots: plenty of scores, fouls and near misses
+CROSS_CONFIGS = {
+    "default": {},
+    "aim": dict(constrain_aim=True),
+    "features": dict(extra_features=True),
+    "aim_features": dict(constrain_aim=True, extra_features=True),
+    "shaping_none": dict(SHAPED),
+    "foul_penalty": dict(SHAPED, foul_penalty=1.0),
+    "gentle": dict(SHAPED, gentle=0.2),
+    "gentle_power": dict(SHAPED, gentle=0.5, gentle_kind="power"),
+    "near_miss": dict(SHAPED, near_miss=0.05, near_miss_sigma=0.04),
+    "both": dict(SHAPED, foul_penalty=1.0, gentle=0.2, near_miss=0.05),
+    "all_reset_on_miss": dict(ALL_LAYERS, on_miss="reset", max_shots=4),
+    "international": dict(SHAPED, extra_features=True, gentle=0.2, physics="international"),
+}
+
+
+def gym_and_torchrl(config: dict, normalized: bool, seed: int):
+    trl_config = {("params" if k == "physics" else k): v for k, v in config.items()}
+    return (Billiards4BallInningEnv(normalize_actions=normalized, **config),
+            make_env(1, seed=seed, normalize_actions=normalized, **trl_config))
+
+
+@pytest.mark.parametrize("normalized", [True, False], ids=["normalized", "raw"])
+@pytest.mark.parametrize("name", list(CROSS_CONFIGS))
+def test_gym_and_torchrl_envs_play_the_same_innings(name, normalized):
+    """Same seed, same actions: the gymnasium env (the shared step code on a batch of one) and
+    the TorchRL env (make_env, B = 1) draw the same racks, play the same shots and return the
+    same observations, outcomes, flags and rewards, inning after inning (the TorchRL reward
+    sums its float32 terms in float32, the gymnasium one in float64)."""
+    config, seed, steps = CROSS_CONFIGS[name], 11, 30
+    gym_env, trl_env = gym_and_torchrl(config, normalized, seed)
+    low, high = gym_env.action_space.low, gym_env.action_space.high
+    np.testing.assert_array_equal(low, trl_env.action_spec_unbatched.space.low.numpy())
+    np.testing.assert_array_equal(high, trl_env.action_spec_unbatched.space.high.numpy())
+    assert gym_env.observation_space.shape == trl_env.observation_spec_unbatched["observation"].shape
+    rng = np.random.default_rng(seed)
+    obs, info = gym_env.reset(seed=seed)
+    td = trl_env.reset()
+    shaped, innings = 0, 1
+    for _ in range(steps):
+        np.testing.assert_array_equal(obs, td["observation"][0].numpy())
+        np.testing.assert_array_equal(info["positions"], td["positions"][0].numpy())
+        action = (low + (high - low) * rng.random(4)).astype(np.float32)
+        obs, reward, terminated, truncated, info = gym_env.step(action)
+        td["action"] = torch.from_numpy(action)[None]
+        full, td = trl_env.step_and_maybe_reset(td)
+        nxt = full["next"]
+        np.testing.assert_array_equal(obs, nxt["observation"][0].numpy())
+        np.testing.assert_array_equal(info["positions"], nxt["positions"][0].numpy())
+        for key in ("score", "foul", "miss", "first_contact", "second_red", "hits", "n_events", "shot"):
+            np.testing.assert_array_equal(np.reshape(info[key], -1), nxt[key][0].numpy(), err_msg=key)
+        np.testing.assert_array_equal(info["closest"].astype(np.float32), nxt["closest"][0].numpy())
+        assert (terminated, truncated) == (bool(nxt["terminated"]), bool(nxt["truncated"]))
+        assert reward == pytest.approx(float(nxt["reward"]), rel=0, abs=5e-7)
+        shaped += reward != float(info["score"])
+        if terminated or truncated:
+            obs, info = gym_env.reset()
+            innings += 1
+    assert innings >= 3
+    if any(config.get(k) for k in ("foul_penalty", "gentle", "near_miss")):
+        assert shaped  # the shaping terms were exercised, not only the score
+
+
+def test_gym_and_torchrl_envs_play_the_same_noisy_shots():
+    """With execution noise the envs draw from different generators by design (the gymnasium
+    env from its np_random, as gymnasium's seeding asks; the TorchRL env from one of its own,
+    so that its racks do not shift), so their innings differ. The step is the same: the shot
+    either one played under noise, commanded to the other without noise on the same table,
+    gives the same outcome, bit for bit."""
+    rng = np.random.default_rng(4)
+    noisy_trl, exact_trl = make_env(1, seed=3, noise="fastfiz_x5"), make_env(1, seed=3)
+    noisy_gym, exact_gym = (Billiards4BallInningEnv(normalize_actions=False, noise=n) for n in ("fastfiz_x5", None))
+    noisy_gym.reset(seed=5)
+    td = noisy_trl.reset()
+    low, high = domain.action_bounds()
+    for _ in range(8):
+        action = low + (high - low) * rng.random(4)
+        td["action"] = torch.from_numpy(action)[None]
+        full, td = noisy_trl.step_and_maybe_reset(td)
+        played = full["next", "played_action"][0].numpy()
+        assert not np.array_equal(played, action)
+        exact_gym.reset(options={"positions": full["positions"][0].numpy()})
+        _, _, _, _, info = exact_gym.step(played)
+        np.testing.assert_array_equal(info["positions"], full["next", "positions"][0].numpy())
+        np.testing.assert_array_equal(info["hits"], full["next", "hits"][0].numpy())
+
+        table = noisy_gym.positions
+        _, _, _, _, info = noisy_gym.step(action)
+        assert not np.array_equal(info["raw_action"], info["commanded_action"])
+        replay = reset_to(exact_trl, table[None])
+        replay["action"] = torch.from_numpy(info["raw_action"])[None]
+        nxt = exact_trl.step(replay)["next"]
+        np.testing.assert_array_equal(info["positions"], nxt["positions"][0].numpy())
+        np.testing.assert_array_equal(info["hits"], nxt["hits"][0].numpy())
+
+
 # ----------------------------------------------------------------------------- TorchRL specs
 
 
@@ -271,6 +370,18 @@ def test_bad_actions_raise_naming_action_and_shape():
         td["action"] = torch.zeros(4, 3)
         with pytest.raises(ValueError, match=r'"action" must have shape \(4, 4\).*got shape \(4, 3\)'):
             env.step(td)
+    # a normalised power or tip outside [-1, 1] is refused by the same check in both envs
+    env, gym_env = make_env(4, seed=0, normalize_actions=True), Billiards4BallInningEnv()
+    td = env.reset()
+    td["action"] = torch.tensor([[0.0, 0.0, 0.0, 0.0]] * 3 + [[0.0, 1.5, 0.0, 0.0]])
+    with pytest.raises(ValueError, match=r'"action" is normalised.*\[0.0, 1.5, 0.0, 0.0\]'):
+        env.step(td)
+    gym_env.reset(seed=0)
+    with pytest.raises(ValueError, match=r'"action" is normalised.*\[0.0, 1.5, 0.0, 0.0\]'):
+        gym_env.step(np.array([0.0, 1.5, 0.0, 0.0]))
+    for make in (lambda: make_env(2, gentle_kind="soft"), lambda: Billiards4BallInningEnv(gentle_kind="soft")):
+        with pytest.raises(ValueError, match="gentle_kind must be one of"):
+            make()
 
 
 # ----------------------------------------------------------------------------- transforms

@@ -8,13 +8,18 @@ tests/test_presets.py).
 
 import dataclasses
 import math
+import os
+import subprocess
+import sys
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from billiards.physics import PRESETS, PhysicsParams, api
 from billiards.physics import core
+from billiards.physics.core import LABEL, VX, VY, WX, WY, WZ, X, Y
 
 P = PRESETS["international"]
 action_to_cue = partial(api.action_to_cue, params=P)
@@ -109,15 +114,15 @@ def test_rolling_ball_stops_at_the_closed_form_distance():
 
 
 def test_spin_decays_at_ten_ninths_g():
-    st = np.zeros((4, 7))
+    st = np.zeros((core.N_BALLS, core.N_STATE))
     lab = np.zeros(4, dtype=np.int64)
-    st[0, 6] = 5.0
+    st[0, WZ] = 5.0
     lab[0] = core.SPINNING
     tau, to = core.transition_time(st, lab, 0, P.array)
     assert tau == pytest.approx(5.0 / (10 / 9 * G), rel=1e-12)
     assert to == core.STATIONARY
     core.evolve_ball(st, lab, 0, 0.1, P.array)
-    assert st[0, 6] == pytest.approx(5.0 - 10 / 9 * G * 0.1, rel=1e-12)
+    assert st[0, WZ] == pytest.approx(5.0 - 10 / 9 * G * 0.1, rel=1e-12)
 
 
 # ----------------------------------------------------------------------------- cushion
@@ -125,7 +130,7 @@ def test_spin_decays_at_ten_ninths_g():
 
 def test_han_sanity_case_rolling_straight_into_a_rail():
     V = 2.0
-    st = np.zeros((4, 7))
+    st = np.zeros((core.N_BALLS, core.N_STATE))
     lab = np.full(4, core.STATIONARY, dtype=np.int64)
     st[0, :6] = [W - R, 1.0, V, 0.0, 0.0, V / R]  # rolling along +x into the x = w cushion
     lab[0] = core.ROLLING
@@ -133,23 +138,23 @@ def test_han_sanity_case_rolling_straight_into_a_rail():
     th = P.cushion_angle
     e, mu = P.e_cushion, P.f_cushion
     # slide branch closed form: v_x' = V - (1 + e) V cos(th) (mu sin(th) + cos(th))
-    assert st[0, 2] / V == pytest.approx(1 - (1 + e) * math.cos(th) * (mu * math.sin(th) + math.cos(th)), rel=1e-12)
-    assert st[0, 2] / V == pytest.approx(-0.828, abs=1e-3)  # the reference's worked number
-    assert st[0, 5] * R / V == pytest.approx(0.32, abs=1e-3)  # wrong-way spin
-    assert st[0, 3] == pytest.approx(0.0, abs=1e-15) and st[0, 4] == pytest.approx(0.0, abs=1e-15)
-    assert st[0, 0] == pytest.approx(W - R - P.min_dist, abs=1e-12)  # make_kiss spacer
+    assert st[0, VX] / V == pytest.approx(1 - (1 + e) * math.cos(th) * (mu * math.sin(th) + math.cos(th)), rel=1e-12)
+    assert st[0, VX] / V == pytest.approx(-0.828, abs=1e-3)  # the reference's worked number
+    assert st[0, WY] * R / V == pytest.approx(0.32, abs=1e-3)  # wrong-way spin
+    assert st[0, VY] == pytest.approx(0.0, abs=1e-15) and st[0, WX] == pytest.approx(0.0, abs=1e-15)
+    assert st[0, X] == pytest.approx(W - R - P.min_dist, abs=1e-12)  # make_kiss spacer
     assert lab[0] == core.SLIDING
     # after the post-rebound slide it rolls at 0.50 V
     tau, to = core.transition_time(st, lab, 0, P.array)
     core.evolve_ball(st, lab, 0, tau, P.array)
-    assert np.hypot(st[0, 2], st[0, 3]) / V == pytest.approx(0.50, abs=1e-3)
+    assert np.hypot(st[0, VX], st[0, VY]) / V == pytest.approx(0.50, abs=1e-3)
 
 
 def test_cushion_impact_in_a_full_shot_reverses_normal_velocity():
     res = simulate_shot(lone_white_rack((0.71, 1.42)), [0.0, 0.4, 0.0, 0.0])
     cushion = [k for k, e in enumerate(res.events()) if e[1] == "cushion"][0]
     assert res.events()[cushion][3] == 1  # the x = w cushion
-    assert res.event_state[cushion, 0, 2] < 0
+    assert res.event_state[cushion, 0, VX] < 0
 
 
 # ----------------------------------------------------------------------------- ball-ball
@@ -162,33 +167,33 @@ def test_head_on_collision_restitution():
     k = [k for k, e in enumerate(res.events()) if e[1] == "ball_ball"][0]
     assert res.events()[k][2:] == (0, 2)
     before = res.event_state[k - 1]
-    st = before[:, :7].copy()
-    lab = before[:, 7].astype(np.int64)
+    st = before[:, :core.N_STATE].copy()
+    lab = before[:, LABEL].astype(np.int64)
     for b in range(4):
         core.evolve_ball(st, lab, b, res.event_time[k] - res.event_time[k - 1], P.array)
-    vin = st[0, 3]
+    vin = st[0, VY]
     after = res.event_state[k]
-    assert after[2, 3] == pytest.approx((1 + P.e_ball) / 2 * vin, rel=1e-9)
-    assert after[0, 3] == pytest.approx((1 - P.e_ball) / 2 * vin, rel=1e-9)
-    assert after[2, 2] == pytest.approx(0.0, abs=1e-12)
-    assert after[2, 1] - after[0, 1] == pytest.approx(2 * R + P.min_dist, abs=1e-10)
+    assert after[2, VY] == pytest.approx((1 + P.e_ball) / 2 * vin, rel=1e-9)
+    assert after[0, VY] == pytest.approx((1 - P.e_ball) / 2 * vin, rel=1e-9)
+    assert after[2, VX] == pytest.approx(0.0, abs=1e-12)
+    assert after[2, Y] - after[0, Y] == pytest.approx(2 * R + P.min_dist, abs=1e-10)
 
 
 def test_degenerate_quartic_equal_accelerations():
     """Two balls rolling along +x with equal speed never meet; a faster one behind catches up
     at the linear-motion time (the quartic degenerates to a quadratic)."""
-    st = np.zeros((4, 7))
+    st = np.zeros((core.N_BALLS, core.N_STATE))
     lab = np.zeros(4, dtype=np.int64)
     st[0, :4] = [0.2, 1.0, 1.0, 0.0]
     st[1, :4] = [0.6, 1.0, 1.0, 0.0]
     for k in (0, 1):
-        st[k, 5] = st[k, 2] / R
+        st[k, WY] = st[k, VX] / R
         lab[k] = core.ROLLING
-    st[2, :2], st[3, :2] = [0.2, 2.0], [1.0, 2.0]
+    st[2, X:Y + 1], st[3, X:Y + 1] = [0.2, 2.0], [1.0, 2.0]
     poly = np.array([core._poly(st, lab, k, P.array) for k in range(4)])
     assert core.ball_ball_time(st, poly, lab, 0, 1, R, 5.0) == math.inf
-    st[0, 2] = 1.5  # now the rear ball is faster; both decelerate at mu_r g, so dx is linear in t
-    st[0, 5] = 1.5 / R
+    st[0, VX] = 1.5  # now the rear ball is faster; both decelerate at mu_r g, so dx is linear in t
+    st[0, WY] = 1.5 / R
     poly = np.array([core._poly(st, lab, k, P.array) for k in range(4)])
     t = core.ball_ball_time(st, poly, lab, 0, 1, R, 5.0)
     assert t == pytest.approx((0.4 - 2 * R) / 0.5, rel=1e-12)
@@ -293,9 +298,42 @@ def test_determinism_and_batch_equals_single_bit_for_bit():
         assert np.array_equal(res.hits, batch.hits[n]) and res.score == batch.score[n]
 
 
+
+LEAK_CHECK = """
+import dataclasses
+import numpy as np
+from numba.core.runtime import rtsys
+from billiards.physics import PRESETS, random_racks, simulate_batch, simulate_shot
+# lively balls and cloth: long shots, event logs that grow past their first 64 rows
+P = dataclasses.replace(PRESETS["international"], u_roll=0.0002, e_ball=1.0, e_cushion=0.98)
+rng = np.random.default_rng(0)
+racks = random_racks(rng, 300, P)
+acts = np.column_stack([rng.uniform(0, 2 * np.pi, 300), np.ones(300), rng.uniform(-1, 1, (300, 2))])
+simulate_batch(racks[:2], acts[:2], P), simulate_shot(racks[0], acts[0], P)  # compile or load
+before = rtsys.get_allocation_stats()
+batch = simulate_batch(racks, acts, P)
+logs = [simulate_shot(r, a, P).event_time.size for r, a in zip(racks, acts)]
+del batch
+after = rtsys.get_allocation_stats()
+print(after.alloc - before.alloc, after.free - before.free, after.mi_alloc - before.mi_alloc,
+      after.mi_free - before.mi_free, max(logs))
+"""
+
+
+def test_the_kernel_frees_every_array_it_allocates():
+    """The event loop's helpers run without numba's reference counting (see core's
+    docstring); every array a shot allocates (state, caches, outcome vectors, an event log
+    grown past its first 64 rows) is freed all the same, on the batch and the single path."""
+    env = {**os.environ, "NUMBA_NRT_STATS": "1"}
+    out = subprocess.run([sys.executable, "-c", LEAK_CHECK], env=env, capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parent.parent)
+    alloc, free, mi_alloc, mi_free, longest_log = map(int, out.stdout.split())
+    assert alloc > 1000 and alloc == free and mi_alloc == mi_free
+    assert longest_log > 64
+
 def kinetic_energy(state):
-    v2 = state[..., 2] ** 2 + state[..., 3] ** 2
-    w2 = state[..., 4] ** 2 + state[..., 5] ** 2 + state[..., 6] ** 2
+    v2 = state[..., VX] ** 2 + state[..., VY] ** 2
+    w2 = state[..., WX] ** 2 + state[..., WY] ** 2 + state[..., WZ] ** 2
     return (0.5 * M * v2 + 0.5 * 0.4 * M * R * R * w2).sum(axis=-1)
 
 
@@ -320,13 +358,13 @@ def test_kinetic_energy_never_rises_across_an_event():
         res = simulate_shot(racks[n], acts[n])
         for k in range(1, len(res.event_time)):
             st = res.event_state[k - 1, :, :7].copy()
-            lab = res.event_state[k - 1, :, 7].astype(np.int64)
+            lab = res.event_state[k - 1, :, LABEL].astype(np.int64)
             for b in range(4):
                 core.evolve_ball(st, lab, b, res.event_time[k] - res.event_time[k - 1], P.array)
             before, after = kinetic_energy(st), kinetic_energy(res.event_state[k])
             worst = max(worst, after - before)
             assert after <= before + 1e-12, (n, k, res.events()[k], before, after)
-        assert np.all(res.event_state[-1, :, 7] == core.STATIONARY)
+        assert np.all(res.event_state[-1, :, LABEL] == core.STATIONARY)
     assert worst <= 1e-12
 
 
@@ -457,9 +495,9 @@ def test_chains_of_shots_stay_on_the_table():
 def _state(*balls):
     """A (4, 7) state and labels: the given (x, y, vx, vy, wx, wy, wz, label) rows, the rest
     of the balls parked at rest in the far corners."""
-    st = np.zeros((4, 7))
+    st = np.zeros((core.N_BALLS, core.N_STATE))
     lab = np.full(4, core.STATIONARY, dtype=np.int64)
-    st[:, :2] = [[0.1, 2.7], [1.3, 2.7], [0.1, 2.5], [1.3, 2.5]]
+    st[:, X:Y + 1] = [[0.1, 2.7], [1.3, 2.7], [0.1, 2.5], [1.3, 2.5]]
     for k, row in enumerate(balls):
         st[k] = row[:7]
         lab[k] = row[7]
@@ -501,7 +539,7 @@ def test_a_ball_on_the_nose_line_accelerating_into_it_collides_now():
     # (the quadratic's double root at 0 is not > EPS)
     st, lab = _state([R, 1.0, 0.0, 1.0, 0.0, -20.0, 0.0, core.SLIDING])
     assert _cushion(st, lab) == (0.0, 0)
-    st[0, 5] = 20.0  # the slip pulls it away from the rail: no contact with it
+    st[0, WY] = 20.0  # the slip pulls it away from the rail: no contact with it
     assert _cushion(st, lab)[1] != 0
 
 
@@ -527,7 +565,7 @@ def test_touching_balls_that_turn_towards_each_other_collide():
     poly = np.array([core._poly(st, lab, k, P.array) for k in range(4)])
     t = core.ball_ball_time(st, poly, lab, 0, 1, R, 0.1)
     assert t == pytest.approx(1e-4 / (P.u_slide * G), rel=1e-9)
-    st[0, 3] = 1e-4  # approaching now
+    st[0, VY] = 1e-4  # approaching now
     poly = np.array([core._poly(st, lab, k, P.array) for k in range(4)])
     assert core.ball_ball_time(st, poly, lab, 0, 1, R, 0.1) == 0.0
 
@@ -539,7 +577,7 @@ def test_make_kiss_never_pushes_a_ball_through_a_rail():
     rack = [[x0, y0], [x0 + d - 1e-12, y0], [x0 + d - 1e-12, y0 - d + 1e-12], [x0, y0 - d - 1e-12]]
     res = simulate_shot(rack, [-1.9e-7, 0.09, 0.83, 0.89])
     assert_valid_rest(res.positions[None])
-    assert (res.event_state[:, :, 0] >= x0).all()  # never deeper than it started
+    assert (res.event_state[:, :, X] >= x0).all()  # never deeper than it started
 
 
 def adversarial_shots(rng, n, params):

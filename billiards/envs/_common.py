@@ -1,15 +1,33 @@
-"""Inning options shared by the gymnasium and the TorchRL environment."""
+"""The step code shared by the gymnasium and the TorchRL environment: pure NumPy, no torch.
+
+Both envs are thin layers over these functions (the gymnasium env calls them on a batch of
+one, the TorchRL env and its transforms on B innings), and over the domain math of
+:mod:`billiards.domain` (observation, action maps, shaping terms):
+
+* the inning options: :func:`check_inning_options`, :func:`resolve_paradigm`,
+  :func:`initial_racks`, :func:`terminated_truncated`;
+* the action a policy emits: :func:`validate_action`, :func:`unnormalize_checked`;
+* one step of B innings: :func:`play_shots` (execution noise, simulation, inning end);
+* the reward shaping's coefficients, checked once: :class:`Shaping`.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+from typing import NamedTuple
+
 import numpy as np
 
+from billiards import domain
 from billiards.physics import (
     DEFAULT_PARAMS,
+    BatchResult,
     PhysicsParams,
     canonical_rack,
     random_racks,
+    simulate_batch,
 )
+from billiards.physics.noise import NoiseModel
 
 STARTS = ("random", "canonical")
 ON_MISS = ("continue", "reset")
@@ -96,3 +114,68 @@ def validate_action(action, expected_shape: tuple[int, ...]) -> np.ndarray:
             f'"action" of shape {tuple(expected_shape)} has non-finite (NaN/inf) entries in row(s) {rows[:8]}'
         )
     return arr
+
+
+def unnormalize_checked(x: np.ndarray, constrain_aim: bool = False) -> np.ndarray:
+    """The normalised action x (..., 4) as the raw one (:func:`billiards.domain.unnormalize_action`),
+    or a ValueError naming ``"action"`` if a power or tip coordinate x1, x2, x3 lies outside
+    [-1, 1] (the aim coordinate x0 may: theta wraps, and a u beyond +-1 aims outside the
+    window)."""
+    x = np.asarray(x, dtype=np.float64)
+    if np.any(np.abs(x[..., 1:]) > 1.0):
+        bad = x.reshape(-1, x.shape[-1])
+        row = bad[np.any(np.abs(bad[:, 1:]) > 1.0, axis=1)][0]
+        raise ValueError(f'"action" is normalised: x1, x2, x3 (power, tip offsets) must lie in [-1, 1]; got {row.tolist()}')
+    return domain.unnormalize_action(x, constrain_aim)
+
+
+class Shots(NamedTuple):
+    """What :func:`play_shots` returns for B innings (every field has leading dim B)."""
+
+    played: np.ndarray  # (B, 4) float64: the raw shots simulated (the commanded ones, perturbed by the noise)
+    result: BatchResult  # the simulator's outcome, rest positions included
+    shot: np.ndarray  # (B,) int64: shots played in each inning, this one included
+    terminated: np.ndarray  # (B,) bool
+    truncated: np.ndarray  # (B,) bool
+
+
+def play_shots(positions: np.ndarray, commanded: np.ndarray, shots_before: np.ndarray, *, params: PhysicsParams,
+               noise: NoiseModel, rng: np.random.Generator, on_miss: str, max_shots: int) -> Shots:
+    """One step of B innings, the step of both envs: the commanded raw shots (B, 4) perturbed
+    by the execution noise (its draws from ``rng``; an exact model draws nothing and plays
+    them bit for bit), simulated from the tables ``positions`` (B, 4, 2) in one
+    ``simulate_batch`` call, and each inning's end (:func:`terminated_truncated`) after it."""
+    played = noise.perturb(commanded, rng, params)
+    result = simulate_batch(positions, played, params)
+    shot = np.asarray(shots_before) + 1
+    terminated, truncated = terminated_truncated(result.score, shot, on_miss, max_shots)
+    return Shots(played, result, shot, terminated, truncated)
+
+
+@dataclasses.dataclass(frozen=True)
+class Shaping:
+    """The reward-shaping coefficients of an env, checked once where they enter (a
+    ValueError names the field as passed: NaN, inf or negative, ``near_miss_sigma`` <= 0, or
+    an unknown ``gentle_kind``); 0 switches a term off. The terms are
+    :func:`billiards.domain.shaped_reward`'s (the TorchRL transforms add them one by one)."""
+
+    foul_penalty: float = 0.0  # -c * foul
+    gentle: float = 0.0  # the gentle bonus's beta
+    gentle_kind: str = "leave"  # the paper's leave-position bonus, or "power"
+    near_miss: float = 0.0  # the near-miss bonus's beta
+    near_miss_sigma: float = domain.NEAR_MISS_SIGMA  # ... and its length scale (m)
+
+    def __post_init__(self) -> None:
+        for name in ("foul_penalty", "gentle", "near_miss"):
+            object.__setattr__(self, name, domain.check_coefficient(name, getattr(self, name)))
+        object.__setattr__(self, "near_miss_sigma", domain.check_coefficient("near_miss_sigma", self.near_miss_sigma, strict=True))
+        if self.gentle_kind not in domain.GENTLE_KINDS:
+            raise ValueError(f"gentle_kind must be one of {domain.GENTLE_KINDS}, got {self.gentle_kind!r}")
+
+    def reward(self, shots: Shots) -> np.ndarray:
+        """(B,) float64: the carom score plus every enabled term, for the shots played."""
+        res = shots.result
+        return domain.shaped_reward(res.score, res.foul, shots.played[..., 1], res.hits, res.closest, res.positions,
+                                    res.second_red, foul_c=self.foul_penalty, gentle_beta=self.gentle,
+                                    gentle_kind=self.gentle_kind, near_miss_beta=self.near_miss,
+                                    near_miss_sigma=self.near_miss_sigma)

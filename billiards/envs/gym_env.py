@@ -6,9 +6,12 @@ Registered as ``Billiards4Ball-v0`` when :mod:`billiards.envs` is imported::
     env = gym.make("Billiards4Ball-v0", start="random", on_miss="continue", max_shots=10)
     env = gym.make("Billiards4Ball-v0", physics="international")   # another table (default korean_medium)
 
-Same semantics and the same domain functions (:mod:`billiards.domain`) as the TorchRL env
-and its transforms, so ``constrain_aim``, ``extra_features`` and the shaping coefficients
-mean exactly what they mean in :func:`billiards.envs.make_env`.
+A thin layer over the step code the TorchRL env and its transforms run (``_common``:
+:func:`~billiards.envs._common.play_shots`, :class:`~billiards.envs._common.Shaping`; and
+:mod:`billiards.domain`: :func:`~billiards.domain.raw_action`,
+:func:`~billiards.domain.observation`, :func:`~billiards.domain.action_bounds`), on a batch of
+one, so ``constrain_aim``, ``extra_features`` and the shaping coefficients mean exactly what
+they mean in :func:`billiards.envs.make_env`, and give the same shots.
 """
 
 from __future__ import annotations
@@ -20,19 +23,15 @@ import gymnasium as gym
 import numpy as np
 
 from billiards import domain
-from billiards.physics import (
-    PhysicsParams,
-    check_positions,
-    get_params,
-    simulate_batch,
-)
-
+from billiards.physics import PhysicsParams, check_positions, get_params
 from billiards.physics.noise import NoiseModel, get_noise
 
 from ._common import (
+    Shaping,
     check_inning_options,
     initial_racks,
-    terminated_truncated,
+    play_shots,
+    unnormalize_checked,
     validate_action,
 )
 
@@ -124,34 +123,12 @@ class Billiards4BallInningEnv(gym.Env):
         self.start, self.on_miss, self.params, self.render_mode = start, on_miss, params, render_mode
         self.constrain_aim, self.extra_features = bool(constrain_aim), bool(extra_features)
         self.normalize_actions = bool(normalize_actions)
-        if gentle_kind not in domain.GENTLE_KINDS:
-            raise ValueError(f"gentle_kind must be one of {domain.GENTLE_KINDS}, got {gentle_kind!r}")
-        self.shaping = dict(
-            foul_c=domain.check_coefficient("foul_penalty", foul_penalty),
-            gentle_beta=domain.check_coefficient("gentle", gentle),
-            gentle_kind=gentle_kind,
-            near_miss_beta=domain.check_coefficient("near_miss", near_miss),
-            near_miss_sigma=domain.check_coefficient("near_miss_sigma", near_miss_sigma, strict=True),
-        )
+        self.shaping = Shaping(foul_penalty, gentle, gentle_kind, near_miss, near_miss_sigma)
 
-        low, high = domain.action_bounds(self.constrain_aim)
-        if self.normalize_actions:
-            low, high = -np.ones(domain.ACTION_DIM), np.ones(domain.ACTION_DIM)
+        low, high = domain.action_bounds(self.constrain_aim, self.normalize_actions)
         self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
-
-        w, l = params.table_width, params.table_length
-        # Velocity/spin slots are 0 between shots; their bounds are a physical envelope: the
-        # fastest cue-ball launch v_max = 2 V0_max / (1 + m/M) and spin 2.5 v_max / R.
-        v_max = 2.0 * params.cue_speed_max / (1.0 + params.ball_mass / params.cue_mass)
-        w_max = 2.5 * v_max / params.ball_radius
-        ball_high = np.array([w, l, v_max, v_max, w_max, w_max, w_max])
-        ball_low = np.concatenate([[0.0, 0.0], -ball_high[2:]])
-        obs_low, obs_high = np.tile(ball_low, domain.N_BALLS), np.tile(ball_high, domain.N_BALLS)
-        if self.extra_features:
-            diag = float(np.hypot(w, l))
-            obs_low = np.concatenate([obs_low, [0.0, 0.0, -1.0, -1.0]])
-            obs_high = np.concatenate([obs_high, [diag, diag, 1.0, 1.0]])
-        self.observation_space = gym.spaces.Box(obs_low.astype(np.float32), obs_high.astype(np.float32), dtype=np.float32)
+        low, high = domain.observation_bounds(params, self.extra_features)
+        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
 
         self._positions = initial_racks(np.random.default_rng(0), "canonical", 1, params)[0]
         self._shot = 0
@@ -159,10 +136,7 @@ class Billiards4BallInningEnv(gym.Env):
     # ------------------------------------------------------------------ helpers
 
     def _obs(self) -> np.ndarray:
-        obs = domain.rest_observation(self._positions)
-        if self.extra_features:
-            obs = np.concatenate([obs, domain.carom_features(self._positions).astype(np.float32)])
-        return obs
+        return domain.observation(self._positions[None], self.extra_features)[0]
 
     @property
     def spec(self):
@@ -203,21 +177,17 @@ class Billiards4BallInningEnv(gym.Env):
         return self._obs(), self._info()
 
     def _raw_action(self, action) -> np.ndarray:
-        """The (theta, p, a, b) to simulate from the agent's action (see the class docstring)."""
-        act = validate_action(action, (domain.ACTION_DIM,)).copy()
+        """The commanded (theta, p, a, b) of the agent's action (see the class docstring), (1, 4)."""
+        act = validate_action(action, (domain.ACTION_DIM,))[None]
         if self.normalize_actions:
-            if np.any(np.abs(act[1:]) > 1.0):
-                raise ValueError(f'"action" is normalised: x1, x2, x3 (power, tip offsets) must lie in [-1, 1]; got {act.tolist()}')
-            act = domain.unnormalize_action(act, self.constrain_aim)
-        if self.constrain_aim:
-            act[0] = domain.constrained_theta(self._positions, act[0], self.params.ball_radius)
-        return act
+            act = unnormalize_checked(act, self.constrain_aim)
+        return domain.raw_action(act, self._positions[None], self.params.ball_radius, self.constrain_aim)
 
-    def _info(self, res=None, act=None, commanded=None) -> dict:
-        """The info dict: the same keys and dtypes after reset (res None: "no shot yet") and step.
-        The flags are 0-d bool arrays, not np.bool_, which is no np.number: gymnasium's vector
-        envs would stack it into an object array."""
-        if res is None:
+    def _info(self, shots=None, commanded=None) -> dict:
+        """The info dict: the same keys and dtypes after reset (shots None: "no shot yet") and
+        step. The flags are 0-d bool arrays, not np.bool_, which is no np.number: gymnasium's
+        vector envs would stack it into an object array."""
+        if shots is None:
             return {
                 "score": np.array(False), "foul": np.array(False), "miss": np.array(False),
                 "first_contact": np.int64(-1), "second_red": np.int64(-1),
@@ -226,6 +196,7 @@ class Billiards4BallInningEnv(gym.Env):
                 "theta": np.float64(0.0), "raw_action": np.zeros(domain.ACTION_DIM),
                 "commanded_action": np.zeros(domain.ACTION_DIM),
             }
+        res, act = shots.result, shots.played[0]
         return {
             "score": np.array(bool(res.score[0])),
             "foul": np.array(bool(res.foul[0])),
@@ -240,20 +211,19 @@ class Billiards4BallInningEnv(gym.Env):
             "positions": self.positions,
             "theta": np.float64(act[0]),
             "raw_action": act.astype(np.float64),
-            "commanded_action": (act if commanded is None else commanded).astype(np.float64),
+            "commanded_action": commanded[0].astype(np.float64),
         }
 
     def step(self, action):
         commanded = self._raw_action(action)
-        act = self.noise.perturb(commanded, self.np_random, self.params)  # the shot played
-        res = simulate_batch(self._positions[None], act[None], self.params)
-        self._last_shot = (self._positions, act)
-        self._positions = res.positions[0]
-        self._shot += 1
-        reward = domain.shaped_reward(res.score, res.foul, act[None, 1], res.hits, res.closest,
-                                      res.positions, res.second_red, **self.shaping)
-        terminated, truncated = terminated_truncated(res.score, np.array([self._shot]), self.on_miss, self.max_shots)
-        return self._obs(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), self._info(res, act, commanded)
+        shots = play_shots(self._positions[None], commanded, np.array([self._shot]), params=self.params,
+                           noise=self.noise, rng=self.np_random, on_miss=self.on_miss, max_shots=self.max_shots)
+        self._last_shot = (self._positions, shots.played[0])
+        self._positions = shots.result.positions[0]
+        self._shot = int(shots.shot[0])
+        reward = self.shaping.reward(shots)
+        return (self._obs(), float(reward[0]), bool(shots.terminated[0]), bool(shots.truncated[0]),
+                self._info(shots, commanded))
 
     def render(self):
         """``rgb_array``: an (H, W, 3) uint8 frame of the table, with the last shot's ball paths

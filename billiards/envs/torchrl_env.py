@@ -49,27 +49,11 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from billiards.domain import (
-    ACTION_DIM,
-    ACTION_HIGH,
-    ACTION_LOW,
-    OBS_DIM,
-    rest_observation,
-)
+from billiards.domain import ACTION_DIM, OBS_DIM, action_bounds, observation
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams, check_positions
 from billiards.physics.noise import NoiseModel, get_noise
-from billiards.physics import (
-    DEFAULT_PARAMS,
-    PhysicsParams,
-    check_positions,
-    simulate_batch,
-)
 
-from ._common import (
-    check_inning_options,
-    initial_racks,
-    terminated_truncated,
-    validate_action,
-)
+from ._common import check_inning_options, initial_racks, play_shots, validate_action
 
 BITS_KEY = "positions_bits"
 INFO_KEYS = ("score", "foul", "miss", "first_contact", "second_red", "hits", "closest", "n_events")
@@ -189,9 +173,10 @@ class BilliardsEnv(EnvBase):
         if not self.noise.is_exact:
             self.observation_spec["played_action"] = Unbounded(shape=(*B, ACTION_DIM), dtype=torch.float64)
         self.state_spec = Composite(positions=positions.clone(), positions_bits=bits.clone(), shot=shot.clone(), shape=B)
+        low, high = action_bounds()
         self.action_spec = Bounded(
-            torch.as_tensor(ACTION_LOW, dtype=torch.float32).expand(*B, ACTION_DIM),
-            torch.as_tensor(ACTION_HIGH, dtype=torch.float32).expand(*B, ACTION_DIM),
+            torch.as_tensor(low, dtype=torch.float32).expand(*B, ACTION_DIM),
+            torch.as_tensor(high, dtype=torch.float32).expand(*B, ACTION_DIM),
             shape=(*B, ACTION_DIM),
             dtype=torch.float32,
         )
@@ -217,19 +202,16 @@ class BilliardsEnv(EnvBase):
         shot = tensordict.get("shot", None)
         if positions is None or shot is None:
             raise KeyError('BilliardsEnv.step needs "positions" and "shot" in the input: call env.reset() first')
-        shot = shot.detach().numpy().reshape(B) + 1
-        noisy = {}
-        if not self.noise.is_exact:
-            action = self.noise.perturb(action, self.noise_rng, self.params)
-            noisy["played_action"] = action
-        result = simulate_batch(positions, action, self.params)
-        terminated, truncated = terminated_truncated(result.score, shot, self.on_miss, self.max_shots)
+        shots = play_shots(positions, action, shot.detach().numpy().reshape(B), params=self.params, noise=self.noise,
+                           rng=self.noise_rng, on_miss=self.on_miss, max_shots=self.max_shots)
+        result = shots.result
+        noisy = {} if self.noise.is_exact else {"played_action": shots.played}
         return self._output(
             positions=result.positions,
-            shot=shot,
+            shot=shots.shot,
             reward=result.score.astype(np.float32),
-            terminated=terminated,
-            truncated=truncated,
+            terminated=shots.terminated,
+            truncated=shots.truncated,
             score=result.score,
             foul=result.foul,
             miss=result.miss,
@@ -246,7 +228,7 @@ class BilliardsEnv(EnvBase):
         col = lambda x: torch.from_numpy(np.ascontiguousarray(x)).reshape(B, -1)
         positions = np.ascontiguousarray(positions, dtype=np.float64)
         data = {
-            "observation": torch.from_numpy(rest_observation(positions)),
+            "observation": torch.from_numpy(observation(positions)),
             "positions": torch.from_numpy(positions),
             BITS_KEY: torch.from_numpy(positions.view(np.int64).copy()),
             "shot": col(shot.astype(np.int64)),

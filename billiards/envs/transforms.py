@@ -1,7 +1,8 @@
 """TorchRL transforms for the domain knowledge of the paper, and :func:`make_env`.
 
-The math of every transform is in :mod:`billiards.domain` (shared with the gymnasium env);
-this module only moves tensors in and out of tensordicts.
+The math of every transform is in :mod:`billiards.domain` and the env step code of
+``_common`` (shared with the gymnasium env, which runs the same functions on a batch of one);
+this module only moves tensors in and out of tensordicts and specs.
 
 * :class:`AimConstraint` -- action[..., 0] becomes u in [-1, 1]:
   ``theta = theta_target + u * asin(min(1, 2R/d))`` (:func:`billiards.domain.constrained_theta`).
@@ -32,12 +33,19 @@ from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params
 from billiards.physics.config import warn_physics_mismatch
 
-from ._common import resolve_paradigm, validate_action
+from ._common import Shaping, resolve_paradigm, unnormalize_checked, validate_action
 from .torchrl_env import BilliardsEnv, exact_positions
 
 
 def _np(x: torch.Tensor) -> np.ndarray:
     return x.detach().cpu().numpy()
+
+
+def _bounded(spec, low: np.ndarray, high: np.ndarray) -> Bounded:
+    """A Bounded spec like ``spec`` (shape, dtype, device) with the per-coordinate bounds
+    (low, high) (4,) of :func:`billiards.domain.action_bounds`, broadcast over its batch."""
+    as_tensor = lambda x: torch.as_tensor(x, dtype=spec.dtype, device=spec.device).expand(spec.shape).clone()
+    return Bounded(as_tensor(low), as_tensor(high), shape=spec.shape, dtype=spec.dtype, device=spec.device)
 
 
 class _ActionMap(Transform):
@@ -83,15 +91,12 @@ class AimConstraint(_ActionMap):
         self.R = float(R)
 
     def _map(self, u_action, tensordict):
-        u_action[..., 0] = domain.constrained_theta(exact_positions(tensordict), u_action[..., 0], self.R)
-        return u_action
+        return domain.aim_action(u_action, exact_positions(tensordict), self.R)
 
     def transform_input_spec(self, input_spec: Composite) -> Composite:
         input_spec = input_spec.clone()
         spec = input_spec["full_action_spec", "action"]
-        low, high = spec.space.low.clone(), spec.space.high.clone()
-        low[..., 0], high[..., 0] = -1.0, 1.0
-        input_spec["full_action_spec", "action"] = Bounded(low, high, shape=spec.shape, dtype=spec.dtype, device=spec.device)
+        input_spec["full_action_spec", "action"] = _bounded(spec, *domain.action_bounds(constrain_aim=True))
         return input_spec
 
 
@@ -111,7 +116,7 @@ class NormalizedActions(_ActionMap):
         self.constrain_aim = bool(constrain_aim)
 
     def _map(self, x, tensordict):
-        return domain.unnormalize_action(x, self.constrain_aim)
+        return unnormalize_checked(x, self.constrain_aim)
 
     def transform_input_spec(self, input_spec: Composite) -> Composite:
         input_spec = input_spec.clone()
@@ -124,8 +129,7 @@ class NormalizedActions(_ActionMap):
                 f"{high.tolist()}, but the env below it has {below[0][0].tolist()} .. {below[1][0].tolist()}: "
                 "with AimConstraint, pass constrain_aim=True and put NormalizedActions after it"
             )
-        ones = torch.ones_like(spec.space.high)
-        input_spec["full_action_spec", "action"] = Bounded(-ones, ones, shape=spec.shape, dtype=spec.dtype, device=spec.device)
+        input_spec["full_action_spec", "action"] = _bounded(spec, *domain.action_bounds(self.constrain_aim, normalized=True))
         return input_spec
 
 
@@ -146,7 +150,7 @@ class CaromFeatures(Transform):
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
         obs = next_tensordict.get("observation")
-        feats = domain.carom_features(exact_positions(next_tensordict)).astype(np.float32)
+        feats = domain.feature_observation(exact_positions(next_tensordict))
         next_tensordict.set("observation", torch.cat([obs, torch.from_numpy(feats)], dim=-1))
         return next_tensordict
 
@@ -305,12 +309,11 @@ def make_env(
 
     Raises:
         ValueError: a shaping coefficient (foul_penalty, gentle, near_miss, rm) that is NaN,
-            inf or negative, or near_miss_sigma <= 0, named as passed.
+            inf or negative, near_miss_sigma <= 0 (named as passed), or an unknown gentle_kind.
     """
     start, on_miss = resolve_paradigm(paradigm, start, on_miss)
-    for name, value in (("foul_penalty", foul_penalty), ("gentle", gentle), ("near_miss", near_miss), ("rm", rm)):
-        domain.check_coefficient(name, value)  # before anything is built, named as passed
-    domain.check_coefficient("near_miss_sigma", near_miss_sigma, strict=True)
+    shaping = Shaping(foul_penalty, gentle, gentle_kind, near_miss, near_miss_sigma)  # checked before anything is built
+    domain.check_coefficient("rm", rm)
     params = get_params(params)
     base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=max_shots, params=params, seed=seed, noise=noise)
     transforms: list[Transform] = []
@@ -320,12 +323,12 @@ def make_env(
         transforms.append(NormalizedActions(constrain_aim))
     if extra_features:
         transforms.append(CaromFeatures())
-    if foul_penalty:
-        transforms.append(FoulPenalty(foul_penalty))
-    if gentle:
-        transforms.append(GentleShotBonus(gentle, gentle_kind))
-    if near_miss:
-        transforms.append(NearMissBonus(near_miss, near_miss_sigma))
+    if shaping.foul_penalty:
+        transforms.append(FoulPenalty(shaping.foul_penalty))
+    if shaping.gentle:
+        transforms.append(GentleShotBonus(shaping.gentle, shaping.gentle_kind))
+    if shaping.near_miss:
+        transforms.append(NearMissBonus(shaping.near_miss, shaping.near_miss_sigma))
     if rm:
         if rm_model is None:
             raise ValueError("rm > 0 needs rm_model (a billiards.rm.RewardModel or a path to one)")

@@ -73,7 +73,7 @@ class ShotResult:
 
     @cached_property
     def positions(self) -> np.ndarray:
-        return self._st[:, :2].copy()
+        return self._st[:, core.X:core.Y + 1].copy()
 
     @cached_property
     def hits(self) -> np.ndarray:
@@ -95,9 +95,9 @@ class ShotResult:
     second_red = property(lambda self: int(self._oi[core.O_SECOND_RED]))
     duration = property(lambda self: float(self._of[core.OF_TIME]))
     closest = property(lambda self: self._of[core.OF_CLOSE2:core.OF_CLOSE3 + 1])
-    event_kind = property(lambda self: self._ev_info[:, 0])
-    event_ball = property(lambda self: self._ev_info[:, 1])
-    event_other = property(lambda self: self._ev_info[:, 2])
+    event_kind = property(lambda self: self._ev_info[:, core.INFO_KIND])
+    event_ball = property(lambda self: self._ev_info[:, core.INFO_BALL])
+    event_other = property(lambda self: self._ev_info[:, core.INFO_OTHER])
 
     def events(self) -> list[tuple[float, str, int, int]]:
         """The ordered event log as (time, kind, ball, other) tuples."""
@@ -344,9 +344,9 @@ def trajectory(result: ShotResult, dt: float = 1.0 / 60.0, params: PhysicsParams
     xy = np.empty((times.size, 4, 2))
     p = params.array
     for n, (t, s) in enumerate(zip(times, seg)):
-        st = result.event_state[s, :, :7].copy()
-        lab = result.event_state[s, :, 7].astype(np.int64)
-        for k in range(4):
+        st = result.event_state[s, :, :core.N_STATE].copy()
+        lab = result.event_state[s, :, core.LABEL].astype(np.int64)
+        for k in range(core.N_BALLS):
             core.evolve_ball(st, lab, k, t - result.event_time[s], p)
-        xy[n] = st[:, :2]
+        xy[n] = st[:, core.X:core.Y + 1]
     return times, xy

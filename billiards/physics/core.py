@@ -1,15 +1,31 @@
 """Numba kernels of the event-based simulator: evolve, detect, resolve, and the event loop.
 
-Pure functions over arrays. A table state is ``st`` (4, 7) float64 rows
-``x, y, vx, vy, wx, wy, wz`` plus ``lab`` (4,) int64 motion labels. Parameters arrive as the
-packed vector of :class:`billiards.physics.params.PhysicsParams`. Formulas and their sources
-are in ``shared/physics_reference.md``; section numbers below refer to it.
+Pure functions over arrays. A table state is ``st`` (N_BALLS, N_STATE) float64, one row per
+ball in the ball order (WHITE, YELLOW, RED1, RED2) with the columns X, Y, VX, VY, WX, WY, WZ
+(centre, velocity, angular velocity), plus ``lab`` (N_BALLS,) int64 motion labels. Parameters
+arrive as the packed vector of :class:`billiards.physics.params.PhysicsParams` (slots ``P_*``).
+Formulas and their sources are in ``shared/physics_reference.md``; section numbers below refer
+to it.
 
 Layout (pooltool's split, our code):
 * evolve: closed-form slide / roll / spin motion (§2);
-* detect: transition times, ball–cushion quadratics, ball–ball quartics (§3);
-* resolve: cue strike (§1), ball–ball (§4), Han 2005 cushion (§5), transitions (§2);
-* loop: next event, advance every ball, resolve, invalidate caches (§3.4).
+* detect: transition times, ball–cushion quadratics, ball–ball quartics (§3), and the next
+  event over the per-ball and per-pair caches (:func:`_detect`, :func:`_next_event`);
+* resolve: cue strike (§1), ball–ball (§4), Han 2005 cushion (§5), transitions (§2), one
+  event by kind (:func:`_resolve`);
+* carom: what the white touched, in which order, how close it came (``_carom_*``): facts the
+  rules read, kept apart from the physics;
+* loop (:func:`run_shot`): detect the next event, evolve every ball to it, resolve it, note
+  the carom facts, log it.
+
+Reference counting: only the entry points allocate (:func:`run_shot` its state, caches, outcome
+vectors and log). The helpers the loop calls per event (``_evolve_all``, ``_detect``,
+``_next_event``, ``_resolve``, ``_carom_*``) are compiled with ``_nrt=False``: they only read
+and write the loop's arrays, borrowed for the call, so numba's reference counting (an atomic
+increment and decrement per array argument per call, and numba passes the flag on to every
+kernel they call) would be pure overhead: with it, this split of the loop ran 35% slower than
+the single loop it replaced; without it, a third faster. A helper that allocated an array
+would not compile under the flag.
 
 Detection differs from pooltool in one deliberate way: instead of a general quartic solver we
 isolate the earliest root inside the *validity horizon* of the two trajectories (the earliest
@@ -26,22 +42,37 @@ import numpy as np
 from numba import njit, prange
 
 from .params import (
-    P_BALL_BALL, P_CUE_END_M, P_CUE_M, P_CUE_V_MAX, P_MAX_ENGLISH, P_E_B, P_E_C, P_F_C, P_G, P_H, P_L, P_M,
-    P_MAX_EVENTS, P_MAX_TIME, P_MIN_DIST, P_R, P_SQUIRT, P_U_R, P_U_S, P_U_SP, P_W,
+    BALL_BALL_ELASTIC, P_BALL_BALL, P_CUE_END_M, P_CUE_M, P_CUE_V_MAX, P_MAX_ENGLISH, P_E_B, P_E_C, P_F_C, P_G, P_H,
+    P_L, P_M, P_MAX_EVENTS, P_MAX_TIME, P_MIN_DIST, P_R, P_SQUIRT, P_U_R, P_U_S, P_U_SP, P_W,
 )
 
+# Balls, in the order of every array: the white (the player's cue ball), the yellow, the reds.
+WHITE, YELLOW, RED1, RED2 = range(4)
+N_BALLS = 4
+# Columns of a ball's row of the state ``st``: centre, velocity, angular velocity.
+X, Y, VX, VY, WX, WY, WZ = range(7)
+N_STATE = 7
+LABEL = N_STATE  # the event log's state rows carry the motion label after the state columns
+# Columns of a ball's trajectory polynomial p(t) = c + b t + a t^2 (§3.1): a and b (c is X, Y).
+AX, AY, BX, BY = range(4)
+N_POLY = 4
 # Motion labels (pooltool's numbering).
 STATIONARY, SPINNING, SLIDING, ROLLING = 0, 1, 2, 3
-# Event kinds in the log.
+# Event kinds in the log, and the columns of its info rows.
 EV_STRIKE, EV_TRANSITION, EV_BALL_BALL, EV_CUSHION, EV_STOP = 0, 1, 2, 3, 4
+INFO_KIND, INFO_BALL, INFO_OTHER = range(3)
+N_INFO = 3
 # Cushions: 0 is x = 0, 1 is x = w, 2 is y = 0, 3 is y = l.
-N_BALLS = 4
+N_CUSHIONS = 4
 EPS = 100.0 * np.finfo(np.float64).eps  # pooltool's EPS, 2.2e-14
 KISS_SLACK = 9e-7  # m a make_kiss may press a ball into a rail or third ball (< api.POSITION_TOL)
 INF = np.inf
-# Pairs of balls, in a fixed order.
+NEWTON_ITERATIONS = 100  # the root solvers' iteration cap (they converge in far fewer)
+NEWTON_RTOL = 1e-15  # ... and their relative step tolerance
+# Pairs of balls, in a fixed order (i < j, so the white is always the first of its pairs).
 PAIR_I = np.array([0, 0, 0, 1, 1, 2], dtype=np.int64)
 PAIR_J = np.array([1, 2, 3, 2, 3, 3], dtype=np.int64)
+N_PAIRS = 6
 # Outcome slots of the integer and float result vectors.
 O_FIRST, O_HIT1, O_HIT2, O_HIT3, O_NEVENTS, O_TRUNC, O_CUSHIONS, O_SECOND_RED, O_TIMEOUT = range(9)
 N_OUT_INT = 9
@@ -71,14 +102,14 @@ def _spin_after(wz, t, alpha):
 @njit(cache=True, error_model="numpy")
 def _slip_dir(st, i, R):
     """Unit contact-point slip direction; the heading if the slip is exactly zero."""
-    ux = st[i, 2] - R * st[i, 5]
-    uy = st[i, 3] + R * st[i, 4]
+    ux = st[i, VX] - R * st[i, WY]
+    uy = st[i, VY] + R * st[i, WX]
     un = _norm(ux, uy)
     if un > 0.0:
         return ux / un, uy / un, un
-    vn = _norm(st[i, 2], st[i, 3])
+    vn = _norm(st[i, VX], st[i, VY])
     if vn > 0.0:
-        return st[i, 2] / vn, st[i, 3] / vn, 0.0
+        return st[i, VX] / vn, st[i, VY] / vn, 0.0
     return 0.0, 0.0, 0.0
 
 
@@ -93,30 +124,37 @@ def evolve_ball(st, lab, i, t, p):
     if s == SLIDING:
         ux, uy, _ = _slip_dir(st, i, R)
         mg = p[P_U_S] * g
-        st[i, 0] += st[i, 2] * t - 0.5 * mg * t * t * ux
-        st[i, 1] += st[i, 3] * t - 0.5 * mg * t * t * uy
-        st[i, 2] -= mg * t * ux
-        st[i, 3] -= mg * t * uy
+        st[i, X] += st[i, VX] * t - 0.5 * mg * t * t * ux
+        st[i, Y] += st[i, VY] * t - 0.5 * mg * t * t * uy
+        st[i, VX] -= mg * t * ux
+        st[i, VY] -= mg * t * uy
         k = 5.0 * mg * t / (2.0 * R)
-        st[i, 4] -= k * uy
-        st[i, 5] += k * ux
-        st[i, 6] = _spin_after(st[i, 6], t, alpha)
+        st[i, WX] -= k * uy
+        st[i, WY] += k * ux
+        st[i, WZ] = _spin_after(st[i, WZ], t, alpha)
     elif s == ROLLING:
-        vn = _norm(st[i, 2], st[i, 3])
+        vn = _norm(st[i, VX], st[i, VY])
         if vn > 0.0:
-            hx, hy = st[i, 2] / vn, st[i, 3] / vn
+            hx, hy = st[i, VX] / vn, st[i, VY] / vn
         else:
             hx, hy = 0.0, 0.0
         mg = p[P_U_R] * g
-        st[i, 0] += st[i, 2] * t - 0.5 * mg * t * t * hx
-        st[i, 1] += st[i, 3] * t - 0.5 * mg * t * t * hy
-        st[i, 2] -= mg * t * hx
-        st[i, 3] -= mg * t * hy
-        st[i, 4] = -st[i, 3] / R
-        st[i, 5] = st[i, 2] / R
-        st[i, 6] = _spin_after(st[i, 6], t, alpha)
+        st[i, X] += st[i, VX] * t - 0.5 * mg * t * t * hx
+        st[i, Y] += st[i, VY] * t - 0.5 * mg * t * t * hy
+        st[i, VX] -= mg * t * hx
+        st[i, VY] -= mg * t * hy
+        st[i, WX] = -st[i, VY] / R
+        st[i, WY] = st[i, VX] / R
+        st[i, WZ] = _spin_after(st[i, WZ], t, alpha)
     elif s == SPINNING:
-        st[i, 6] = _spin_after(st[i, 6], t, alpha)
+        st[i, WZ] = _spin_after(st[i, WZ], t, alpha)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _evolve_all(st, lab, t, p):
+    """Advance every ball by t seconds (the event loop's step between events), in place."""
+    for k in range(N_BALLS):
+        evolve_ball(st, lab, k, t, p)
 
 
 @njit(cache=True, error_model="numpy")
@@ -126,12 +164,12 @@ def _poly(st, lab, i, p):
     if s == SLIDING:
         ux, uy, _ = _slip_dir(st, i, p[P_R])
         k = -0.5 * p[P_U_S] * p[P_G]
-        return k * ux, k * uy, st[i, 2], st[i, 3]
+        return k * ux, k * uy, st[i, VX], st[i, VY]
     if s == ROLLING:
-        vn = _norm(st[i, 2], st[i, 3])
+        vn = _norm(st[i, VX], st[i, VY])
         if vn > 0.0:
             k = -0.5 * p[P_U_R] * p[P_G] / vn
-            return k * st[i, 2], k * st[i, 3], st[i, 2], st[i, 3]
+            return k * st[i, VX], k * st[i, VY], st[i, VX], st[i, VY]
     return 0.0, 0.0, 0.0, 0.0
 
 
@@ -148,13 +186,13 @@ def transition_time(st, lab, i, p):
         _, _, un = _slip_dir(st, i, R)
         return 2.0 * un / (7.0 * p[P_U_S] * g), ROLLING
     if s == ROLLING:
-        tau_r = _norm(st[i, 2], st[i, 3]) / (p[P_U_R] * g)
-        tau_sp = abs(st[i, 6]) / alpha
+        tau_r = _norm(st[i, VX], st[i, VY]) / (p[P_U_R] * g)
+        tau_sp = abs(st[i, WZ]) / alpha
         if tau_sp > tau_r:
             return tau_r, SPINNING
         return tau_r, STATIONARY
     if s == SPINNING:
-        return abs(st[i, 6]) / alpha, STATIONARY
+        return abs(st[i, WZ]) / alpha, STATIONARY
     return INF, STATIONARY
 
 
@@ -183,23 +221,33 @@ def _cubic_eval(c3, c2, c1, c0, t):
 
 
 @njit(cache=True, error_model="numpy")
+def _newton_step(t, ft, dft, lo, hi, below):
+    """One safeguarded Newton step towards the root bracketed by [lo, hi], from t where f is
+    ft and f' is dft; ``below`` says t lies on lo's side of the root. The bracket shrinks to
+    t's side; a step that leaves it (or a flat f') bisects instead. Returns (next t, lo, hi,
+    converged): converged when the step is below NEWTON_RTOL of t or lands on the bracket."""
+    if below:
+        lo = t
+    else:
+        hi = t
+    tn = t - ft / dft if dft != 0.0 else 0.5 * (lo + hi)
+    if not (lo < tn < hi):
+        tn = 0.5 * (lo + hi)
+    return tn, lo, hi, abs(tn - t) <= NEWTON_RTOL * abs(t) or tn == lo or tn == hi
+
+
+@njit(cache=True, error_model="numpy")
 def _cubic_root(c3, c2, c1, c0, lo, hi, flo):
     """Root of a cubic that is monotone on [lo, hi] and changes sign there (flo = value at
-    lo): Newton steps kept inside the shrinking bracket, bisection when a step leaves it."""
+    lo), by :func:`_newton_step` from the bracket's midpoint."""
     t = 0.5 * (lo + hi)
-    for _ in range(100):
+    for _ in range(NEWTON_ITERATIONS):
         ft = _cubic_eval(c3, c2, c1, c0, t)
         if ft == 0.0:
             return t
-        if (ft > 0.0) == (flo > 0.0):
-            lo = t
-        else:
-            hi = t
         dft = (3.0 * c3 * t + 2.0 * c2) * t + c1
-        tn = t - ft / dft if dft != 0.0 else 0.5 * (lo + hi)
-        if not (lo < tn < hi):
-            tn = 0.5 * (lo + hi)
-        if abs(tn - t) <= 1e-15 * abs(t) or tn == lo or tn == hi:
+        tn, lo, hi, done = _newton_step(t, ft, dft, lo, hi, (ft > 0.0) == (flo > 0.0))
+        if done:
             return tn
         t = tn
     return t
@@ -257,8 +305,8 @@ def _sep2(dax, day, dbx, dby, dcx, dcy, t):
 
 @njit(cache=True, error_model="numpy")
 def _relative_poly(st, poly, i, j):
-    return (poly[j, 0] - poly[i, 0], poly[j, 1] - poly[i, 1], poly[j, 2] - poly[i, 2],
-            poly[j, 3] - poly[i, 3], st[j, 0] - st[i, 0], st[j, 1] - st[i, 1])
+    return (poly[j, AX] - poly[i, AX], poly[j, AY] - poly[i, AY], poly[j, BX] - poly[i, BX],
+            poly[j, BY] - poly[i, BY], st[j, X] - st[i, X], st[j, Y] - st[i, Y])
 
 
 @njit(cache=True, error_model="numpy")
@@ -280,10 +328,10 @@ def _span(a, b, c, T):
 def _box_gap(st, poly, i, j, T):
     """A lower bound on the centre distance of balls i and j over [0, T]: the gap between
     the axis-aligned boxes their trajectory polynomials sweep."""
-    ilx, ihx = _span(poly[i, 0], poly[i, 2], st[i, 0], T)
-    ily, ihy = _span(poly[i, 1], poly[i, 3], st[i, 1], T)
-    jlx, jhx = _span(poly[j, 0], poly[j, 2], st[j, 0], T)
-    jly, jhy = _span(poly[j, 1], poly[j, 3], st[j, 1], T)
+    ilx, ihx = _span(poly[i, AX], poly[i, BX], st[i, X], T)
+    ily, ihy = _span(poly[i, AY], poly[i, BY], st[i, Y], T)
+    jlx, jhx = _span(poly[j, AX], poly[j, BX], st[j, X], T)
+    jly, jhy = _span(poly[j, AY], poly[j, BY], st[j, Y], T)
     gx = max(jlx - ihx, ilx - jhx, 0.0)
     gy = max(jly - ihy, ily - jhy, 0.0)
     return _norm(gx, gy)
@@ -297,6 +345,24 @@ def _quartic_derivative(dax, day, dbx, dby, dcx, dcy):
     a2 = dbx * dbx + dby * dby + 2.0 * (dax * dcx + day * dcy)
     a1 = 2.0 * (dbx * dcx + dby * dcy)
     return 4.0 * a4, 3.0 * a3, 2.0 * a2, a1
+
+
+@njit(cache=True, error_model="numpy")
+def _contact_root(dax, day, dbx, dby, dcx, dcy, r2, lo, hi):
+    """The contact time inside a bracket [lo, hi] with f(lo) > 0 >= f(hi), f(t) the squared
+    centre distance minus r2 in its direct (non-expanded) form, by :func:`_newton_step`
+    from lo."""
+    t = lo
+    for _ in range(NEWTON_ITERATIONS):
+        x = (dax * t + dbx) * t + dcx
+        y = (day * t + dby) * t + dcy
+        ft = x * x + y * y - r2
+        dft = 2.0 * (x * (2.0 * dax * t + dbx) + y * (2.0 * day * t + dby))
+        tn, lo, hi, done = _newton_step(t, ft, dft, lo, hi, ft > 0.0)
+        if done:
+            return tn
+        t = tn
+    return t
 
 
 @njit(cache=True, error_model="numpy")
@@ -327,24 +393,7 @@ def ball_ball_time(st, poly, lab, i, j, R, T):
         hi = T if k == n else (q0 if k == 0 else (q1 if k == 1 else q2))
         fhi = _sep2(dax, day, dbx, dby, dcx, dcy, hi) - r2
         if flo > 0.0 and fhi <= 0.0:
-            # safeguarded Newton inside the bracket [lo, hi], f(lo) > 0 >= f(hi)
-            t = lo
-            for _ in range(100):
-                x = (dax * t + dbx) * t + dcx
-                y = (day * t + dby) * t + dcy
-                ft = x * x + y * y - r2
-                if ft > 0.0:
-                    lo = t
-                else:
-                    hi = t
-                dft = 2.0 * (x * (2.0 * dax * t + dbx) + y * (2.0 * day * t + dby))
-                tn = t - ft / dft if dft != 0.0 else 0.5 * (lo + hi)
-                if not (lo < tn < hi):
-                    tn = 0.5 * (lo + hi)
-                if abs(tn - t) <= 1e-15 * abs(t) or tn == lo or tn == hi:
-                    return tn
-                t = tn
-            return t
+            return _contact_root(dax, day, dbx, dby, dcx, dcy, r2, lo, hi)
         if flo <= 0.0 and fhi < flo:
             return lo  # touching at lo and turning towards each other there
         lo, flo = hi, fhi
@@ -396,13 +445,13 @@ def cushion_time(st, poly, lab, i, p, T):
     if lab[i] <= SPINNING:
         return INF, -1
     R = p[P_R]
-    ax, ay, bx, by = poly[i, 0], poly[i, 1], poly[i, 2], poly[i, 3]
+    ax, ay, bx, by = poly[i, AX], poly[i, AY], poly[i, BX], poly[i, BY]
     best, which = INF, -1
-    for w in range(4):
+    for w in range(N_CUSHIONS):
         if w < 2:
-            a, b, c = ax, bx, st[i, 0] - (R if w == 0 else p[P_W] - R)
+            a, b, c = ax, bx, st[i, X] - (R if w == 0 else p[P_W] - R)
         else:
-            a, b, c = ay, by, st[i, 1] - (R if w == 2 else p[P_L] - R)
+            a, b, c = ay, by, st[i, Y] - (R if w == 2 else p[P_L] - R)
         inward = -1.0 if w % 2 == 0 else 1.0  # sign of the velocity component into the cushion
         fa, fb, fc = a * inward, b * inward, c * inward
         if fc >= 0.0 and _moving_in(fa, fb, fc, 0.0):
@@ -423,6 +472,56 @@ def cushion_time(st, poly, lab, i, p, T):
     return best, which
 
 
+# The event caches of the loop: the absolute time of every ball's next transition, every
+# pair's next contact and every ball's next cushion, in one vector ``when`` (N_SLOTS,) of
+# slots in that order, beside ``what`` (N_SLOTS,): the transition's new label, the cushion.
+SLOT_TRANSITION, SLOT_PAIR, SLOT_CUSHION = 0, N_BALLS, N_BALLS + N_PAIRS
+N_SLOTS = 2 * N_BALLS + N_PAIRS
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _detect(st, lab, p, t, poly, dirty, when, what):
+    """Refresh the event caches at time t (§3.4): every ball's trajectory polynomial, and the
+    slots of the balls whose trajectory changed (``dirty``, cleared here) and of their pairs.
+    A pair's contact is sought only up to the first transition or cushion of either ball,
+    which would change its trajectory anyway."""
+    for k in range(N_BALLS):
+        poly[k, AX], poly[k, AY], poly[k, BX], poly[k, BY] = _poly(st, lab, k, p)
+    for k in range(N_BALLS):
+        if dirty[k]:
+            tau, to = transition_time(st, lab, k, p)
+            when[SLOT_TRANSITION + k] = t + tau
+            what[SLOT_TRANSITION + k] = to
+            tc, w = cushion_time(st, poly, lab, k, p, tau)
+            when[SLOT_CUSHION + k] = t + tc
+            what[SLOT_CUSHION + k] = w
+    for q in range(N_PAIRS):
+        i, j = PAIR_I[q], PAIR_J[q]
+        if dirty[i] or dirty[j]:
+            horizon = min(min(when[SLOT_TRANSITION + i], when[SLOT_CUSHION + i]),
+                          min(when[SLOT_TRANSITION + j], when[SLOT_CUSHION + j])) - t
+            when[SLOT_PAIR + q] = t + ball_ball_time(st, poly, lab, i, j, p[P_R], horizon)
+    for k in range(N_BALLS):
+        dirty[k] = False
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _next_event(when, what):
+    """The earliest cached event: (kind, ball, other, time), kind -1 if none is left. Exact
+    ties go to the first slot: transitions win over collisions (§3.4)."""
+    s, t_next = -1, INF
+    for q in range(N_SLOTS):
+        if when[q] < t_next:
+            s, t_next = q, when[q]
+    if s < 0:
+        return -1, -1, -1, INF
+    if s < SLOT_PAIR:
+        return EV_TRANSITION, s - SLOT_TRANSITION, what[s], t_next
+    if s < SLOT_CUSHION:
+        return EV_BALL_BALL, PAIR_I[s - SLOT_PAIR], PAIR_J[s - SLOT_PAIR], t_next
+    return EV_CUSHION, s - SLOT_CUSHION, what[s], t_next
+
+
 # ----------------------------------------------------------------------------- resolve
 
 
@@ -436,12 +535,12 @@ def strike(st, lab, V0, phi, a, b, p):
         heading += -math.atan2(2.5 * a * math.sqrt(1.0 - a * a),
                                1.0 + m / p[P_CUE_END_M] + 2.5 * (1.0 - a * a))
     k = 5.0 * v / (2.0 * R)
-    st[0, 2] = v * math.cos(heading)
-    st[0, 3] = v * math.sin(heading)
-    st[0, 4] = -k * b * math.sin(phi)
-    st[0, 5] = k * b * math.cos(phi)
-    st[0, 6] = -k * a
-    lab[0] = SLIDING if v > 0.0 else STATIONARY
+    st[WHITE, VX] = v * math.cos(heading)
+    st[WHITE, VY] = v * math.sin(heading)
+    st[WHITE, WX] = -k * b * math.sin(phi)
+    st[WHITE, WY] = k * b * math.cos(phi)
+    st[WHITE, WZ] = -k * a
+    lab[WHITE] = SLIDING if v > 0.0 else STATIONARY
 
 
 @njit(cache=True, error_model="numpy")
@@ -464,14 +563,14 @@ def _clear(st, k, x, y, p, partner):
     once (a ball pushing another with no normal speed left would do so forever).
     """
     R, W, L = p[P_R], p[P_W], p[P_L]
-    if _deeper(st[k, 0] - R, x - R) or _deeper(W - R - st[k, 0], W - R - x):
+    if _deeper(st[k, X] - R, x - R) or _deeper(W - R - st[k, X], W - R - x):
         return False
-    if _deeper(st[k, 1] - R, y - R) or _deeper(L - R - st[k, 1], L - R - y):
+    if _deeper(st[k, Y] - R, y - R) or _deeper(L - R - st[k, Y], L - R - y):
         return False
     for m in range(N_BALLS):
         if m != k and m != partner:
-            before = _norm(st[m, 0] - st[k, 0], st[m, 1] - st[k, 1]) - 2.0 * R
-            if _deeper(before, _norm(st[m, 0] - x, st[m, 1] - y) - 2.0 * R):
+            before = _norm(st[m, X] - st[k, X], st[m, Y] - st[k, Y]) - 2.0 * R
+            if _deeper(before, _norm(st[m, X] - x, st[m, Y] - y) - 2.0 * R):
                 return False
     return True
 
@@ -483,22 +582,22 @@ def _free_move(st, k, dx, dy, p, partner):
     (0, 0) if no such move is clear."""
     R, W, L = p[P_R], p[P_W], p[P_L]
     for _ in range(3):
-        x, y = st[k, 0] + dx, st[k, 1] + dy
+        x, y = st[k, X] + dx, st[k, Y] + dy
         if _clear(st, k, x, y, p, partner):
             return dx, dy
-        if _deeper(st[k, 0] - R, x - R) or _deeper(W - R - st[k, 0], W - R - x):
+        if _deeper(st[k, X] - R, x - R) or _deeper(W - R - st[k, X], W - R - x):
             dx = 0.0
-        if _deeper(st[k, 1] - R, y - R) or _deeper(L - R - st[k, 1], L - R - y):
+        if _deeper(st[k, Y] - R, y - R) or _deeper(L - R - st[k, Y], L - R - y):
             dy = 0.0
         for m in range(N_BALLS):
             if m != k and m != partner:
-                ux, uy = st[m, 0] - st[k, 0], st[m, 1] - st[k, 1]
+                ux, uy = st[m, X] - st[k, X], st[m, Y] - st[k, Y]
                 u = _norm(ux, uy)
-                if _deeper(u - 2.0 * R, _norm(st[m, 0] - x, st[m, 1] - y) - 2.0 * R):
+                if _deeper(u - 2.0 * R, _norm(st[m, X] - x, st[m, Y] - y) - 2.0 * R):
                     c = (dx * ux + dy * uy) / (u * u)
                     if c > 0.0:
                         dx, dy = dx - c * ux, dy - c * uy
-    if _clear(st, k, st[k, 0] + dx, st[k, 1] + dy, p, partner):
+    if _clear(st, k, st[k, X] + dx, st[k, Y] + dy, p, partner):
         return dx, dy
     return 0.0, 0.0
 
@@ -509,7 +608,7 @@ def _place_pair(st, i, j, xi, yi, xj, yj, p):
     (:func:`_clear`); returns whether they moved."""
     if not (_clear(st, i, xi, yi, p, j) and _clear(st, j, xj, yj, p, i)):
         return False
-    st[i, 0], st[i, 1], st[j, 0], st[j, 1] = xi, yi, xj, yj
+    st[i, X], st[i, Y], st[j, X], st[j, Y] = xi, yi, xj, yj
     return True
 
 
@@ -527,8 +626,8 @@ def _kiss_balls(st, lab, i, j, p):
     """
     dist = 2.0 * p[P_R] + p[P_MIN_DIST]
     md = p[P_MIN_DIST]
-    rx, ry = st[j, 0] - st[i, 0], st[j, 1] - st[i, 1]
-    vx, vy = st[j, 2] - st[i, 2], st[j, 3] - st[i, 3]
+    rx, ry = st[j, X] - st[i, X], st[j, Y] - st[i, Y]
+    vx, vy = st[j, VX] - st[i, VX], st[j, VY] - st[i, VY]
     r1, r2 = _quadratic_roots(vx * vx + vy * vy, 2.0 * (rx * vx + ry * vy), rx * rx + ry * ry - dist * dist)
     t = np.nan
     if r1 == r1:
@@ -537,14 +636,14 @@ def _kiss_balls(st, lab, i, j, p):
             t = r2
     moving = lab[i] > SPINNING or lab[j] > SPINNING
     if t == t and moving:
-        mx = 0.5 * t * (st[i, 2] + st[j, 2])
-        my = 0.5 * t * (st[i, 3] + st[j, 3])
+        mx = 0.5 * t * (st[i, VX] + st[j, VX])
+        my = 0.5 * t * (st[i, VY] + st[j, VY])
         if _norm(mx, my) <= 5.0 * md and _place_pair(
-                st, i, j, st[i, 0] + t * st[i, 2], st[i, 1] + t * st[i, 3],
-                st[j, 0] + t * st[j, 2], st[j, 1] + t * st[j, 3], p):
+                st, i, j, st[i, X] + t * st[i, VX], st[i, Y] + t * st[i, VY],
+                st[j, X] + t * st[j, VX], st[j, Y] + t * st[j, VY], p):
             return
     # fallback: push apart symmetrically along the line of centres
-    cx, cy = 0.5 * (st[i, 0] + st[j, 0]), 0.5 * (st[i, 1] + st[j, 1])
+    cx, cy = 0.5 * (st[i, X] + st[j, X]), 0.5 * (st[i, Y] + st[j, Y])
     n = _norm(rx, ry)
     nx, ny = rx / n, ry / n
     if _place_pair(st, i, j, cx - 0.5 * dist * nx, cy - 0.5 * dist * ny, cx + 0.5 * dist * nx, cy + 0.5 * dist * ny, p):
@@ -554,32 +653,32 @@ def _kiss_balls(st, lab, i, j, p):
         push = scale * (dist - n)
         for share in (0.0, 1.0, 0.5):  # the part of the push ball i takes
             si, sj = share * push, (1.0 - share) * push
-            if _place_pair(st, i, j, st[i, 0] - si * nx, st[i, 1] - si * ny, st[j, 0] + sj * nx, st[j, 1] + sj * ny, p):
+            if _place_pair(st, i, j, st[i, X] - si * nx, st[i, Y] - si * ny, st[j, X] + sj * nx, st[j, Y] + sj * ny, p):
                 return
     # wedged along the line of centres: each ball slides along what it presses against
     push = dist - n
     dix, diy = _free_move(st, i, -0.5 * push * nx, -0.5 * push * ny, p, j)
     djx, djy = _free_move(st, j, 0.5 * push * nx, 0.5 * push * ny, p, i)
     if (djx - dix) * nx + (djy - diy) * ny > 0.0:
-        _place_pair(st, i, j, st[i, 0] + dix, st[i, 1] + diy, st[j, 0] + djx, st[j, 1] + djy, p)
+        _place_pair(st, i, j, st[i, X] + dix, st[i, Y] + diy, st[j, X] + djx, st[j, Y] + djy, p)
 
 
 @njit(cache=True, error_model="numpy")
 def resolve_ball_ball(st, lab, i, j, p):
     """Equal-mass restitution exchange along the line of centres (§4b; e = 1 gives §4a)."""
     _kiss_balls(st, lab, i, j, p)
-    e = 1.0 if p[P_BALL_BALL] == 1.0 else p[P_E_B]
-    nx, ny = st[j, 0] - st[i, 0], st[j, 1] - st[i, 1]
+    e = 1.0 if p[P_BALL_BALL] == BALL_BALL_ELASTIC else p[P_E_B]
+    nx, ny = st[j, X] - st[i, X], st[j, Y] - st[i, Y]
     n = _norm(nx, ny)
     nx, ny = nx / n, ny / n
-    vin = st[i, 2] * nx + st[i, 3] * ny
-    vjn = st[j, 2] * nx + st[j, 3] * ny
+    vin = st[i, VX] * nx + st[i, VY] * ny
+    vjn = st[j, VX] * nx + st[j, VY] * ny
     vin_new = 0.5 * ((1.0 - e) * vin + (1.0 + e) * vjn)
     vjn_new = 0.5 * ((1.0 + e) * vin + (1.0 - e) * vjn)
-    st[i, 2] += (vin_new - vin) * nx
-    st[i, 3] += (vin_new - vin) * ny
-    st[j, 2] += (vjn_new - vjn) * nx
-    st[j, 3] += (vjn_new - vjn) * ny
+    st[i, VX] += (vin_new - vin) * nx
+    st[i, VY] += (vin_new - vin) * ny
+    st[j, VX] += (vjn_new - vjn) * nx
+    st[j, VY] += (vjn_new - vjn) * ny
     lab[i] = SLIDING
     lab[j] = SLIDING
 
@@ -603,42 +702,42 @@ def resolve_cushion(st, lab, i, w, p):
     nx, ny = _cushion_normal(w)
     # make_kiss: back along the velocity to distance R + min_dist, else along the normal
     if w == 0:
-        d = st[i, 0]
+        d = st[i, X]
     elif w == 1:
-        d = p[P_W] - st[i, 0]
+        d = p[P_W] - st[i, X]
     elif w == 2:
-        d = st[i, 1]
+        d = st[i, Y]
     else:
-        d = p[P_L] - st[i, 1]
+        d = p[P_L] - st[i, Y]
     # (only where that does not push it into another rail or a ball, see _clear; else part of
     # the spacer, or it stays: detection needs no spacer, see cushion_time)
     need = R + md - d
-    vn = _norm(st[i, 2], st[i, 3])
-    along = (st[i, 2] * nx + st[i, 3] * ny) / vn if vn > 0.0 else 0.0
+    vn = _norm(st[i, VX], st[i, VY])
+    along = (st[i, VX] * nx + st[i, VY] * ny) / vn if vn > 0.0 else 0.0
     shift = need / along if along > 0.0 else INF
     moved = False
     if abs(shift) <= 5.0 * md:
-        x, y = st[i, 0] - shift * st[i, 2] / vn, st[i, 1] - shift * st[i, 3] / vn
+        x, y = st[i, X] - shift * st[i, VX] / vn, st[i, Y] - shift * st[i, VY] / vn
         moved = _clear(st, i, x, y, p, -1)
     for scale in (1.0, 0.5, 0.25, 0.125):  # along the normal; blocked: part of the spacer
         if not moved:
-            x, y = st[i, 0] - scale * need * nx, st[i, 1] - scale * need * ny
+            x, y = st[i, X] - scale * need * nx, st[i, Y] - scale * need * ny
             moved = _clear(st, i, x, y, p, -1)
     if not moved:  # wedged: slide along what blocks the push, if that still leaves the rail
         dx, dy = _free_move(st, i, -need * nx, -need * ny, p, -1)
-        x, y = st[i, 0] + dx, st[i, 1] + dy
+        x, y = st[i, X] + dx, st[i, Y] + dy
         moved = dx * nx + dy * ny < 0.0
     if moved:
-        st[i, 0], st[i, 1] = x, y
+        st[i, X], st[i, Y] = x, y
     # rail frame: x along the normal oriented with the velocity, y = z cross x
-    if st[i, 2] * nx + st[i, 3] * ny < 0.0:
+    if st[i, VX] * nx + st[i, VY] * ny < 0.0:
         nx, ny = -nx, -ny
     yx, yy = -ny, nx
-    vx = st[i, 2] * nx + st[i, 3] * ny
-    vy = st[i, 2] * yx + st[i, 3] * yy
-    wx = st[i, 4] * nx + st[i, 5] * ny
-    wy = st[i, 4] * yx + st[i, 5] * yy
-    wz = st[i, 6]
+    vx = st[i, VX] * nx + st[i, VY] * ny
+    vy = st[i, VX] * yx + st[i, VY] * yy
+    wx = st[i, WX] * nx + st[i, WY] * ny
+    wy = st[i, WX] * yx + st[i, WY] * yy
+    wz = st[i, WZ]
     theta = math.asin(p[P_H] / R - 1.0)
     sa, ca = math.sin(theta), math.cos(theta)
     e, mu = p[P_E_C], p[P_F_C]
@@ -662,11 +761,11 @@ def resolve_cushion(st, lab, i, w, p):
     wx -= k * PY * sa
     wy += k * (PX * sa - PZ * ca)
     wz += k * PY * ca
-    st[i, 2] = vx * nx + vy * yx
-    st[i, 3] = vx * ny + vy * yy
-    st[i, 4] = wx * nx + wy * yx
-    st[i, 5] = wx * ny + wy * yy
-    st[i, 6] = wz
+    st[i, VX] = vx * nx + vy * yx
+    st[i, VY] = vx * ny + vy * yy
+    st[i, WX] = wx * nx + wy * yx
+    st[i, WY] = wx * ny + wy * yy
+    st[i, WZ] = wz
     lab[i] = SLIDING
 
 
@@ -674,16 +773,88 @@ def resolve_cushion(st, lab, i, w, p):
 def resolve_transition(st, lab, i, new_label):
     """Enter a new motion state (§2): residual velocities are zeroed on entering spin/rest."""
     if new_label == SPINNING or new_label == STATIONARY:
-        st[i, 2] = 0.0
-        st[i, 3] = 0.0
-        st[i, 4] = 0.0
-        st[i, 5] = 0.0
+        st[i, VX] = 0.0
+        st[i, VY] = 0.0
+        st[i, WX] = 0.0
+        st[i, WY] = 0.0
         if new_label == STATIONARY:
-            st[i, 6] = 0.0
+            st[i, WZ] = 0.0
     lab[i] = new_label
 
 
-# ----------------------------------------------------------------------------- event loop
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _resolve(st, lab, kind, who, other, p, dirty):
+    """Resolve one event of the loop in place, and mark the balls whose trajectory changed."""
+    if kind == EV_TRANSITION:
+        resolve_transition(st, lab, who, other)
+    elif kind == EV_BALL_BALL:
+        resolve_ball_ball(st, lab, who, other, p)
+        dirty[other] = True
+    else:
+        resolve_cushion(st, lab, who, other, p)
+    dirty[who] = True
+
+
+# ----------------------------------------------------------------------------- carom facts
+# What the rules and the shaping read about the white's shot, gathered along the event loop in
+# the outcome vectors: the balls it touched (O_HIT*), the first (O_FIRST), the red it touched
+# second (O_SECOND_RED), its cushions (O_CUSHIONS), and its closest approach to each red
+# (OF_CLOSE*: a centre distance during the shot, the surface gap at its end).
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _carom_begin(st, out_int, out_float):
+    """No contact yet; the white's closest approach to each red so far is where they stand."""
+    out_int[O_FIRST] = -1
+    out_int[O_SECOND_RED] = -1
+    for r in range(2):
+        out_float[OF_CLOSE2 + r] = _norm(st[RED1 + r, X] - st[WHITE, X], st[RED1 + r, Y] - st[WHITE, Y])
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _carom_approach(st, poly, lab, out_int, out_float, dt):
+    """Before every ball moves on by dt along ``poly``: the white's closest approach to each red
+    it has not touched (the exact minimum, where the swept boxes can beat the best so far)."""
+    for r in range(2):
+        if out_int[O_HIT2 + r] == 0 and (lab[WHITE] > SPINNING or lab[RED1 + r] > SPINNING):
+            if _box_gap(st, poly, WHITE, RED1 + r, dt) < out_float[OF_CLOSE2 + r]:
+                out_float[OF_CLOSE2 + r] = min(out_float[OF_CLOSE2 + r], min_separation(st, poly, lab, WHITE, RED1 + r, dt))
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _carom_event(kind, who, other, out_int, out_float, R):
+    """After a resolved event: a contact of the white (which ball, whether the first, whether
+    the second red) or a cushion of the white."""
+    if who != WHITE:
+        return
+    if kind == EV_BALL_BALL:  # the white is always ``who`` of its pairs (PAIR_I < PAIR_J)
+        hit = O_HIT1 + other - YELLOW
+        if other >= RED1 and out_int[hit] == 0 and out_int[O_HIT1 + (RED1 + RED2 - other) - YELLOW] != 0:
+            out_int[O_SECOND_RED] = other  # the white's first contact with the second red
+        out_int[hit] = 1
+        if out_int[O_FIRST] < 0:
+            out_int[O_FIRST] = other
+        if other >= RED1:
+            out_float[OF_CLOSE2 + other - RED1] = 2.0 * R
+    elif kind == EV_CUSHION:
+        out_int[O_CUSHIONS] += 1
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _carom_end(out_float, R):
+    """The closest approaches as surface gaps (0 for a red the white touched)."""
+    for r in range(2):
+        out_float[OF_CLOSE2 + r] = max(out_float[OF_CLOSE2 + r] - 2.0 * R, 0.0)
+
+
+# ----------------------------------------------------------------------------- event log
+# A log is (times (E,), info (E, N_INFO) rows INFO_KIND, INFO_BALL, INFO_OTHER, states (E,
+# N_BALLS, N_STATE + 1): every ball's state and LABEL after the event), grown by doubling.
+
+
+@njit(cache=True, error_model="numpy")
+def _new_log(cap):
+    return np.empty(cap), np.empty((cap, N_INFO), dtype=np.int64), np.empty((cap, N_BALLS, N_STATE + 1))
 
 
 @njit(cache=True, error_model="numpy")
@@ -694,30 +865,33 @@ def _grow(arr, n):
 
 
 @njit(cache=True, error_model="numpy")
-def _record(ev_time, ev_info, ev_state, n_rec, t, kind, who, other, st, lab):
-    """Append one event and every ball's state after it to the log, growing it if full."""
-    if n_rec >= ev_time.shape[0]:
-        ev_time = _grow(ev_time, n_rec)
-        ev_info = _grow(ev_info, n_rec)
-        ev_state = _grow(ev_state, n_rec)
-    ev_time[n_rec] = t
-    ev_info[n_rec, 0], ev_info[n_rec, 1], ev_info[n_rec, 2] = kind, who, other
+def _record(log, n, t, kind, who, other, st, lab):
+    """Append one event and every ball's state after it to the log (n entries so far), growing
+    it if full; returns the log and its new length."""
+    times, info, states = log
+    if n >= times.shape[0]:
+        times, info, states = _grow(times, n), _grow(info, n), _grow(states, n)
+    times[n] = t
+    info[n, INFO_KIND], info[n, INFO_BALL], info[n, INFO_OTHER] = kind, who, other
     for k in range(N_BALLS):
-        ev_state[n_rec, k, :7] = st[k]
-        ev_state[n_rec, k, 7] = lab[k]
-    return ev_time, ev_info, ev_state, n_rec + 1
+        states[n, k, :N_STATE] = st[k]
+        states[n, k, LABEL] = lab[k]
+    return (times, info, states), n + 1
+
+
+# ----------------------------------------------------------------------------- event loop
 
 
 @njit(cache=True, error_model="numpy")
-def _halt(st, lab, out_int, flag, record, ev_time, ev_info, ev_state, n_rec, t):
+def _halt(st, lab, out_int, flag, record, log, n, t):
     """Stop the shot: every ball rests where it is, ``out_int[flag]`` says why (the shot-time
-    limit or the event cap), and the log records the stop. Returns the (possibly grown) log."""
+    limit or the event cap), and the log records the stop. Returns the log and its length."""
     for k in range(N_BALLS):
         resolve_transition(st, lab, k, STATIONARY)
     out_int[flag] = 1
     if record:
-        return _record(ev_time, ev_info, ev_state, n_rec, t, EV_STOP, -1, -1, st, lab)
-    return ev_time, ev_info, ev_state, n_rec
+        return _record(log, n, t, EV_STOP, -1, -1, st, lab)
+    return log, n
 
 
 @njit(cache=True, error_model="numpy")
@@ -728,70 +902,36 @@ def run_shot(positions, V0, phi, a, b, p, record):
     (fractions of R). Returns ``(st, out_int, out_float, ev_time, ev_info, ev_state)``: the
     final state, the outcome vectors (slots ``O_*`` and ``OF_*``) and, if ``record``, the
     event log (time; kind, ball, other; all balls' state and labels after the event).
+
+    The loop: detect the next event from the caches (refreshed for the balls the last event
+    changed), evolve every ball to it, resolve it, note the carom facts, log it; until no
+    event is left, or the shot-time limit or the event cap stops the shot.
     """
-    st = np.zeros((N_BALLS, 7))
+    st = np.zeros((N_BALLS, N_STATE))
     lab = np.zeros(N_BALLS, dtype=np.int64)
     for k in range(N_BALLS):
-        st[k, 0] = positions[k, 0]
-        st[k, 1] = positions[k, 1]
+        st[k, X] = positions[k, 0]
+        st[k, Y] = positions[k, 1]
     out_int = np.zeros(N_OUT_INT, dtype=np.int64)
     out_float = np.zeros(N_OUT_FLOAT)
-    out_int[O_FIRST] = -1
-    out_int[O_SECOND_RED] = -1
-    R = p[P_R]
-    max_events = int(p[P_MAX_EVENTS])
-    cap = 64 if record else 1
-    ev_time = np.empty(cap)
-    ev_info = np.empty((cap, 3), dtype=np.int64)
-    ev_state = np.empty((cap, N_BALLS, 8))
-    closest = np.empty(2)
-    for r in range(2):
-        closest[r] = _norm(st[2 + r, 0] - st[0, 0], st[2 + r, 1] - st[0, 1])
+    _carom_begin(st, out_int, out_float)
+    log = _new_log(64 if record else 1)
+    n_rec = 0
 
     strike(st, lab, V0, phi, a, b, p)
-    n_ev = 0
-    n_rec = 0
     if record:
-        ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, 0, 0.0, EV_STRIKE, 0, -1, st, lab)
+        log, n_rec = _record(log, n_rec, 0.0, EV_STRIKE, WHITE, -1, st, lab)
 
     t = 0.0
-    trans_t = np.full(N_BALLS, INF)
-    trans_to = np.zeros(N_BALLS, dtype=np.int64)
-    cush_t = np.full(N_BALLS, INF)
-    cush_w = np.full(N_BALLS, -1, dtype=np.int64)
-    pair_t = np.full(6, INF)
+    n_ev = 0
+    max_events = int(p[P_MAX_EVENTS])
+    when = np.full(N_SLOTS, INF)
+    what = np.full(N_SLOTS, -1, dtype=np.int64)
     dirty = np.ones(N_BALLS, dtype=np.bool_)
-    poly = np.empty((N_BALLS, 4))
+    poly = np.empty((N_BALLS, N_POLY))
     while True:
-        for k in range(N_BALLS):
-            poly[k, 0], poly[k, 1], poly[k, 2], poly[k, 3] = _poly(st, lab, k, p)
-        # refresh the caches of the balls whose trajectory changed (§3.4)
-        for k in range(N_BALLS):
-            if dirty[k]:
-                tau, to = transition_time(st, lab, k, p)
-                trans_t[k] = t + tau
-                trans_to[k] = to
-                tc, w = cushion_time(st, poly, lab, k, p, tau)
-                cush_t[k] = t + tc
-                cush_w[k] = w
-        for q in range(6):
-            i, j = PAIR_I[q], PAIR_J[q]
-            if dirty[i] or dirty[j]:
-                horizon = min(min(trans_t[i], cush_t[i]), min(trans_t[j], cush_t[j])) - t
-                pair_t[q] = t + ball_ball_time(st, poly, lab, i, j, R, horizon)
-        for k in range(N_BALLS):
-            dirty[k] = False
-        # next event: transitions win exact ties over collisions (§3.4)
-        kind, who, other, t_next = -1, -1, -1, INF
-        for k in range(N_BALLS):
-            if trans_t[k] < t_next:
-                kind, who, other, t_next = EV_TRANSITION, k, trans_to[k], trans_t[k]
-        for q in range(6):
-            if pair_t[q] < t_next:
-                kind, who, other, t_next = EV_BALL_BALL, PAIR_I[q], PAIR_J[q], pair_t[q]
-        for k in range(N_BALLS):
-            if cush_t[k] < t_next:
-                kind, who, other, t_next = EV_CUSHION, k, cush_w[k], cush_t[k]
+        _detect(st, lab, p, t, poly, dirty, when, what)
+        kind, who, other, t_next = _next_event(when, what)
         if kind < 0:
             break
         # the shot-time limit (reference §10): evolve to it, then every ball rests
@@ -799,56 +939,33 @@ def run_shot(positions, V0, phi, a, b, p, record):
         if timeout:
             t_next = p[P_MAX_TIME]
         dt = t_next - t
-        # the carom facts: cue ball's closest approach to each red not yet hit
-        for r in range(2):
-            if out_int[O_HIT2 + r] == 0 and (lab[0] > SPINNING or lab[2 + r] > SPINNING):
-                if _box_gap(st, poly, 0, 2 + r, dt) < closest[r]:
-                    closest[r] = min(closest[r], min_separation(st, poly, lab, 0, 2 + r, dt))
-        for k in range(N_BALLS):
-            evolve_ball(st, lab, k, dt, p)
+        _carom_approach(st, poly, lab, out_int, out_float, dt)
+        _evolve_all(st, lab, dt, p)
         t = t_next
         if timeout:
-            ev_time, ev_info, ev_state, n_rec = _halt(st, lab, out_int, O_TIMEOUT, record, ev_time, ev_info, ev_state, n_rec, t)
+            log, n_rec = _halt(st, lab, out_int, O_TIMEOUT, record, log, n_rec, t)
             break
-        if kind == EV_TRANSITION:
-            resolve_transition(st, lab, who, other)
-            dirty[who] = True
-        elif kind == EV_BALL_BALL:
-            resolve_ball_ball(st, lab, who, other, p)
-            dirty[who] = True
-            dirty[other] = True
-            if who == 0:
-                if other >= 2 and out_int[O_HIT1 + other - 1] == 0 and out_int[O_HIT1 + (5 - other) - 1] != 0:
-                    out_int[O_SECOND_RED] = other  # the white's first contact with the second red
-                out_int[O_HIT1 + other - 1] = 1
-                if out_int[O_FIRST] < 0:
-                    out_int[O_FIRST] = other
-                if other >= 2:
-                    closest[other - 2] = 2.0 * R
-        else:
-            resolve_cushion(st, lab, who, other, p)
-            dirty[who] = True
-            if who == 0:
-                out_int[O_CUSHIONS] += 1
+        _resolve(st, lab, kind, who, other, p, dirty)
+        _carom_event(kind, who, other, out_int, out_float, p[P_R])
         n_ev += 1
         if record:
-            ev_time, ev_info, ev_state, n_rec = _record(ev_time, ev_info, ev_state, n_rec, t, kind, who, other, st, lab)
+            log, n_rec = _record(log, n_rec, t, kind, who, other, st, lab)
         if n_ev >= max_events:  # safety net
-            ev_time, ev_info, ev_state, n_rec = _halt(st, lab, out_int, O_TRUNC, record, ev_time, ev_info, ev_state, n_rec, t)
+            log, n_rec = _halt(st, lab, out_int, O_TRUNC, record, log, n_rec, t)
             break
     out_int[O_NEVENTS] = n_ev
-    out_float[OF_CLOSE2] = max(closest[0] - 2.0 * R, 0.0)
-    out_float[OF_CLOSE3] = max(closest[1] - 2.0 * R, 0.0)
+    _carom_end(out_float, p[P_R])
     out_float[OF_TIME] = t
-    return st, out_int, out_float, ev_time[:n_rec], ev_info[:n_rec], ev_state[:n_rec]
+    times, info, states = log
+    return st, out_int, out_float, times[:n_rec], info[:n_rec], states[:n_rec]
 
 
 @njit(cache=True, error_model="numpy")
 def _store(n, positions, actions, p, out_pos, out_int, out_float):
     st, oi, of, _, _, _ = run_action(positions[n], actions[n], p, False)
     for k in range(N_BALLS):
-        out_pos[n, k, 0] = st[k, 0]
-        out_pos[n, k, 1] = st[k, 1]
+        out_pos[n, k, 0] = st[k, X]
+        out_pos[n, k, 1] = st[k, Y]
     out_int[n] = oi
     out_float[n] = of
 
