@@ -168,17 +168,29 @@ class PolicyProposer:
     sum in different orders; see ``tests/test_search.py``). ``self.impl`` is the one in use.
     The batched proposer copies the weights when it is built: later changes to the torch
     modules do not reach it (build a new proposer).
+
+    ``device``: where the networks run. The default, the CPU, allows either implementation; a
+    GPU takes the reference one with the modules moved there, the observation sent once per
+    decision and the candidates brought back once per policy (the draws stay the caller's
+    NumPy generator's, so the candidates equal the CPU's up to float32 rounding).
     """
 
     IMPLS = ("auto", "batched", "reference")
 
     def __init__(self, policies: Sequence[torch.nn.Module], *, constrain_aim: bool, extra_features: bool,
-                 name: str = "policy", R: float = DEFAULT_PARAMS.ball_radius, impl: str = "auto"):
+                 name: str = "policy", R: float = DEFAULT_PARAMS.ball_radius, impl: str = "auto",
+                 device: torch.device | str | None = None):
         if not policies:
             raise ValueError("PolicyProposer needs at least one policy")
         if impl not in self.IMPLS:
             raise ValueError(f"PolicyProposer impl must be one of {', '.join(self.IMPLS)}; got {impl!r}")
-        self.policies = list(policies)
+        self.device = torch.device("cpu") if device is None else torch.device(device)
+        if self.device.type != "cpu":
+            if impl == "batched":
+                raise ValueError(f"proposer {name!r}: the batched implementation runs in NumPy on the CPU; "
+                                 f"device={self.device} needs impl='reference' (or 'auto')")
+            impl = "reference"  # the torch modules on the device
+        self.policies = [p.to(self.device) for p in policies] if impl == "reference" else list(policies)
         self.constrain_aim, self.extra_features, self.name, self.R = constrain_aim, extra_features, name, R
         self.heads = None
         if impl != "reference":
@@ -197,7 +209,8 @@ class PolicyProposer:
         return obs
 
     def observation(self, positions: np.ndarray) -> torch.Tensor:
-        return torch.from_numpy(self.observation_array(positions))
+        """The observation tensor on the proposer's device (one transfer per decision)."""
+        return torch.from_numpy(self.observation_array(positions)).to(self.device)
 
     @staticmethod
     def _actions(policy, obs: torch.Tensor, n: int, rng: np.random.Generator) -> torch.Tensor:
@@ -217,7 +230,7 @@ class PolicyProposer:
         draws = [dist.deterministic_sample[:, None]]
         if n > 1:
             normal = dist.base_dist.base_dist
-            eps = torch.from_numpy(rng.standard_normal((S, n - 1, normal.loc.shape[-1]))).to(normal.loc.dtype)
+            eps = torch.from_numpy(rng.standard_normal((S, n - 1, normal.loc.shape[-1]))).to(normal.loc.device, normal.loc.dtype)
             x = normal.loc[:, None] + normal.scale[:, None] * eps
             for t in dist.transforms:
                 x = t(x)
@@ -251,7 +264,7 @@ class PolicyProposer:
         for e, policy in enumerate(self.policies):
             cols = np.arange(e, k, E)
             if cols.size:
-                out[:, cols] = self._actions(policy, obs, cols.size, rng).double().numpy()
+                out[:, cols] = self._actions(policy, obs, cols.size, rng).double().cpu().numpy()
         return out
 
     def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
@@ -264,11 +277,13 @@ class PolicyProposer:
         return out
 
 
-def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | None = None) -> PolicyProposer:
+def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | None = None,
+                         device: torch.device | str | None = None) -> PolicyProposer:
     """A :class:`PolicyProposer` over the policies of several runs (e.g. the three seeds of one
     Table 5 variant): ``paths`` are training run dirs, their checkpoint.pt or exported policy
     files (:func:`billiards.rl.policy.load_policy`); they must share the observation and
     action layout. ``params`` is the table it will propose for (default: the default preset);
+    ``device``: where the networks run (a GPU takes the torch implementation; default CPU);
     policies trained on another table are used with a :class:`PhysicsMismatchWarning`."""
     from billiards.physics.config import warn_physics_mismatch
     from billiards.rl.policy import load_policy, policy_physics
@@ -282,7 +297,7 @@ def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | No
         warn_physics_mismatch(f"proposer {name!r} policy {path}", policy_physics(cfg), params)
     constrain_aim, extra_features = layouts.pop()
     return PolicyProposer([p for p, _ in loaded], constrain_aim=constrain_aim, extra_features=extra_features, name=name,
-                          R=params.ball_radius)
+                          R=params.ball_radius, device=device)
 
 
 __all__ = ["EnsembleHeads", "GeometricProposer", "PolicyProposer", "Proposer", "load_policy_proposer"]
