@@ -202,11 +202,9 @@ class PolicyProposer:
         self.impl = "reference" if self.heads is None else "batched"
 
     def observation_array(self, positions: np.ndarray) -> np.ndarray:
-        """The policies' float32 observation (S, D) of tables at rest (S, 4, 2)."""
-        obs = domain.rest_observation(positions)
-        if self.extra_features:
-            obs = np.concatenate([obs, domain.carom_features(positions).astype(np.float32)], axis=-1)
-        return obs
+        """The policies' float32 observation (S, D) of tables at rest (S, 4, 2): the envs' own,
+        :func:`billiards.domain.observation`."""
+        return domain.observation(positions, self.extra_features)
 
     def observation(self, positions: np.ndarray) -> torch.Tensor:
         """The observation tensor on the proposer's device (one transfer per decision)."""
