@@ -64,9 +64,7 @@ def random_policy(action_spec=None, seed: int = 0, constrain_aim: bool = False) 
     if action_spec is not None:
         low, high = action_spec.space.low, action_spec.space.high
     else:
-        low, high = domain.ACTION_LOW.copy(), domain.ACTION_HIGH.copy()
-        if constrain_aim:
-            low[0], high[0] = -1.0, 1.0
+        low, high = domain.action_bounds(constrain_aim)
     return TensorDictModule(UniformActor(low, high, seed), in_keys=["observation"], out_keys=["action"])
 
 
