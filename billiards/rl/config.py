@@ -32,6 +32,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
+from billiards.physics.noise import NoiseConfig, noise_errors
 
 CHECKPOINT_FILE = "checkpoint.pt"
 CONFIG_FILE = "config.yaml"  # the resolved training config, written into the run dir at start
@@ -222,6 +223,7 @@ class CheckpointConfig:
 class Config:
     algo: Any = MISSING  # SACConfig | TD3Config | PPOConfig, chosen by the algo group
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
+    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise of the training and evaluation envs
     env: EnvConfig = field(default_factory=EnvConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
     curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
@@ -255,6 +257,7 @@ def register_configs() -> None:
 def register_physics(cs: ConfigStore) -> None:
     """The ``physics`` option group's schema (conf/physics/*.yaml), shared by both apps."""
     cs.store(group="schema", name="physics", node=PhysicsConfig)
+    cs.store(group="schema", name="noise", node=NoiseConfig)  # conf/noise/*.yaml, shared by both apps
 
 
 # ----------------------------------------------------------------------------- resolvers
@@ -331,6 +334,7 @@ def _errors(cfg: DictConfig) -> list[str]:
     need(cfg.shaping.gentle_kind in ("leave", "power"),
          f"shaping.gentle_kind must be leave (the paper's leave-position bonus) or power, got {cfg.shaping.gentle_kind!r}")
     errs.extend(physics_errors(cfg.physics))
+    errs.extend(noise_errors(cfg.noise) if "noise" in cfg else [])
     positive("shaping.rm", cfg.shaping.rm, strict=False)
     if cfg.shaping.rm:
         path = resolve_rm_model(cfg.shaping.rm_model)

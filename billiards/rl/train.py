@@ -35,6 +35,7 @@ from tqdm import tqdm
 
 from billiards.files import atomic_write_text
 from billiards.physics.config import params_from_config, physics_record
+from billiards.physics.noise import noise_from_config, noise_record
 from billiards.physics.warmup import warm_up
 
 from .checkpoint import CheckpointError, load_checkpoint, rng_state, save_checkpoint, set_rng_state
@@ -93,6 +94,7 @@ def env_kwargs(cfg) -> dict[str, Any]:
         rm=cfg.shaping.rm,
         rm_model=str(resolve_rm_model(cfg.shaping.rm_model)) if cfg.shaping.rm else None,
         params=params_from_config(cfg.physics),
+        noise=noise_from_config(cfg.get("noise")),
     )
 
 
@@ -119,6 +121,7 @@ def evaluate_policy(cfg, policy, n_innings: int, start: str):
         constrain_aim=cfg.env.constrain_aim,
         extra_features=cfg.env.extra_features,
         env_kwargs=dict(params=params_from_config(cfg.physics)),
+        noise=noise_from_config(cfg.get("noise")),
     )
 
 
@@ -550,6 +553,7 @@ class Trainer:
             "frames": self.frames,
             "updates": self.agent.n_updates,
             **physics_record(params_from_config(cfg.physics)),
+            **noise_record(noise_from_config(cfg.get("noise"))),
             "stopped_by": "total_steps" if self.frames >= cfg.budget.total_steps else "cpu_minutes",
             "train_seconds": round(train_seconds, 2),
             "cpu_seconds": round(cpu_seconds, 2),

@@ -11,6 +11,8 @@ _WHERE = {
     "H2Config": "lookahead", "SearchResult": "lookahead", "h2_search": "lookahead", "verifier_reward": "lookahead",
     "GeometricProposer": "proposers", "PolicyProposer": "proposers", "Proposer": "proposers",
     "PUCTConfig": "puct", "puct_search": "puct", "puct_reference": "puct_reference",
+    "NoisyPUCTActor": "actors", "RobustActor": "actors", "RobustConfig": "robust", "robust_search": "robust",
+    "noisy_puct_search": "puct_noise",
 }
 __all__ = sorted(_WHERE)
 

@@ -14,9 +14,10 @@ from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
 from billiards.physics.config import PhysicsConfig, physics_errors
+from billiards.physics.noise import NoiseConfig, noise_errors, noise_from_config
 
 
-SEARCH_KINDS = ("h2", "puct")
+SEARCH_KINDS = ("h2", "puct", "robust")
 PROPOSER_KINDS = ("geometric", "policy")
 PROTOCOLS = ("p1", "p3")
 
@@ -31,6 +32,11 @@ class ProposerConfig:
     checkpoints: List[str] = field(default_factory=list)
     power_low: float = 0.15
     power_high: float = 0.9
+    # geometric only: narrower draws for forgiving shots under noise (defaults: the full ranges)
+    u_low: float = 0.0  # |u| >= u_low (u: where in the aim cone; 0 full hit, 1 graze)
+    u_high: float = 1.0
+    spin_low: float = -1.0  # vertical tip offset b in [spin_low, spin_high] (-1 draw, 1 follow)
+    spin_high: float = 1.0
     command: Optional[str] = None  # how the checkpoints were trained (documentation)
 
 
@@ -50,6 +56,12 @@ class SearchConfig:
     pw_alpha: float = 0.5
     pool: int = 16
     max_depth: int = 8
+    # --- noise-aware search (kind=robust; billiards/search/robust.py): budget = [k1 screen] + noisy samples + m1 * k2
+    samples: int = 4  # schedule=uniform: noisy samples per candidate (k1 * samples + m1 * k2 = budget)
+    schedule: str = "halving"  # uniform | halving (successive halving over the candidates left)
+    screen: bool = True  # one exact simulation per candidate first; only scoring ones get noisy samples
+    quantile: Optional[float] = None  # the candidate's statistic over its samples: null = mean, else this quantile
+    k2: int = 0  # robust: children per expanded candidate (h2 derives its k2 from the budget)
 
 
 @dataclass
@@ -70,6 +82,7 @@ class Config:
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
     search: SearchConfig = field(default_factory=SearchConfig)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise: noise=none|fastfiz|fastfiz_x5
     seed: int = 0
     threads: Optional[int] = None  # numba threads for simulate_batch (default: all cores)
     progress: bool = True
@@ -93,6 +106,8 @@ def validate(cfg) -> None:
             from .lookahead import H2Config
 
             H2Config.from_budget(s.budget, s.k1, s.m1, gamma=s.gamma, foul_penalty=s.foul_penalty)
+        elif s.kind == "robust":
+            robust_config(s)
         else:
             from .puct import PUCTConfig
 
@@ -104,6 +119,11 @@ def validate(cfg) -> None:
     if not 0.0 <= pr.power_low <= pr.power_high <= 1.0:
         raise ValueError(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
                          f"got {pr.power_low}, {pr.power_high}")
+    if not 0.0 <= pr.u_low <= pr.u_high <= 1.0:
+        raise ValueError(f"proposer.u_low and proposer.u_high must satisfy 0 <= low <= high <= 1, got {pr.u_low}, {pr.u_high}")
+    if not -1.0 <= pr.spin_low <= pr.spin_high <= 1.0:
+        raise ValueError(f"proposer.spin_low and proposer.spin_high must satisfy -1 <= low <= high <= 1, "
+                         f"got {pr.spin_low}, {pr.spin_high}")
     for key in ("n_innings", "shots", "seeds", "cap"):
         if getattr(p, key) < 1:
             raise ValueError(f"protocol.{key} must be >= 1, got {getattr(p, key)}")
@@ -125,9 +145,20 @@ def validate(cfg) -> None:
 
         if not (Path(cfg.resume) / "config.yaml").is_file():
             raise ValueError(f"resume={cfg.resume!r}: not a search run directory (no config.yaml there)")
-    errs = physics_errors(cfg.physics)
+    errs = physics_errors(cfg.physics) + noise_errors(cfg.noise)
     if errs:
         raise ValueError(errs[0])
+    if s.kind == "robust" and noise_from_config(cfg.noise).is_exact:
+        raise ValueError("search=robust scores candidates over noisy replays: it needs execution noise "
+                         "(noise=fastfiz|fastfiz_x5 or noise.aim_deg=...); without noise use search=h2")
+
+
+def robust_config(s):
+    """The RobustConfig of a ``search`` node of kind robust."""
+    from .robust import RobustConfig
+
+    return RobustConfig(budget=s.budget, k1=s.k1, samples=s.samples, schedule=s.schedule, screen=s.screen,
+                        quantile=s.quantile, m1=s.m1, k2=s.k2, gamma=s.gamma, foul_penalty=s.foul_penalty)
 
 
 def _or(value, default: str) -> str:
@@ -145,6 +176,7 @@ def register() -> None:
     cs.store(group="search", name="search_schema", node=SearchConfig)
     cs.store(group="protocol", name="protocol_schema", node=ProtocolConfig)
     cs.store(group="schema", name="physics", node=PhysicsConfig)  # conf/physics/*.yaml, shared with train.py
+    cs.store(group="schema", name="noise", node=NoiseConfig)  # conf/noise/*.yaml, shared with train.py
 
 
 class ValidateSearchConfig(Callback):

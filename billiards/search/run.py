@@ -12,11 +12,12 @@ from omegaconf import OmegaConf
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.warmup import warm_up
 from billiards.physics.config import params_from_config, physics_record
+from billiards.physics.noise import noise_from_config, noise_record
 from billiards.files import atomic_write_text
 from billiards.provenance import ROOT, git_commit
 
-from .actors import LookaheadActor, PUCTActor, SearchActor
-from .config import validate
+from .actors import LookaheadActor, NoisyPUCTActor, PUCTActor, RobustActor, SearchActor
+from .config import robust_config, validate
 from .lookahead import H2Config
 from .proposers import GeometricProposer
 from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, read_chains, run_p1, run_p3
@@ -28,7 +29,8 @@ RESULTS_FILE = "results.json"
 def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS):
     """The proposer a ``proposer`` config node describes, for the table ``params``."""
     if cfg.kind == "geometric":
-        return GeometricProposer(power_low=cfg.power_low, power_high=cfg.power_high, R=params.ball_radius)
+        return GeometricProposer(power_low=cfg.power_low, power_high=cfg.power_high, R=params.ball_radius,
+                                 u_low=cfg.u_low, u_high=cfg.u_high, spin_low=cfg.spin_low, spin_high=cfg.spin_high)
     from billiards.rl.policy import load_policy_proposer
 
     paths = [p if Path(p).is_absolute() else str(ROOT / p) for p in cfg.checkpoints]
@@ -36,12 +38,19 @@ def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS):
 
 
 def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchActor:
+    """The search actor of ``cfg.search``; under execution noise PUCT's revisits are noisy
+    replays (:mod:`billiards.search.puct_noise`) and ``robust`` samples the noise model."""
     s = cfg.search
+    noise = noise_from_config(cfg.get("noise"))
+    if s.kind == "robust":
+        return RobustActor(proposer, robust_config(s), noise, seed=cfg.seed, params=params)
     if s.kind == "h2":
         h2 = H2Config.from_budget(s.budget, s.k1, s.m1, gamma=s.gamma, foul_penalty=s.foul_penalty)
         return LookaheadActor(proposer, h2, seed=cfg.seed, params=params)
     puct = PUCTConfig(budget=s.budget, c_puct=s.c_puct, pw_c=s.pw_c, pw_alpha=s.pw_alpha, pool=s.pool,
                       max_depth=s.max_depth, gamma=s.gamma, foul_penalty=s.foul_penalty)
+    if not noise.is_exact:
+        return NoisyPUCTActor(proposer, puct, noise, seed=cfg.seed, params=params)
     return PUCTActor(proposer, puct, seed=cfg.seed, params=params)
 
 
@@ -54,7 +63,8 @@ def describe(cfg, params) -> str:
     s, p = cfg.search, cfg.protocol
     what = (f"P1: {p.n_innings} random-start innings x {p.shots} shots" if p.name == "p1"
             else f"P3: {p.seeds} chains from the opening rack, each up to {p.cap:,} shots")
-    return f"{what}; {s.kind} search, {s.budget} simulations per shot, proposer {cfg.proposer.name}, physics {params.describe()}"
+    return (f"{what}; {s.kind} search, {s.budget} simulations per shot, proposer {cfg.proposer.name}, physics {params.describe()}"
+            f", noise {noise_from_config(cfg.get('noise')).describe()}")
 
 
 def resume_config(out_dir: Path, current):
@@ -84,6 +94,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     if cfg.threads is not None:
         numba.set_num_threads(cfg.threads)
     params = params_from_config(cfg.physics)
+    noise = noise_from_config(cfg.get("noise"))
     print(f"search: {describe(cfg, params)}\noutput: {out_dir}", flush=True)
     warm_up(params, log=lambda msg: print(msg, flush=True))
     actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
@@ -92,7 +103,8 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     ledger = out_dir / CHAINS_FILE
     interrupted = False
     if proto == "p1":
-        result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress)
+        result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress,
+                        noise=noise)
         interrupted = bool(result.extra.get("partial"))
     else:
         if cfg.get("resume"):
@@ -100,7 +112,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         picture = out_dir / "longest_chain.png" if cfg.picture else None
         try:
             result = run_p3(actor, seeds, cfg.protocol.cap, params=params, progress=cfg.progress, picture=picture,
-                            ledger=ledger)
+                            ledger=ledger, noise=noise)
         except KeyboardInterrupt:
             interrupted = True
             result = partial_p3(ledger, seeds, cfg.protocol.cap, actor.cfg.sims_per_decision)
@@ -109,6 +121,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         proposer=cfg.proposer.name,
         search=cfg.search.kind,
         **physics_record(params),
+        **noise_record(noise),
         config=OmegaConf.to_container(cfg, resolve=True),
         commit=git_commit(),
     )
