@@ -34,9 +34,9 @@ def rows(budget: int) -> dict[str, list[str]]:
     h2 = ["search=h2", f"search.k1={b // 2}", "search.m1=10"]
     uniform = lambda k1: ["search=robust", "search.schedule=uniform", "search.screen=false", f"search.k1={k1}",
                           f"search.samples={b // k1}"]
-    halving = ["search=robust", f"search.k1={b * 5 // 8}"]
-    forgiving = ["proposer=geometric", "proposer.name=forgiving", "proposer.u_low=0.3", "proposer.u_high=0.9",
-                 "proposer.power_low=0.5", "proposer.power_high=1.0", "proposer.spin_low=-0.2"]
+    halving = ["search=robust", f"search.k1={b * 5 // 8}", "search.target=0"]  # a fixed screen
+    adaptive = ["search=robust", f"search.k1={b * 3 // 4}", f"search.target={10 if b <= 400 else 20}"]
+    forgiving = ["proposer=forgiving"]
     return {
         "geo_h2": geo + h2,
         "geo_uniform_x4": geo + uniform(b // 4),
@@ -44,10 +44,14 @@ def rows(budget: int) -> dict[str, list[str]]:
         "geo_uniform_x16": geo + uniform(b // 16),
         "geo_halving": geo + halving,
         "forgiving_halving": forgiving + halving,
+        "geo_adaptive": geo + adaptive,
+        "forgiving_h2": forgiving + h2,
+        "forgiving_adaptive": forgiving + adaptive,
         "geo_puct": geo + ["search=puct"],
         "both_h2": trained + h2,
         "both_uniform_x4": trained + uniform(b // 4),
         "both_halving": trained + halving,
+        "both_adaptive": trained + adaptive,
         "both_puct": trained + ["search=puct"],
     }
 

@@ -62,6 +62,9 @@ class SearchConfig:
     screen: bool = True  # one exact simulation per candidate first; only scoring ones get noisy samples
     quantile: Optional[float] = None  # the candidate's statistic over its samples: null = mean, else this quantile
     k2: int = 0  # robust: children per expanded candidate (h2 derives its k2 from the budget)
+    target: int = 0  # robust: adaptive screen, stop screening a state once `target` candidates score (0: screen all k1)
+    wave: int = 50  # robust: candidates per screening wave when target > 0
+    antithetic: bool = False  # robust: noisy samples in antithetic pairs (z, -z)
 
 
 @dataclass
@@ -158,7 +161,8 @@ def robust_config(s):
     from .robust import RobustConfig
 
     return RobustConfig(budget=s.budget, k1=s.k1, samples=s.samples, schedule=s.schedule, screen=s.screen,
-                        quantile=s.quantile, m1=s.m1, k2=s.k2, gamma=s.gamma, foul_penalty=s.foul_penalty)
+                        quantile=s.quantile, m1=s.m1, k2=s.k2, target=s.target, wave=s.wave, antithetic=s.antithetic,
+                        gamma=s.gamma, foul_penalty=s.foul_penalty)
 
 
 def _or(value, default: str) -> str:

@@ -7,18 +7,23 @@ statistic (mean, or a quantile) of its verifier reward over noisy samples -- the
 shot perturbed by the search's own draws from the noise model and simulated. Every simulation,
 exact or noisy, counts in the budget. At each of S states:
 
-1. **screen** (optional, ``screen=True``): the proposer's ``k1`` candidates are simulated once
-   exactly; only those that score go on (if none does, the best by exact reward is played and
-   the rest of the budget is left unspent: ``SearchResult.n_sims`` says what was spent).
-   Without the screen all ``k1`` candidates go on.
+1. **screen** (optional, ``screen=True``): the proposer's candidates are simulated once
+   exactly and only those that score go on -- ``k1`` of them at once, or (adaptive screen,
+   ``target > 0``) in waves of ``wave`` until a state has ``target`` scoring candidates or has
+   screened ``k1``, so easy tables leave more of the budget to the noisy samples. If none
+   scores, the best by exact reward is played and the rest of the budget is left unspent
+   (``SearchResult.n_sims`` says what was spent). Without the screen all ``k1`` go on.
 2. **noisy samples**, by ``schedule``:
 
    * ``uniform``: ``samples`` noisy replays of every candidate (needs ``screen=False``, so the
      budget is exactly ``k1 * samples + m1 * k2``);
    * ``halving``: successive halving over the candidates left with the rest of the budget
-     (``budget - [k1] - m1 * k2``): rounds of equal samples per candidate, the better half by
+     (``budget`` less the screen and ``m1 * k2``): rounds of equal samples per candidate, the better half by
      the statistic so far going on, the last round spending exactly what is left (its
      remainder one extra sample each for the best-ranked candidates).
+
+   The noisy errors are the search's own draws from the noise model; with ``antithetic``
+   a candidate's samples come in pairs (z, -z).
 3. **expansion** (optional, ``m1 > 0``): the ``m1`` best candidates by the statistic are
    expanded as in :mod:`billiards.search.lookahead` -- ``k2`` children proposed from the table
    the candidate leaves (its exact outcome when screened, else its first noisy one) and
@@ -49,11 +54,15 @@ SCHEDULES = ("uniform", "halving")
 @dataclass(frozen=True)
 class RobustConfig:
     budget: int = 400
-    k1: int = 250
+    k1: int = 300
     samples: int = 4  # noisy samples per candidate (schedule=uniform)
     schedule: str = "halving"
     screen: bool = True
     quantile: Optional[float] = None  # None: the mean over samples
+    target: int = 10  # adaptive screen: stop screening a state once `target` candidates score (0: all k1 at once;
+    # no screen, screen=False: unused)
+    wave: int = 50  # candidates per screening wave (target > 0)
+    antithetic: bool = False  # noisy samples in antithetic pairs (z, -z)
     m1: int = 0
     k2: int = 0
     gamma: float = 0.99
@@ -62,6 +71,8 @@ class RobustConfig:
     def __post_init__(self):
         if self.schedule not in SCHEDULES:
             raise ValueError(f"robust search schedule must be one of {', '.join(SCHEDULES)}; got {self.schedule!r}")
+        if self.target < 0 or self.wave < 1:
+            raise ValueError(f"robust search needs target >= 0 and wave >= 1; got target={self.target}, wave={self.wave}")
         if self.budget < 1 or self.k1 < 1 or self.samples < 1 or self.m1 < 0 or self.k2 < 0:
             raise ValueError(f"robust search needs budget, k1, samples >= 1 and m1, k2 >= 0; got budget={self.budget}, "
                              f"k1={self.k1}, samples={self.samples}, m1={self.m1}, k2={self.k2}")
@@ -109,6 +120,47 @@ def _plan(n_alive: int, left: int, rounds_left: int) -> tuple[int, np.ndarray]:
     return k, np.full(k, per)
 
 
+def _screen(positions, proposer, cfg: RobustConfig, rng, params):
+    """The exact screen: candidates (S, k1, 4), their exact rewards (S, k1; -inf where no
+    candidate was drawn), the tables they leave and how many each state screened."""
+    S, K = positions.shape[0], cfg.k1
+    if not cfg.target:
+        a1 = proposer.propose(positions, K, rng)
+        res = simulate_batch(np.repeat(positions, K, axis=0), a1.reshape(-1, 4), params)
+        exact = verifier_reward(res, cfg.foul_penalty).reshape(S, K)
+        return a1, exact, res.positions.reshape(S, K, 4, 2), np.full(S, K)
+    a1, exact = np.zeros((S, K, 4)), np.full((S, K), -np.inf)
+    leave = np.repeat(positions[:, None], K, axis=1).copy()
+    screened = np.zeros(S, dtype=np.int64)
+    while True:  # waves of candidates for the states that have screened fewer than k1 and found < target
+        active = np.flatnonzero((screened < K) & ((exact > 0).sum(axis=1) < cfg.target))
+        if not len(active):
+            return a1, exact, leave, screened
+        n = min(cfg.wave, K - int(screened[active].min()))
+        first = screened[active].min() == 0
+        # later waves drop the proposer's mode (candidate 0: the same shot every call)
+        cand = proposer.propose(positions[active], n if first else n + 1, rng)[:, 0 if first else 1:]
+        take = np.minimum(n, K - screened[active])
+        rows = np.repeat(active, take)
+        cols = np.concatenate([screened[s] + np.arange(t) for s, t in zip(active, take)])
+        a1[rows, cols] = np.concatenate([cand[i, :t] for i, t in enumerate(take)])
+        res = simulate_batch(positions[rows], a1[rows, cols], params)
+        exact[rows, cols] = verifier_reward(res, cfg.foul_penalty)
+        leave[rows, cols] = res.positions
+        screened[active] += take
+
+
+def _errors(noise: NoiseModel, counts: np.ndarray, antithetic: bool, rng) -> np.ndarray:
+    """Standard normal errors for rows grouped by candidate (``counts`` rows each); with
+    ``antithetic`` every second row of a group is the negative of the one before."""
+    z = noise.draw((int(counts.sum()),), rng)
+    if antithetic:
+        within = np.arange(len(z)) - np.repeat(np.cumsum(counts) - counts, counts)
+        odd = np.flatnonzero(within % 2 == 1)
+        z[odd] = -z[odd - 1]
+    return z
+
+
 def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.random.Generator,
                   params: PhysicsParams = DEFAULT_PARAMS, noise: NoiseModel | None = None) -> SearchResult:
     """Choose one action for each of S table states (positions (S, 4, 2)), each candidate scored
@@ -116,22 +168,20 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
     noise = noise if noise is not None else NoiseModel()
     positions = np.asarray(positions, dtype=np.float64)
     S, K = positions.shape[0], cfg.k1
-    a1 = proposer.propose(positions, K, rng)
     n_sims = 0
-    leave = np.repeat(positions[:, None], K, axis=1).copy()  # the table each candidate leaves
-    has_leave = np.zeros((S, K), dtype=bool)
-    exact = np.zeros((S, K))
     if cfg.screen:
-        res = simulate_batch(np.repeat(positions, K, axis=0), a1.reshape(-1, 4), params)
-        exact = verifier_reward(res, cfg.foul_penalty).reshape(S, K)
-        leave, has_leave[:] = res.positions.reshape(S, K, 4, 2), True
-        n_sims += S * K
+        a1, exact, leave, screened = _screen(positions, proposer, cfg, rng, params)
+        has_leave = np.ones((S, K), dtype=bool)
+        n_sims += int(screened.sum())
         alive = [list(np.flatnonzero(exact[s] > 0)) for s in range(S)]
     else:
+        a1 = proposer.propose(positions, K, rng)
+        exact, screened = np.zeros((S, K)), np.zeros(S, dtype=np.int64)
+        leave = np.repeat(positions[:, None], K, axis=1).copy()  # the table each candidate leaves
+        has_leave = np.zeros((S, K), dtype=bool)
         alive = [list(range(K)) for _ in range(S)]
     samples = [[[] for _ in range(K)] for _ in range(S)]
-    noisy_budget = cfg.budget - cfg.m1 * cfg.k2 - (K if cfg.screen else 0)
-    left = [noisy_budget if alive[s] else 0 for s in range(S)]
+    left = [cfg.budget - cfg.m1 * cfg.k2 - int(screened[s]) if alive[s] else 0 for s in range(S)]
     rounds = [1 if cfg.schedule == "uniform" else max(1, math.ceil(math.log2(max(len(a), 1))) + 1) for a in alive]
     r = 0
     while any(left):
@@ -150,7 +200,7 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
             left[s] -= int(per.sum())
         counts = np.asarray(counts)
         s_idx, k_idx = np.repeat(rows_s, counts), np.repeat(rows_k, counts)
-        played = noise.perturb(a1[s_idx, k_idx], rng, params)
+        played = noise.apply(a1[s_idx, k_idx], _errors(noise, counts, cfg.antithetic, rng), params)
         res = simulate_batch(positions[s_idx], played, params)
         reward = verifier_reward(res, cfg.foul_penalty)
         n_sims += len(s_idx)
