@@ -317,3 +317,12 @@ def test_the_adaptive_screen_stops_at_its_target_and_never_passes_k1():
         assert np.isneginf(exact[s, screened[s]:]).all() and np.isfinite(exact[s, : screened[s]]).all()
         res = simulate_batch(np.repeat(pos[s][None], screened[s], 0), a1[s, : screened[s]], K)
         np.testing.assert_array_equal(res.positions, leave[s, : screened[s]])
+
+
+def test_the_table6_report_keeps_noisy_runs_apart_from_exact_ones():
+    from billiards.search.report import table6_markdown
+
+    run = {"protocol": "p3", "search": "h2", "proposer": "geometric", "physics": "korean_medium", "mean": 5.0, "max": 9,
+           "values": [5], "extra": {"cap": 10000}}
+    text = table6_markdown([run, {**run, "noise": "fastfiz", "mean": 2.0}, {**run, "noise": "none", "mean": 7.0}])
+    assert text.count("Table 6:") == 2 and "Physics: `korean_medium`, execution noise `fastfiz`." in text
