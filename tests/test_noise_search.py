@@ -326,3 +326,22 @@ def test_the_table6_report_keeps_noisy_runs_apart_from_exact_ones():
            "values": [5], "extra": {"cap": 10000}}
     text = table6_markdown([run, {**run, "noise": "fastfiz", "mean": 2.0}, {**run, "noise": "none", "mean": 7.0}])
     assert text.count("Table 6:") == 2 and "Physics: `korean_medium`, execution noise `fastfiz`." in text
+
+
+def test_a_search_config_saved_before_the_noise_keys_still_validates_and_runs_exactly():
+    from omegaconf import OmegaConf
+
+    from billiards.search.config import validate
+    from billiards.search.run import make_actor, make_proposer
+
+    old = OmegaConf.to_container(compose())
+    del old["noise"]
+    for key in ("u_low", "u_high", "spin_low", "spin_high"):
+        del old["proposer"][key]
+    for key in ("samples", "schedule", "screen", "quantile", "k2", "target", "wave", "antithetic"):
+        del old["search"][key]
+    old = OmegaConf.create(old)  # what resume= loads from such a run's config.yaml
+    validate(old)
+    proposer = make_proposer(old.proposer, K)
+    assert (proposer.u_low, proposer.u_high, proposer.spin_low, proposer.spin_high) == (0.0, 1.0, -1.0, 1.0)
+    assert type(make_actor(old, proposer, K)).__name__ == "LookaheadActor"

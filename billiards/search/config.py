@@ -122,11 +122,13 @@ def validate(cfg) -> None:
     if not 0.0 <= pr.power_low <= pr.power_high <= 1.0:
         raise ValueError(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
                          f"got {pr.power_low}, {pr.power_high}")
-    if not 0.0 <= pr.u_low <= pr.u_high <= 1.0:
-        raise ValueError(f"proposer.u_low and proposer.u_high must satisfy 0 <= low <= high <= 1, got {pr.u_low}, {pr.u_high}")
-    if not -1.0 <= pr.spin_low <= pr.spin_high <= 1.0:
+    u_low, u_high = pr.get("u_low", 0.0), pr.get("u_high", 1.0)  # absent from configs saved before they existed
+    spin_low, spin_high = pr.get("spin_low", -1.0), pr.get("spin_high", 1.0)
+    if not 0.0 <= u_low <= u_high <= 1.0:
+        raise ValueError(f"proposer.u_low and proposer.u_high must satisfy 0 <= low <= high <= 1, got {u_low}, {u_high}")
+    if not -1.0 <= spin_low <= spin_high <= 1.0:
         raise ValueError(f"proposer.spin_low and proposer.spin_high must satisfy -1 <= low <= high <= 1, "
-                         f"got {pr.spin_low}, {pr.spin_high}")
+                         f"got {spin_low}, {spin_high}")
     for key in ("n_innings", "shots", "seeds", "cap"):
         if getattr(p, key) < 1:
             raise ValueError(f"protocol.{key} must be >= 1, got {getattr(p, key)}")
@@ -148,10 +150,11 @@ def validate(cfg) -> None:
 
         if not (Path(cfg.resume) / "config.yaml").is_file():
             raise ValueError(f"resume={cfg.resume!r}: not a search run directory (no config.yaml there)")
-    errs = physics_errors(cfg.physics) + noise_errors(cfg.noise)
+    noise = cfg.get("noise")  # absent from configs saved before it existed (exact play)
+    errs = physics_errors(cfg.physics) + (noise_errors(noise) if noise is not None else [])
     if errs:
         raise ValueError(errs[0])
-    if s.kind == "robust" and noise_from_config(cfg.noise).is_exact:
+    if s.kind == "robust" and noise_from_config(noise).is_exact:
         raise ValueError("search=robust scores candidates over noisy replays: it needs execution noise "
                          "(noise=fastfiz|fastfiz_x5 or noise.aim_deg=...); without noise use search=h2")
 

@@ -29,8 +29,10 @@ RESULTS_FILE = "results.json"
 def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS):
     """The proposer a ``proposer`` config node describes, for the table ``params``."""
     if cfg.kind == "geometric":
+        # u_*, spin_*: absent from configs saved before they existed (the full ranges)
         return GeometricProposer(power_low=cfg.power_low, power_high=cfg.power_high, R=params.ball_radius,
-                                 u_low=cfg.u_low, u_high=cfg.u_high, spin_low=cfg.spin_low, spin_high=cfg.spin_high)
+                                 u_low=cfg.get("u_low", 0.0), u_high=cfg.get("u_high", 1.0),
+                                 spin_low=cfg.get("spin_low", -1.0), spin_high=cfg.get("spin_high", 1.0))
     from billiards.rl.policy import load_policy_proposer
 
     paths = [p if Path(p).is_absolute() else str(ROOT / p) for p in cfg.checkpoints]
