@@ -11,7 +11,7 @@
   :func:`register_app`: the root schema under the app's name, every option schema at
   ``schema/<group>[/<option>]`` -- outside the option groups, so ``group=`` lists only real
   options, and an option pulls its schema in with ``/schema/<group>/<option>@_here_`` in its
-  defaults list --, the physics schema both apps share and the resolvers their YAML uses.
+  defaults list --, the physics and noise schemas both apps share and the resolvers their YAML uses.
   The two apps' schemas have distinct names (``TrainConfig``, ``SearchAppConfig``) and live
   side by side in one ConfigStore.
 * **Validation**: each app's ``validate(cfg)`` checks what a type cannot express; its Hydra
@@ -29,6 +29,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
 from billiards.physics.config import PhysicsConfig
+from billiards.physics.noise import NoiseConfig
 
 SCHEMA_GROUP = "schema"  # where option schemas live (outside the option groups)
 
@@ -64,8 +65,9 @@ def register_resolvers() -> None:
 def register_app(root_name: str, root: type, groups: dict[str, type | dict[str, type]]) -> ConfigStore:
     """Store an app's schema in Hydra's ConfigStore (idempotent): ``root`` as ``root_name`` (the
     first entry of the app's defaults list); for each group, one schema for all its options at
-    ``schema/<group>`` or one per option at ``schema/<group>/<option>``; ``schema/physics``;
-    and the resolvers. Returns the ConfigStore (for option nodes the app stores itself)."""
+    ``schema/<group>`` or one per option at ``schema/<group>/<option>``; ``schema/physics`` and
+    ``schema/noise`` (both apps' table and execution noise); and the resolvers. Returns the
+    ConfigStore (for option nodes the app stores itself)."""
     cs = ConfigStore.instance()
     cs.store(name=root_name, node=root)
     for group, schemas in groups.items():
@@ -75,6 +77,7 @@ def register_app(root_name: str, root: type, groups: dict[str, type | dict[str, 
         else:
             cs.store(group=SCHEMA_GROUP, name=group, node=schemas)
     cs.store(group=SCHEMA_GROUP, name="physics", node=PhysicsConfig)  # conf/physics/*.yaml, both apps
+    cs.store(group=SCHEMA_GROUP, name="noise", node=NoiseConfig)  # conf/noise/*.yaml, both apps
     register_resolvers()
     return cs
 

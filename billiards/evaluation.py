@@ -8,6 +8,10 @@ drawn from ``seed`` (or the canonical rack), deterministic policy
 * points per inning: mean and std (population std, ddof = 0) over innings, and the best inning;
 * foul innings %: share of innings with at least one foul;
 * foul % per shot and success (score) % per shot, over all ``n_innings * max_shots`` shots.
+
+Execution noise (``noise=``, :mod:`billiards.physics.noise`; off by default) perturbs every
+shot the policy commands; the env draws the errors from its own generator seeded with
+``seed``, so the same seed replays the same noisy innings. The result records the noise.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from billiards import domain
 from billiards.envs import make_env
 from billiards.files import atomic_write_text
+from billiards.physics.noise import get_noise
 
 
 @dataclasses.dataclass
@@ -41,6 +46,7 @@ class EvalResult:
     start: str = "random"
     seed: int = 0
     points: list[int] = dataclasses.field(default_factory=list)  # per inning
+    noise: str = "none"  # the execution noise the shots were played under (NoiseModel.describe())
 
     def to_json(self, path: str | Path) -> None:
         """Write the result as JSON, atomically (:func:`billiards.files.atomic_write_text`)."""
@@ -55,11 +61,11 @@ class EvalResult:
             f"{self.mean:.3f} ± {self.std:.3f} points/inning (best {self.best}), "
             f"foul innings {self.foul_innings_pct:.1f}%, foul/shot {self.foul_per_shot_pct:.1f}%, "
             f"success/shot {self.success_per_shot_pct:.1f}% ({self.n_innings} innings x {self.max_shots} shots, "
-            f"{self.start} start, seed {self.seed})"
+            f"{self.start} start, seed {self.seed}{'' if self.noise == 'none' else ', noise ' + self.noise})"
         )
 
 
-def summarize(score: np.ndarray, foul: np.ndarray, *, start: str = "random", seed: int = 0) -> EvalResult:
+def summarize(score: np.ndarray, foul: np.ndarray, *, start: str = "random", seed: int = 0, noise: str = "none") -> EvalResult:
     """EvalResult from per-shot outcomes ``score``, ``foul`` of shape (n_innings, max_shots)."""
     score, foul = np.asarray(score, dtype=bool), np.asarray(foul, dtype=bool)
     points = score.sum(axis=1)
@@ -76,6 +82,7 @@ def summarize(score: np.ndarray, foul: np.ndarray, *, start: str = "random", see
         start=start,
         seed=int(seed),
         points=[int(p) for p in points],
+        noise=noise,
     )
 
 
@@ -89,6 +96,7 @@ def evaluate(
     constrain_aim: bool = False,
     extra_features: bool = False,
     env_kwargs: dict | None = None,
+    noise=None,
 ) -> EvalResult:
     """Evaluate ``policy`` with the unified protocol (see the module docstring).
 
@@ -102,7 +110,10 @@ def evaluate(
         constrain_aim, extra_features: the domain-knowledge layers the policy was trained
             with (they change its action/observation, not the task).
         env_kwargs: further :func:`billiards.envs.make_env` keyword arguments (e.g. params).
+        noise: execution noise (:func:`billiards.physics.noise.get_noise`: None/"none" exact,
+            "fastfiz", "fastfiz_x5", a NoiseModel or a dict of sigmas).
     """
+    noise = get_noise(noise)
     env = make_env(
         n_innings,
         start=start,
@@ -111,6 +122,7 @@ def evaluate(
         constrain_aim=constrain_aim,
         extra_features=extra_features,
         seed=seed,
+        noise=noise,
         **(env_kwargs or {}),
     )
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
@@ -118,7 +130,7 @@ def evaluate(
     score = rollout["next", "score"][..., 0].numpy()
     foul = rollout["next", "foul"][..., 0].numpy()
     assert score.shape == (n_innings, max_shots), score.shape
-    return summarize(score, foul, start=start, seed=seed)
+    return summarize(score, foul, start=start, seed=seed, noise=noise.describe())
 
 
 def numpy_policy(act, *, normalized: bool = True, constrain_aim: bool = False):

@@ -81,9 +81,12 @@ def test_appended_keys_and_contradicting_kinds_fail_validation():
 
 def test_option_groups_list_only_real_options():
     """The schemas live under schema/, outside the option groups (no ``search_schema`` option)."""
-    assert group_options("search") == ["h2", "puct"]
+    # for_noise_<noise>: the default search per execution noise (h2 without noise, robust with it)
+    assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "h2", "puct",
+                                       "robust"]
     assert group_options("protocol") == ["p1", "p3"]
-    assert group_options("proposer") == ["base", "both", "gentle", "geometric", "near_miss", "policy"]
+    assert group_options("proposer") == ["base", "both", "forgiving", "gentle", "geometric", "near_miss", "policy"]
+    assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none"]
     assert group_options("algo") == ["ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
     assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name
 
@@ -117,7 +120,8 @@ def test_proposer_by_name_composes_as_its_former_yaml(name):
 def test_geometric_proposer_and_a_missing_checkpoint():
     cfg = compose_search()
     assert OmegaConf.to_container(cfg.proposer) == {"kind": "geometric", "name": "geometric", "power_low": 0.15,
-                                                     "power_high": 0.9}
+                                                     "power_high": 0.9, "u_low": 0.0, "u_high": 1.0,
+                                                     "spin_low": -1.0, "spin_high": 1.0}
     cfg = compose_search("proposer=near_miss", "proposer.checkpoints=[nowhere/seed0.pt]")
     with pytest.raises(search_config.SearchConfigError, match=r"proposer 'near_miss': no checkpoint at nowhere/seed0.pt "
                                                                r"\(trained with: python train.py"):

@@ -38,6 +38,7 @@ from billiards.app_config import register_app
 from billiards.files import CHECKPOINT_FILE, repo_path
 from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
+from billiards.physics.noise import NoiseConfig, noise_errors
 
 # Keys that configs saved by earlier versions have and the schema no longer does; a resume
 # drops them (the test-only kill switch left the schema: tests kill runs from outside).
@@ -225,6 +226,7 @@ class CheckpointConfig:
 class TrainConfig:
     algo: Any = MISSING  # SACConfig | TD3Config | PPOConfig, chosen by the algo group
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
+    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise of the training and evaluation envs
     env: EnvConfig = field(default_factory=EnvConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
     curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
@@ -295,6 +297,7 @@ def _errors(cfg: DictConfig) -> list[str]:
     need(cfg.shaping.gentle_kind in ("leave", "power"),
          f"shaping.gentle_kind must be leave (the paper's leave-position bonus) or power, got {cfg.shaping.gentle_kind!r}")
     errs.extend(physics_errors(cfg.physics))
+    errs.extend(noise_errors(cfg.noise) if "noise" in cfg else [])
     positive("shaping.rm", cfg.shaping.rm, strict=False)
     if cfg.shaping.rm:
         path = resolve_rm_model(cfg.shaping.rm_model)

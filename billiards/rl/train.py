@@ -44,6 +44,7 @@ from tqdm import tqdm
 from billiards.device import resolve_device
 from billiards.files import atomic_write_text
 from billiards.physics.config import params_from_config, physics_record
+from billiards.physics.noise import noise_from_config, noise_record
 from billiards.physics.warmup import warm_up
 
 from .agents import OFF_POLICY, Agent, make_agent
@@ -109,6 +110,7 @@ def env_kwargs(cfg) -> dict[str, Any]:
         rm=cfg.shaping.rm,
         rm_model=str(resolve_rm_model(cfg.shaping.rm_model)) if cfg.shaping.rm else None,
         params=params_from_config(cfg.physics),
+        noise=noise_from_config(cfg.get("noise")),
     )
 
 
@@ -136,6 +138,7 @@ def evaluate_policy(cfg, policy, n_innings: int, start: str):
         constrain_aim=cfg.env.constrain_aim,
         extra_features=cfg.env.extra_features,
         env_kwargs=dict(params=params_from_config(cfg.physics)),
+        noise=noise_from_config(cfg.get("noise")),
     )
 
 
@@ -436,6 +439,7 @@ def finish(run: Run, bar) -> float:
         "frames": state.frames,
         "updates": agent.n_updates,
         **physics_record(params_from_config(cfg.physics)),
+        **noise_record(noise_from_config(cfg.get("noise"))),
         "device": str(run.device),
         "stopped_by": "total_steps" if state.frames >= cfg.budget.total_steps else "cpu_minutes",
         "train_seconds": round(train_seconds, 2),

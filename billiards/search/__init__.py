@@ -12,6 +12,8 @@ _WHERE = {
     "GeometricProposer": "proposers", "PolicyProposer": "proposers", "Proposer": "proposers",
     "load_policy_proposer": "proposers",
     "PUCTConfig": "puct", "puct_search": "puct", "puct_reference": "puct_reference",
+    "NoisyPUCTActor": "actors", "RobustActor": "actors", "RobustConfig": "robust", "robust_search": "robust",
+    "noisy_puct_search": "puct_noise",
 }
 __all__ = sorted(_WHERE)
 

@@ -18,6 +18,8 @@ from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 
 from .lookahead import H2Config, h2_search
 from .puct import PUCTConfig, puct_search
+from .puct_noise import noisy_puct_search
+from .robust import RobustConfig, robust_search
 
 
 class SearchActor(TensorDictModuleBase):
@@ -72,6 +74,28 @@ class PUCTActor(SearchActor):
         return puct_search(positions, self.proposer, self.cfg, self.rng, self.params)
 
 
+class RobustActor(SearchActor):
+    """Candidates scored over noisy replays of their shot (:mod:`billiards.search.robust`)."""
+
+    def __init__(self, proposer, cfg: RobustConfig, noise, seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
+        self.noise = noise
+        super().__init__(proposer, cfg, seed, params)
+
+    def search(self, positions):
+        return robust_search(positions, self.proposer, self.cfg, self.rng, self.params, self.noise)
+
+
+class NoisyPUCTActor(SearchActor):
+    """PUCT whose revisits are noisy replays (:mod:`billiards.search.puct_noise`)."""
+
+    def __init__(self, proposer, cfg: PUCTConfig, noise, seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
+        self.noise = noise
+        super().__init__(proposer, cfg, seed, params)
+
+    def search(self, positions):
+        return noisy_puct_search(positions, self.proposer, self.cfg, self.rng, self.params, self.noise)
+
+
 def make_search_collector(env, actor: SearchActor, frames_per_batch: int, total_frames: int):
     """The search collector: a TorchRL ``Collector`` running ``actor`` in place of the policy."""
     from torchrl.collectors import Collector
@@ -80,4 +104,4 @@ def make_search_collector(env, actor: SearchActor, frames_per_batch: int, total_
                      auto_register_policy_transforms=False)
 
 
-__all__ = ["LookaheadActor", "PUCTActor", "SearchActor", "make_search_collector"]
+__all__ = ["LookaheadActor", "NoisyPUCTActor", "PUCTActor", "RobustActor", "SearchActor", "make_search_collector"]

@@ -7,10 +7,14 @@ composes: ``search=h2 search.c_puct=5`` is rejected (``Key 'c_puct' not in
 protocol.n_innings=5`` and ``proposer=geometric proposer.checkpoints=[...]``. The schemas of
 the options live at ``schema/<group>/<option>``, outside the option groups:
 
-* ``search``: ``h2`` (:class:`H2SearchConfig`) | ``puct`` (:class:`PUCTSearchConfig`),
-  ``conf/search/*.yaml``;
+* ``search``: ``h2`` (:class:`H2SearchConfig`) | ``puct`` (:class:`PUCTSearchConfig`) |
+  ``robust`` (:class:`RobustSearchConfig`, needs execution noise), ``conf/search/*.yaml``; the
+  default is ``for_noise_${noise}``: h2 without noise, robust under ``noise=fastfiz|fastfiz_x5``
+  (an explicit ``search=`` wins);
 * ``protocol``: ``p1`` (:class:`P1Config`) | ``p3`` (:class:`P3Config`), ``conf/protocol/*.yaml``;
-* ``proposer``: ``geometric`` (:class:`GeometricProposerConfig`) or a policy ensemble
+* ``noise``: the execution noise (:class:`~billiards.physics.noise.NoiseConfig`, ``conf/noise/*.yaml``,
+  shared with train.py);
+* ``proposer``: ``geometric`` or ``forgiving`` (:class:`GeometricProposerConfig`) or a policy ensemble
   (:class:`PolicyProposerConfig`). The shipped ensembles are one config parametrised by name,
   :func:`shipped_proposer`: ``proposer=<name>`` for every name of :data:`SHIPPED_PROPOSERS`
   plays ``results/policies/<name>/seed{0,1,2}.pt``. Policies of your own:
@@ -41,6 +45,7 @@ from omegaconf.errors import OmegaConfBaseException
 from billiards.app_config import BASIC_SWEEPER, job_configs, register_app
 from billiards.files import CONFIG_FILE, repo_path
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
+from billiards.physics.noise import NoiseConfig, noise_errors, noise_from_config
 
 # ----------------------------------------------------------------------------- search
 
@@ -63,7 +68,9 @@ class H2SearchConfig:
 
         return H2Config.from_budget(self.budget, self.k1, self.m1, gamma=self.gamma, foul_penalty=self.foul_penalty)
 
-    def actor(self, proposer, seed: int, params):
+    def actor(self, proposer, seed: int, params, noise=None):
+        """The actor; ``noise`` (the execution noise the shots are played with) does not change
+        how h2 searches: it plans with exact simulations."""
         from .actors import LookaheadActor
 
         return LookaheadActor(proposer, self.settings(), seed=seed, params=params)
@@ -91,10 +98,51 @@ class PUCTSearchConfig:
 
         return PUCTConfig(**{f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "kind"})
 
-    def actor(self, proposer, seed: int, params):
-        from .actors import PUCTActor
+    def actor(self, proposer, seed: int, params, noise=None):
+        """The actor; under execution noise (``noise`` a NoiseModel that is not exact) PUCT's
+        revisits are noisy replays (:mod:`billiards.search.puct_noise`)."""
+        from .actors import NoisyPUCTActor, PUCTActor
 
+        if noise is not None and not noise.is_exact:
+            return NoisyPUCTActor(proposer, self.settings(), noise, seed=seed, params=params)
         return PUCTActor(proposer, self.settings(), seed=seed, params=params)
+
+
+@dataclass
+class RobustSearchConfig:
+    """Noise-aware search (:mod:`billiards.search.robust`): each candidate scored by its verifier
+    reward over noisy replays; ``budget`` = [k1 exact screen] + noisy samples + m1 * k2
+    simulations per shot. Needs execution noise (``noise=fastfiz|fastfiz_x5``). The knobs are
+    those of :class:`billiards.search.robust.RobustConfig`, by name."""
+
+    kind: str = "robust"
+    budget: int = 400
+    k1: int = 300
+    samples: int = 4  # schedule=uniform: noisy samples per candidate (k1 * samples + m1 * k2 = budget)
+    schedule: str = "halving"  # uniform | halving (successive halving over the candidates left)
+    screen: bool = True  # one exact simulation per candidate first; only scoring ones get noisy samples
+    quantile: Optional[float] = None  # the candidate's statistic over its samples: null = mean, else this quantile
+    m1: int = 0
+    k2: int = 0  # children per expanded candidate
+    target: int = 10  # adaptive screen: stop screening a state once `target` candidates score (0: screen all k1)
+    wave: int = 50  # candidates per screening wave when target > 0
+    antithetic: bool = False  # noisy samples in antithetic pairs (z, -z)
+    gamma: float = 0.99
+    foul_penalty: float = 1.0
+
+    def settings(self):
+        """The :class:`~billiards.search.robust.RobustConfig` (ValueError if a knob is out of range)."""
+        from .robust import RobustConfig
+
+        return RobustConfig(**{f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "kind"})
+
+    def actor(self, proposer, seed: int, params, noise=None):
+        """The actor, sampling ``noise`` (a NoiseModel; :func:`errors` refuses robust without noise)."""
+        from billiards.physics.noise import get_noise
+
+        from .actors import RobustActor
+
+        return RobustActor(proposer, self.settings(), get_noise(noise), seed=seed, params=params)
 
 
 # ----------------------------------------------------------------------------- protocols
@@ -130,11 +178,25 @@ class GeometricProposerConfig:
     name: str = "geometric"
     power_low: float = 0.15
     power_high: float = 0.9
+    # narrower draws for forgiving shots under noise (defaults: the full ranges)
+    u_low: float = 0.0  # |u| >= u_low (u: where in the aim cone; 0 full hit, 1 graze)
+    u_high: float = 1.0
+    spin_low: float = -1.0  # vertical tip offset b in [spin_low, spin_high] (-1 draw, 1 follow)
+    spin_high: float = 1.0
 
     def build(self, params):
         from .proposers import GeometricProposer
 
-        return GeometricProposer(power_low=self.power_low, power_high=self.power_high, R=params.ball_radius)
+        return GeometricProposer(power_low=self.power_low, power_high=self.power_high, R=params.ball_radius,
+                                 u_low=self.u_low, u_high=self.u_high, spin_low=self.spin_low, spin_high=self.spin_high)
+
+
+# ``proposer=forgiving``: no training needed, the geometric proposer with its draws narrowed toward
+# shots that forgive execution noise (results/noise/README.md): a cut (0.3 <= |u| <= 0.9) rather
+# than a full hit or a graze, power 0.5..1.0, the vertical tip offset b >= -0.2 (no strong draw).
+# Candidate 0 is the geometric baseline shot, as for proposer=geometric. Use it under noise:
+# ``python search.py noise=fastfiz proposer=forgiving``.
+FORGIVING = dict(name="forgiving", power_low=0.5, power_high=1.0, u_low=0.3, u_high=0.9, spin_low=-0.2, spin_high=1.0)
 
 
 @dataclass
@@ -187,8 +249,9 @@ def shipped_proposer(name: str) -> PolicyProposerConfig:
 class SearchAppConfig:
     proposer: Any = MISSING  # GeometricProposerConfig | PolicyProposerConfig, chosen by proposer=
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
-    search: Any = MISSING  # H2SearchConfig | PUCTSearchConfig, chosen by search=
+    search: Any = MISSING  # H2SearchConfig | PUCTSearchConfig | RobustSearchConfig, chosen by search=
     protocol: Any = MISSING  # P1Config | P3Config, chosen by protocol=
+    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise: noise=none|fastfiz|fastfiz_x5
     seed: int = 0
     threads: Optional[int] = None  # numba threads for simulate_batch (default: all cores)
     progress: bool = True
@@ -198,7 +261,7 @@ class SearchAppConfig:
 
 # group -> (the key naming the option inside its node, {option: schema})
 OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
-    "search": ("kind", {"h2": H2SearchConfig, "puct": PUCTSearchConfig}),
+    "search": ("kind", {"h2": H2SearchConfig, "puct": PUCTSearchConfig, "robust": RobustSearchConfig}),
     "protocol": ("name", {"p1": P1Config, "p3": P3Config}),
     "proposer": ("kind", {"geometric": GeometricProposerConfig, "policy": PolicyProposerConfig}),
 }
@@ -207,9 +270,11 @@ OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
 # resolvers; the proposer options themselves are stored nodes (conf/search/ and conf/protocol/
 # hold the other groups' options as YAML)
 def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConfig]:
-    """The ``proposer=`` options: ``geometric``, the shipped ensembles by name, and ``policy``
+    """The ``proposer=`` options: ``geometric``, ``forgiving`` (geometric, narrowed for noise:
+    :data:`FORGIVING`), the shipped ensembles by name, and ``policy``
     (``proposer=policy proposer.checkpoints=[a.pt,b.pt,...]``: an ensemble of your own)."""
-    return {"geometric": GeometricProposerConfig(), **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS},
+    return {"geometric": GeometricProposerConfig(), "forgiving": GeometricProposerConfig(**FORGIVING),
+            **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS},
             "policy": PolicyProposerConfig(name="policy", checkpoints=[])}
 
 
@@ -282,18 +347,21 @@ def search_config(search: str = "h2", protocol: str = "p3", proposer: str = "geo
 
 # Keys every node of a group had before each option got its own schema: a config saved then
 # (config.yaml of a search run, results.json's "config") has them all, and the option ignored
-# those that were not its own.
+# those that were not its own (the robust knobs and the geometric u_*/spin_* ranges: the union
+# nodes of the runs under execution noise, results/noise/).
 LEGACY_UNION_KEYS = {
-    "search": ("k1", "m1", "c_puct", "pw_c", "pw_alpha", "pool", "max_depth"),
+    "search": ("k1", "m1", "c_puct", "pw_c", "pw_alpha", "pool", "max_depth",
+               "samples", "schedule", "screen", "quantile", "k2", "target", "wave", "antithetic"),
     "protocol": ("n_innings", "shots", "seeds", "cap"),
-    "proposer": ("checkpoints", "command", "power_low", "power_high"),
+    "proposer": ("checkpoints", "command", "power_low", "power_high", "u_low", "u_high", "spin_low", "spin_high"),
 }
 
 
 def upgrade(saved: dict) -> dict:
     """A saved search config (a plain dict) in today's form: the other options' keys of the
-    old union nodes dropped (those options never read them), and ``physics`` added for a
-    config saved before the presets (it played ``international``)."""
+    old union nodes dropped (those options never read them), ``physics`` added for a
+    config saved before the presets (it played ``international``) and ``noise`` for one saved
+    before execution noise (it played exact shots: ``none``)."""
     out = dict(saved)
     for group, legacy in LEGACY_UNION_KEYS.items():
         node = out.get(group)
@@ -301,6 +369,7 @@ def upgrade(saved: dict) -> dict:
             own = {f.name for f in dataclasses.fields(option_schema(group, node))}
             out[group] = {k: v for k, v in node.items() if k in own or k not in legacy}
     out.setdefault("physics", {"preset": LEGACY_PHYSICS})
+    out.setdefault("noise", {"preset": "none"})
     return out
 
 
@@ -350,9 +419,16 @@ def errors(cfg) -> list[str]:
                 errs.append(f"search ({search.kind}): {err}")
     if cfg.seed < 0:
         errs.append(f"seed must be >= 0 (a numpy seed), got {cfg.seed}")
-    if isinstance(proposer, GeometricProposerConfig) and not 0.0 <= proposer.power_low <= proposer.power_high <= 1.0:
-        errs.append(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
-                    f"got {proposer.power_low}, {proposer.power_high}")
+    if isinstance(proposer, GeometricProposerConfig):
+        if not 0.0 <= proposer.power_low <= proposer.power_high <= 1.0:
+            errs.append(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
+                        f"got {proposer.power_low}, {proposer.power_high}")
+        if not 0.0 <= proposer.u_low <= proposer.u_high <= 1.0:
+            errs.append(f"proposer.u_low and proposer.u_high must satisfy 0 <= low <= high <= 1, "
+                        f"got {proposer.u_low}, {proposer.u_high}")
+        if not -1.0 <= proposer.spin_low <= proposer.spin_high <= 1.0:
+            errs.append(f"proposer.spin_low and proposer.spin_high must satisfy -1 <= low <= high <= 1, "
+                        f"got {proposer.spin_low}, {proposer.spin_high}")
     if isinstance(proposer, PolicyProposerConfig):
         if not proposer.checkpoints:
             errs.append(f"proposer {proposer.name!r} is a policy ensemble but lists no checkpoints")
@@ -369,6 +445,12 @@ def errors(cfg) -> list[str]:
     if cfg.get("resume") and not (Path(cfg.resume) / CONFIG_FILE).is_file():
         errs.append(f"resume={cfg.resume!r}: not a search run directory (no {CONFIG_FILE} there)")
     errs.extend(physics_errors(cfg.physics))
+    noise = cfg.get("noise")  # absent from a plain config written before it existed: exact play
+    noise_errs = noise_errors(noise) if noise is not None else []
+    errs.extend(noise_errs)
+    if isinstance(search, RobustSearchConfig) and not noise_errs and noise_from_config(noise).is_exact:
+        errs.append("search=robust scores candidates over noisy replays: it needs execution noise "
+                    "(noise=fastfiz|fastfiz_x5 or noise.aim_deg=...); without noise use search=h2")
     return errs
 
 
@@ -408,6 +490,7 @@ class ValidateSearchConfig(Callback):
             raise SystemExit("Error: " + "\n".join(errs))
 
 
-__all__ = ["GeometricProposerConfig", "H2SearchConfig", "OPTIONS", "P1Config", "P3Config", "PUCTSearchConfig",
-           "PolicyProposerConfig", "SHIPPED_PROPOSERS", "SearchAppConfig", "SearchConfigError", "ValidateSearchConfig",
-           "errors", "option", "proposer_options", "saved_config", "shipped_proposer", "typed", "upgrade", "validate"]
+__all__ = ["FORGIVING", "GeometricProposerConfig", "H2SearchConfig", "OPTIONS", "P1Config", "P3Config",
+           "PUCTSearchConfig", "PolicyProposerConfig", "RobustSearchConfig", "SHIPPED_PROPOSERS", "SearchAppConfig",
+           "SearchConfigError", "ValidateSearchConfig", "errors", "option", "proposer_options", "saved_config",
+           "shipped_proposer", "typed", "upgrade", "validate"]

@@ -36,21 +36,37 @@ class GeometricProposer:
     Candidate 0 is the nearest-red baseline (u = 0, p = ``power_mode``, centre hit). The others
     draw u ~ U[-1, 1] (theta = theta_target + u * asin(2R/d), :func:`domain.constrained_theta`),
     p ~ U[power_low, power_high] and tip offsets a, b ~ U[-1, 1].
+
+    Narrower draws make *forgiving* candidates more common under execution noise (the
+    ``forgiving`` proposer, results/noise/): ``u_low <= |u| <= u_high`` (a half-ball-ish cut
+    rather than a full hit or a graze) and the vertical tip offset ``b`` in
+    ``[spin_low, spin_high]`` (follow rather than draw). Each draw is the default draw mapped
+    onto the narrower range, so the defaults give exactly the default candidates.
     """
 
     name = "geometric"
 
     def __init__(self, power_low: float = 0.15, power_high: float = 0.9, power_mode: float = 0.5,
-                 R: float = DEFAULT_PARAMS.ball_radius):
+                 R: float = DEFAULT_PARAMS.ball_radius, u_low: float = 0.0, u_high: float = 1.0,
+                 spin_low: float = -1.0, spin_high: float = 1.0):
         if not 0.0 <= power_low <= power_high <= 1.0:
             raise ValueError(f"GeometricProposer needs 0 <= power_low <= power_high <= 1, got {power_low}, {power_high}")
+        if not 0.0 <= u_low <= u_high <= 1.0:
+            raise ValueError(f"GeometricProposer needs 0 <= u_low <= u_high <= 1, got {u_low}, {u_high}")
+        if not -1.0 <= spin_low <= spin_high <= 1.0:
+            raise ValueError(f"GeometricProposer needs -1 <= spin_low <= spin_high <= 1, got {spin_low}, {spin_high}")
         self.power_low, self.power_high, self.power_mode, self.R = power_low, power_high, power_mode, R
+        self.u_low, self.u_high, self.spin_low, self.spin_high = u_low, u_high, spin_low, spin_high
 
     def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
         S = positions.shape[0]
         u = rng.uniform(-1.0, 1.0, (S, k))
         p = rng.uniform(self.power_low, self.power_high, (S, k))
         ab = rng.uniform(-1.0, 1.0, (S, k, 2))
+        if (self.u_low, self.u_high) != (0.0, 1.0):
+            u = np.sign(u) * (self.u_low + np.abs(u) * (self.u_high - self.u_low))
+        if (self.spin_low, self.spin_high) != (-1.0, 1.0):
+            ab[..., 1] = self.spin_low + 0.5 * (ab[..., 1] + 1.0) * (self.spin_high - self.spin_low)
         u[:, 0], p[:, 0], ab[:, 0] = 0.0, self.power_mode, 0.0
         theta = domain.constrained_theta(positions[:, None], u, self.R)
         return np.concatenate([theta[..., None], p[..., None], ab], axis=-1)

@@ -6,6 +6,11 @@
 * **P3**, long chains: from the canonical rack, shoot until the first miss or foul, capped at
   ``cap`` shots; one chain per seed (the seed drives the proposer's sampling); the metric is the
   chain length (scoring shots before the first failure), mean and longest over seeds.
+
+Under execution noise (``noise=``, :mod:`billiards.physics.noise`) the env plays the commanded
+shot perturbed by its own generator, seeded from the protocol's seed (P1: ``seed``; P3: each
+chain's seed), so the same seed replays the same noisy innings and chains. P3 records the
+commanded and the played action of each kept shot.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from tqdm.auto import tqdm
 
 from billiards.envs import BilliardsEnv
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+from billiards.physics.noise import get_noise
 
 from .actors import SearchActor, make_search_collector
 
@@ -47,13 +53,15 @@ class ProtocolResult:
 
 
 def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int = 0,
-           params: PhysicsParams = DEFAULT_PARAMS, progress: bool = True) -> ProtocolResult:
+           params: PhysicsParams = DEFAULT_PARAMS, progress: bool = True, noise=None) -> ProtocolResult:
     """P1: random-start innings of ``shots`` shots (continue-on-miss), points per inning.
 
     All innings advance together, one shot per step. Interrupted (Ctrl-C), it returns what the
     finished steps give, marked ``extra["partial"]`` with ``extra["shots_done"]`` per inning (a
     P1 cannot be continued: a new run starts it again)."""
-    env = BilliardsEnv(batch_size=[n_innings], start="random", on_miss="continue", max_shots=shots, seed=seed, params=params)
+    noise = get_noise(noise)
+    env = BilliardsEnv(batch_size=[n_innings], start="random", on_miss="continue", max_shots=shots, seed=seed, params=params,
+                       noise=noise)
     actor.reseed(seed)
     collector = make_search_collector(env, actor, frames_per_batch=n_innings, total_frames=n_innings * shots)
     score = np.zeros((n_innings, shots), dtype=bool)
@@ -80,9 +88,12 @@ def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int
     points = score.sum(axis=1).astype(float)
     extra = {"foul_per_shot": float(foul.mean()) if done else float("nan"),
              "success_per_shot": float(score.mean()) if done else float("nan"),
-             # shots whose outcome in the env differed from the search's simulation (must be 0)
-             "mispredicted_shots": int((predicted != score - actor.cfg.foul_penalty * foul).sum()),
              "n_innings": n_innings, "shots_per_inning": shots, "seed": seed}
+    if noise.is_exact:  # shots whose outcome in the env differed from the search's simulation (must be 0)
+        extra["mispredicted_shots"] = int((predicted != score - actor.cfg.foul_penalty * foul).sum())
+    else:  # the search's own estimate of the chosen shots' immediate reward, against what they got
+        extra.update(noise=noise.describe(), predicted_r1_mean=float(predicted.mean()) if done else float("nan"),
+                     reward_mean=float((score - actor.cfg.foul_penalty * foul).mean()) if done else float("nan"))
     if done < shots:
         extra.update(partial=True, shots_done=done)
     return ProtocolResult(
@@ -94,10 +105,13 @@ def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int
 
 
 def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int = 6,
-              params: PhysicsParams = DEFAULT_PARAMS, bar=None):
-    """One P3 chain from the canonical rack: (length, last shots [(positions, action, score)])."""
+              params: PhysicsParams = DEFAULT_PARAMS, bar=None, noise=None):
+    """One P3 chain from the canonical rack: (length, last shots [(positions, action, score)],
+    under noise [(positions, commanded action, score, played action)])."""
     actor.reseed(seed)
-    env = BilliardsEnv(batch_size=[1], start="canonical", on_miss="reset", max_shots=cap, seed=seed, params=params)
+    noise = get_noise(noise)
+    env = BilliardsEnv(batch_size=[1], start="canonical", on_miss="reset", max_shots=cap, seed=seed, params=params,
+                       noise=noise)
     td = env.reset()
     history: list = []
     length = 0
@@ -106,7 +120,10 @@ def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int =
         td = env.step(actor(td))
         nxt = td["next"]
         scored = bool(nxt["score"].item())
-        history.append((before, td["action"][0].numpy().copy(), scored))
+        shot = (before, td["action"][0].numpy().copy(), scored)
+        if not noise.is_exact:
+            shot += (nxt["played_action"][0].numpy().copy(),)
+        history.append(shot)
         del history[:-keep_last]
         if not scored:
             break
@@ -144,7 +161,8 @@ def _append_line(path: Path, record: dict) -> None:
 
 
 def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: PhysicsParams = DEFAULT_PARAMS,
-           progress: bool = True, picture: str | Path | None = None, ledger: str | Path | None = None) -> ProtocolResult:
+           progress: bool = True, picture: str | Path | None = None, ledger: str | Path | None = None,
+           noise=None) -> ProtocolResult:
     """P3: canonical-start chains until the first miss or foul (cap ``cap``), one per seed.
 
     With a ``ledger`` file, each finished chain is appended to it as it ends, and chains already
@@ -158,9 +176,10 @@ def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: Physi
         if seed in done:
             continue
         t0 = time.perf_counter()
-        length, history = run_chain(actor, seed, cap, params=params, bar=bar)
+        length, history = run_chain(actor, seed, cap, params=params, bar=bar, noise=noise)
         rec = {"seed": seed, "length": length, "decisions": actor.n_decisions, "seconds": time.perf_counter() - t0,
-               "last_shots": [[pos.tolist(), act.tolist(), bool(scored)] for pos, act, scored in history]}
+               "last_shots": [[pos.tolist(), act.tolist(), bool(scored), *(p.tolist() for p in played)]
+                              for pos, act, scored, *played in history]}
         done[seed] = rec
         if ledger is not None:
             _append_line(Path(ledger), rec)
@@ -175,7 +194,7 @@ def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: Physi
     recs = [done[s] for s in seeds]
     if picture is not None:
         best = max(recs, key=lambda r: r["length"])
-        history = [(np.asarray(p), np.asarray(a), s) for p, a, s in best["last_shots"]]
+        history = [(np.asarray(p), np.asarray(a), s) for p, a, s, *_ in best["last_shots"]]
         if history:
             draw_last_shots(history, picture, params, title=f"last shots of the longest chain ({best['length']} points)")
     return _p3_result(recs, cap, actor.cfg.sims_per_decision)

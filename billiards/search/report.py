@@ -80,10 +80,12 @@ def _paper(name: str, protocol: str, kind: str) -> str:
 
 
 def table6_markdown(results: list[dict]) -> str:
-    """The Table 6 layout, one table per physics; the last run found wins where a cell has several."""
+    """The Table 6 layout, one table per physics (and per execution noise: runs under noise are
+    never mixed with exact ones); the last run found wins where a cell has several."""
     by_physics: dict[str, list[dict]] = {}
     for r in results:
-        by_physics.setdefault(physics_of(r), []).append(r)
+        noise = r.get("noise") or "none"
+        by_physics.setdefault(physics_of(r) + ("" if noise == "none" else f"`, execution noise `{noise}"), []).append(r)
     return "\n".join(_table6(physics, rs) for physics, rs in sorted(by_physics.items()))
 
 

@@ -15,6 +15,7 @@ from omegaconf import OmegaConf
 from billiards.files import CONFIG_FILE, RESULTS_FILE, atomic_write_text
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import params_from_config, physics_record
+from billiards.physics.noise import noise_from_config, noise_record
 from billiards.physics.warmup import warm_up
 from billiards.provenance import git_commit
 
@@ -31,8 +32,10 @@ def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS):
 
 
 def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchActor:
-    """The search actor ``cfg.search`` describes, seeded with ``cfg.seed``, over ``proposer``."""
-    return option("search", cfg.search).actor(proposer, cfg.seed, params)
+    """The search actor ``cfg.search`` describes, seeded with ``cfg.seed``, over ``proposer``,
+    for the execution noise ``cfg.noise`` (under noise PUCT's revisits are noisy replays,
+    :mod:`billiards.search.puct_noise`, and ``robust`` samples the noise model)."""
+    return option("search", cfg.search).actor(proposer, cfg.seed, params, noise=noise_from_config(cfg.get("noise")))
 
 
 RUNTIME_KEYS = ("threads", "progress", "picture")  # taken from the command line when resuming
@@ -43,7 +46,8 @@ def describe(cfg, params) -> str:
     s, p = cfg.search, cfg.protocol
     what = (f"P1: {p.n_innings} random-start innings x {p.shots} shots" if p.name == "p1"
             else f"P3: {p.seeds} chains from the opening rack, each up to {p.cap:,} shots")
-    return f"{what}; {s.kind} search, {s.budget} simulations per shot, proposer {cfg.proposer.name}, physics {params.describe()}"
+    return (f"{what}; {s.kind} search, {s.budget} simulations per shot, proposer {cfg.proposer.name}, physics {params.describe()}"
+            f", noise {noise_from_config(cfg.get('noise')).describe()}")
 
 
 def resume_config(out_dir: Path, current):
@@ -72,6 +76,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     if cfg.threads is not None:
         numba.set_num_threads(cfg.threads)
     params = params_from_config(cfg.physics)
+    noise = noise_from_config(cfg.get("noise"))
     print(f"search: {describe(cfg, params)}\noutput: {out_dir}", flush=True)
     warm_up(params, log=lambda msg: print(msg, flush=True))
     actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
@@ -79,7 +84,8 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     ledger = out_dir / CHAINS_FILE
     interrupted = False
     if proto == "p1":
-        result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress)
+        result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress,
+                        noise=noise)
         interrupted = bool(result.extra.get("partial"))
     else:
         seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
@@ -88,7 +94,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         picture = out_dir / "longest_chain.png" if cfg.picture else None
         try:
             result = run_p3(actor, seeds, cfg.protocol.cap, params=params, progress=cfg.progress, picture=picture,
-                            ledger=ledger)
+                            ledger=ledger, noise=noise)
         except KeyboardInterrupt:
             interrupted = True
             result = partial_p3(ledger, seeds, cfg.protocol.cap, actor.cfg.sims_per_decision)
@@ -97,6 +103,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         proposer=cfg.proposer.name,
         search=cfg.search.kind,
         **physics_record(params),
+        **noise_record(noise),
         config=OmegaConf.to_container(cfg, resolve=True),
         commit=git_commit(),
     )

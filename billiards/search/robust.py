@@ -1,0 +1,246 @@
+"""Search that knows the execution noise: candidates scored over noisy replays of their shot.
+
+Under execution noise (:mod:`billiards.physics.noise`) the shot played is the commanded one
+plus a Gaussian error, so the exact verifier reward of a candidate says little: the shots
+that plain lookahead picks are often knife-edge. Here each candidate's immediate value is a
+statistic (mean, or a quantile) of its verifier reward over noisy samples -- the candidate's
+shot perturbed by the search's own draws from the noise model and simulated. Every simulation,
+exact or noisy, counts in the budget. At each of S states:
+
+1. **screen** (optional, ``screen=True``): the proposer's candidates are simulated once
+   exactly and only those that score go on -- ``k1`` of them at once, or (adaptive screen,
+   ``target > 0``) in waves of ``wave`` until a state has ``target`` scoring candidates or has
+   screened ``k1``, so easy tables leave more of the budget to the noisy samples. If none
+   scores, the best by exact reward is played and the rest of the budget is left unspent
+   (``SearchResult.n_sims`` says what was spent). Without the screen all ``k1`` go on.
+2. **noisy samples**, by ``schedule``:
+
+   * ``uniform``: ``samples`` noisy replays of every candidate (needs ``screen=False``, so the
+     budget is exactly ``k1 * samples + m1 * k2``);
+   * ``halving``: successive halving over the candidates left with the rest of the budget
+     (``budget`` less the screen and ``m1 * k2``): rounds of equal samples per candidate, the better half by
+     the statistic so far going on, the last round spending exactly what is left (its
+     remainder one extra sample each for the best-ranked candidates).
+
+   The noisy errors are the search's own draws from the noise model; with ``antithetic``
+   a candidate's samples come in pairs (z, -z).
+3. **expansion** (optional, ``m1 > 0``): the ``m1`` best candidates by the statistic are
+   expanded as in :mod:`billiards.search.lookahead` -- ``k2`` children proposed from the table
+   the candidate leaves (its exact outcome when screened, else its first noisy one) and
+   simulated exactly -- and valued ``stat + gamma * max r2``.
+
+The played action is the best by value; ties go to the higher statistic, then proposer order.
+Simulations per decision: at most ``budget`` (exactly ``budget`` whenever a candidate is left
+after the screen).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from billiards import domain
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams, simulate_batch
+from billiards.physics.noise import NoiseModel
+
+from .lookahead import VERIFIER_FOUL_PENALTY, SearchResult, verifier_reward
+
+SCHEDULES = ("uniform", "halving")
+
+
+@dataclass(frozen=True)
+class RobustConfig:
+    budget: int = 400
+    k1: int = 300
+    samples: int = 4  # noisy samples per candidate (schedule=uniform)
+    schedule: str = "halving"
+    screen: bool = True
+    quantile: Optional[float] = None  # None: the mean over samples
+    target: int = 10  # adaptive screen: stop screening a state once `target` candidates score (0: all k1 at once;
+    # no screen, screen=False: unused)
+    wave: int = 50  # candidates per screening wave (target > 0)
+    antithetic: bool = False  # noisy samples in antithetic pairs (z, -z)
+    m1: int = 0
+    k2: int = 0
+    gamma: float = 0.99
+    foul_penalty: float = VERIFIER_FOUL_PENALTY
+
+    def __post_init__(self):
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"robust search schedule must be one of {', '.join(SCHEDULES)}; got {self.schedule!r}")
+        if self.target < 0 or self.wave < 1:
+            raise ValueError(f"robust search needs target >= 0 and wave >= 1; got target={self.target}, wave={self.wave}")
+        if self.budget < 1 or self.k1 < 1 or self.samples < 1 or self.m1 < 0 or self.k2 < 0:
+            raise ValueError(f"robust search needs budget, k1, samples >= 1 and m1, k2 >= 0; got budget={self.budget}, "
+                             f"k1={self.k1}, samples={self.samples}, m1={self.m1}, k2={self.k2}")
+        if self.m1 > self.k1:
+            raise ValueError(f"robust search cannot expand m1={self.m1} of only k1={self.k1} candidates")
+        if self.quantile is not None and not (math.isfinite(self.quantile) and 0.0 <= self.quantile <= 1.0):
+            raise ValueError(f"quantile must lie in [0, 1] (or be null: the mean), got {self.quantile}")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
+        domain.check_coefficient("foul_penalty", self.foul_penalty)
+        expand = self.m1 * self.k2
+        if self.schedule == "uniform":
+            if self.screen:
+                raise ValueError("schedule=uniform gives every candidate `samples` noisy samples, so it takes "
+                                 "screen=false (a screen leaves a varying number of candidates)")
+            if self.k1 * self.samples + expand != self.budget:
+                raise ValueError(f"schedule=uniform spends k1 * samples + m1 * k2 = {self.k1} * {self.samples} + "
+                                 f"{self.m1} * {self.k2} = {self.k1 * self.samples + expand}, not the budget {self.budget}")
+        else:
+            rest = self.budget - expand - (self.k1 if self.screen else 0)
+            need = 1 if self.screen else self.k1
+            if rest < need:
+                raise ValueError(f"schedule=halving leaves {rest} simulations for noisy samples after "
+                                 f"{'the screen of k1=' + str(self.k1) + ' and ' if self.screen else ''}"
+                                 f"m1 * k2 = {expand}: it needs at least {need} of the budget {self.budget}")
+
+    @property
+    def sims_per_decision(self) -> int:
+        return self.budget
+
+
+def _stat(samples: list, quantile: Optional[float]) -> float:
+    return float(np.mean(samples)) if quantile is None else float(np.quantile(samples, quantile))
+
+
+def _plan(n_alive: int, left: int, rounds_left: int) -> tuple[int, np.ndarray]:
+    """How many candidates (the best-ranked ``k``) get how many samples each this round."""
+    if rounds_left <= 1:
+        k = min(n_alive, left)
+        per = np.full(k, left // k)
+        per[: left - per.sum()] += 1  # the remainder: one more each for the best-ranked
+        return k, per
+    per = max(1, (left // rounds_left) // n_alive)
+    k = min(n_alive, left // per)
+    return k, np.full(k, per)
+
+
+def _screen(positions, proposer, cfg: RobustConfig, rng, params):
+    """The exact screen: candidates (S, k1, 4), their exact rewards (S, k1; -inf where no
+    candidate was drawn), the tables they leave and how many each state screened."""
+    S, K = positions.shape[0], cfg.k1
+    if not cfg.target:
+        a1 = proposer.propose(positions, K, rng)
+        res = simulate_batch(np.repeat(positions, K, axis=0), a1.reshape(-1, 4), params)
+        exact = verifier_reward(res, cfg.foul_penalty).reshape(S, K)
+        return a1, exact, res.positions.reshape(S, K, 4, 2), np.full(S, K)
+    a1, exact = np.zeros((S, K, 4)), np.full((S, K), -np.inf)
+    leave = np.repeat(positions[:, None], K, axis=1).copy()
+    screened = np.zeros(S, dtype=np.int64)
+    while True:  # waves of candidates for the states that have screened fewer than k1 and found < target
+        active = np.flatnonzero((screened < K) & ((exact > 0).sum(axis=1) < cfg.target))
+        if not len(active):
+            return a1, exact, leave, screened
+        n = min(cfg.wave, K - int(screened[active].min()))
+        first = screened[active].min() == 0
+        # later waves drop the proposer's mode (candidate 0: the same shot every call)
+        cand = proposer.propose(positions[active], n if first else n + 1, rng)[:, 0 if first else 1:]
+        take = np.minimum(n, K - screened[active])
+        rows = np.repeat(active, take)
+        cols = np.concatenate([screened[s] + np.arange(t) for s, t in zip(active, take)])
+        a1[rows, cols] = np.concatenate([cand[i, :t] for i, t in enumerate(take)])
+        res = simulate_batch(positions[rows], a1[rows, cols], params)
+        exact[rows, cols] = verifier_reward(res, cfg.foul_penalty)
+        leave[rows, cols] = res.positions
+        screened[active] += take
+
+
+def _errors(noise: NoiseModel, counts: np.ndarray, antithetic: bool, rng) -> np.ndarray:
+    """Standard normal errors for rows grouped by candidate (``counts`` rows each); with
+    ``antithetic`` every second row of a group is the negative of the one before."""
+    z = noise.draw((int(counts.sum()),), rng)
+    if antithetic:
+        within = np.arange(len(z)) - np.repeat(np.cumsum(counts) - counts, counts)
+        odd = np.flatnonzero(within % 2 == 1)
+        z[odd] = -z[odd - 1]
+    return z
+
+
+def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.random.Generator,
+                  params: PhysicsParams = DEFAULT_PARAMS, noise: NoiseModel | None = None) -> SearchResult:
+    """Choose one action for each of S table states (positions (S, 4, 2)), each candidate scored
+    by noisy replays drawn from ``noise`` with ``rng`` (see the module docstring)."""
+    noise = noise if noise is not None else NoiseModel()
+    positions = np.asarray(positions, dtype=np.float64)
+    S, K = positions.shape[0], cfg.k1
+    n_sims = 0
+    if cfg.screen:
+        a1, exact, leave, screened = _screen(positions, proposer, cfg, rng, params)
+        has_leave = np.ones((S, K), dtype=bool)
+        n_sims += int(screened.sum())
+        alive = [list(np.flatnonzero(exact[s] > 0)) for s in range(S)]
+    else:
+        a1 = proposer.propose(positions, K, rng)
+        exact, screened = np.zeros((S, K)), np.zeros(S, dtype=np.int64)
+        leave = np.repeat(positions[:, None], K, axis=1).copy()  # the table each candidate leaves
+        has_leave = np.zeros((S, K), dtype=bool)
+        alive = [list(range(K)) for _ in range(S)]
+    samples = [[[] for _ in range(K)] for _ in range(S)]
+    left = [cfg.budget - cfg.m1 * cfg.k2 - int(screened[s]) if alive[s] else 0 for s in range(S)]
+    rounds = [1 if cfg.schedule == "uniform" else max(1, math.ceil(math.log2(max(len(a), 1))) + 1) for a in alive]
+    r = 0
+    while any(left):
+        rows_s, rows_k, counts = [], [], []
+        for s in range(S):
+            if not left[s]:
+                continue
+            if cfg.schedule == "uniform":
+                k, per = len(alive[s]), np.full(len(alive[s]), cfg.samples)
+            else:
+                k, per = _plan(len(alive[s]), left[s], rounds[s] - r)
+            alive[s] = alive[s][:k]
+            rows_s.extend([s] * k)
+            rows_k.extend(alive[s])
+            counts.extend(per.tolist())
+            left[s] -= int(per.sum())
+        counts = np.asarray(counts)
+        s_idx, k_idx = np.repeat(rows_s, counts), np.repeat(rows_k, counts)
+        played = noise.apply(a1[s_idx, k_idx], _errors(noise, counts, cfg.antithetic, rng), params)
+        res = simulate_batch(positions[s_idx], played, params)
+        reward = verifier_reward(res, cfg.foul_penalty)
+        n_sims += len(s_idx)
+        for i in range(len(s_idx)):
+            s, k = s_idx[i], k_idx[i]
+            samples[s][k].append(reward[i])
+            if not has_leave[s, k]:
+                leave[s, k], has_leave[s, k] = res.positions[i], True
+        for s in set(rows_s):  # rank by the statistic (ties: exact reward, proposer order); halve
+            keys = [(-_stat(samples[s][k], cfg.quantile), -exact[s, k], k) for k in alive[s]]
+            alive[s] = [k for *_, k in sorted(keys)]
+            if left[s] and r + 1 < rounds[s]:
+                alive[s] = alive[s][: (len(alive[s]) + 1) // 2]
+        r += 1
+
+    stat = np.full((S, K), -np.inf)
+    for s in range(S):
+        for k in range(K):
+            if samples[s][k]:
+                stat[s, k] = _stat(samples[s][k], cfg.quantile)
+    scored = np.isfinite(stat).any(axis=1)
+    stat = np.where(scored[:, None], stat, exact)  # nothing sampled (no candidate scored): exact reward
+    order = np.argsort(-stat, axis=1, kind="stable")
+    best = order[:, 0].copy()
+    value = stat[np.arange(S), best].copy()
+    if cfg.m1 and cfg.k2:
+        top = order[:, : cfg.m1]  # (S, M1)
+        rows = np.arange(S)[:, None]
+        mid = leave[rows, top].reshape(-1, 4, 2)
+        a2 = proposer.propose(mid, cfg.k2, rng)
+        res2 = simulate_batch(np.repeat(mid, cfg.k2, axis=0), a2.reshape(-1, 4), params)
+        n_sims += S * cfg.m1 * cfg.k2
+        r2 = verifier_reward(res2, cfg.foul_penalty).reshape(S, cfg.m1, cfg.k2)
+        first = stat[rows, top]
+        total = first + cfg.gamma * r2.max(axis=-1)
+        pick = np.lexsort((np.arange(cfg.m1)[None].repeat(S, 0), -first, -total), axis=-1)[:, 0]
+        best = top[np.arange(S), pick]
+        value = total[np.arange(S), pick]
+    rows = np.arange(S)
+    return SearchResult(a1[rows, best], value, stat[rows, best], leave[rows, best], n_sims)
+
+
+__all__ = ["RobustConfig", "SCHEDULES", "robust_search"]
