@@ -48,3 +48,39 @@ def test_a_gpu_proposer_needs_the_torch_implementation_and_a_gpu():
     if not torch.cuda.is_available():
         with pytest.raises((RuntimeError, AssertionError)):
             PolicyProposer(prop.policies, constrain_aim=True, extra_features=True, device="cuda")
+
+
+def _search(tmp_path, *overrides: str, timeout: float = 300):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, str(ROOT / "search.py"), *overrides], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def test_search_app_device_cpu_end_to_end(tmp_path):
+    """``python search.py device=cpu`` with a trained ensemble plays through the device path and
+    records the device; its decisions equal the default's (``auto``, the CPU here)."""
+    common = ["proposer=base", "physics=international", "protocol=p1", "protocol.n_innings=1", "protocol.shots=3",
+              "search.budget=60", "search.k1=20", "search.m1=4", "picture=false", "progress=false", "threads=1"]
+    results = {}
+    for device in ("cpu", "auto"):
+        proc = _search(tmp_path, *common, f"device={device}", f"hydra.run.dir={tmp_path / device}")
+        assert proc.returncode == 0, proc.stderr
+        import json
+
+        results[device] = json.loads((tmp_path / device / "results.json").read_text())
+    assert results["cpu"]["device"] == "cpu"
+    assert results["auto"]["device"] == ("cuda:0" if torch.cuda.is_available() else "cpu")
+    if not torch.cuda.is_available():
+        assert results["cpu"]["values"] == results["auto"]["values"]
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a GPU")
+@pytest.mark.parametrize("device", ["cuda", "cuda:1", "gpu"])
+def test_search_app_refuses_a_device_it_cannot_use_and_writes_nothing(tmp_path, device):
+    proc = _search(tmp_path, f"device={device}", timeout=120)
+    expected = "is not a device" if device == "gpu" else "this machine has no CUDA GPU that torch can use"
+    assert proc.returncode != 0 and expected in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert list(tmp_path.iterdir()) == []

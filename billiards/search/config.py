@@ -43,6 +43,7 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from billiards.app_config import BASIC_SWEEPER, job_configs, register_app
+from billiards.device import device_error
 from billiards.files import CONFIG_FILE, repo_path
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
 from billiards.physics.noise import NoiseConfig, noise_errors, noise_from_config
@@ -184,7 +185,8 @@ class GeometricProposerConfig:
     spin_low: float = -1.0  # vertical tip offset b in [spin_low, spin_high] (-1 draw, 1 follow)
     spin_high: float = 1.0
 
-    def build(self, params):
+    def build(self, params, device=None):
+        """The proposer (NumPy, on the CPU whatever ``device`` says)."""
         from .proposers import GeometricProposer
 
         return GeometricProposer(power_low=self.power_low, power_high=self.power_high, R=params.ball_radius,
@@ -213,10 +215,11 @@ class PolicyProposerConfig:
     def paths(self) -> list[str]:
         return [str(repo_path(c)) for c in self.checkpoints]
 
-    def build(self, params):
+    def build(self, params, device=None):
+        """The ensemble, its networks on ``device`` (a :class:`torch.device`; default the CPU)."""
         from .proposers import load_policy_proposer
 
-        return load_policy_proposer(self.paths(), name=self.name, params=params)
+        return load_policy_proposer(self.paths(), name=self.name, params=params, device=device)
 
 
 # The ensembles the repository ships (results/policies/<name>/seed{0,1,2}.pt, ~0.3 MB each):
@@ -257,6 +260,9 @@ class SearchAppConfig:
     progress: bool = True
     picture: bool = True
     resume: Optional[str] = None  # a stopped search's run dir: continue it (P3: from its next chain)
+    # where a policy proposer's networks run: auto | cpu | cuda | cuda:N (billiards/device.py); the
+    # simulator, the search and the geometric proposers stay on the CPU
+    device: str = "auto"
 
 
 # group -> (the key naming the option inside its node, {option: schema})
@@ -419,6 +425,8 @@ def errors(cfg) -> list[str]:
                 errs.append(f"search ({search.kind}): {err}")
     if cfg.seed < 0:
         errs.append(f"seed must be >= 0 (a numpy seed), got {cfg.seed}")
+    if (device_err := device_error(cfg.get("device", "auto"))) is not None:
+        errs.append(device_err)
     if isinstance(proposer, GeometricProposerConfig):
         if not 0.0 <= proposer.power_low <= proposer.power_high <= 1.0:
             errs.append(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "

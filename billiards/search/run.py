@@ -12,6 +12,7 @@ from pathlib import Path
 import numba
 from omegaconf import OmegaConf
 
+from billiards.device import resolve_device
 from billiards.files import CONFIG_FILE, RESULTS_FILE, atomic_write_text
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import params_from_config, physics_record
@@ -26,9 +27,10 @@ from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, read_chains, run
 __all__ = ["CONFIG_FILE", "RESULTS_FILE", "describe", "make_actor", "make_proposer", "resume_config", "run"]
 
 
-def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS):
-    """The proposer a ``proposer`` config node describes, for the table ``params``."""
-    return option("proposer", cfg).build(params)
+def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS, device=None):
+    """The proposer a ``proposer`` config node describes, for the table ``params``; a policy
+    ensemble's networks on ``device`` (a :class:`torch.device`, default the CPU)."""
+    return option("proposer", cfg).build(params, device=device)
 
 
 def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchActor:
@@ -38,7 +40,7 @@ def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchA
     return option("search", cfg.search).actor(proposer, cfg.seed, params, noise=noise_from_config(cfg.get("noise")))
 
 
-RUNTIME_KEYS = ("threads", "progress", "picture")  # taken from the command line when resuming
+RUNTIME_KEYS = ("threads", "progress", "picture", "device")  # taken from the command line when resuming
 
 
 def describe(cfg, params) -> str:
@@ -79,7 +81,8 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     noise = noise_from_config(cfg.get("noise"))
     print(f"search: {describe(cfg, params)}\noutput: {out_dir}", flush=True)
     warm_up(params, log=lambda msg: print(msg, flush=True))
-    actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
+    device = resolve_device(cfg.get("device", "auto"))
+    actor = make_actor(cfg, make_proposer(cfg.proposer, params, device=device), params)
     proto = cfg.protocol.name
     ledger = out_dir / CHAINS_FILE
     interrupted = False
@@ -104,6 +107,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         search=cfg.search.kind,
         **physics_record(params),
         **noise_record(noise),
+        device=str(device),
         config=OmegaConf.to_container(cfg, resolve=True),
         commit=git_commit(),
     )
