@@ -74,3 +74,14 @@ def write_json(path: Path | None, summary: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(summary, indent=2) + "\n")
     print("wrote", path)
+
+
+def report_fingerprint(sections: dict[str, str], total: str, seconds: float, settings: str, expect: str | None,
+                       width: int = 40) -> None:
+    """Print a fingerprint's section hashes and its total; exit 1 if ``expect`` is given and differs."""
+    for name, digest in sections.items():
+        print(f"{name:{width}s} {digest}")
+    print(f"{'TOTAL':{width}s} {total}   ({seconds:.0f} s, {settings})")
+    if expect is not None and expect != total:
+        print("MISMATCH: expected", expect)
+        sys.exit(1)

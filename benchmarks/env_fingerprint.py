@@ -32,6 +32,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import torch  # noqa: E402
+from _shots import report_fingerprint  # noqa: E402
 from torchrl.envs import DoubleToFloat  # noqa: E402
 
 from billiards.envs import Billiards4BallInningEnv, make_env  # noqa: E402
@@ -142,12 +143,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     sections, total = fingerprint(args.steps, args.seed)
-    for name, digest in sections.items():
-        print(f"{name:40s} {digest}")
-    print(f"{'TOTAL':40s} {total}   ({time.perf_counter() - t0:.0f} s, --steps {args.steps} --seed {args.seed})")
-    if args.expect is not None and args.expect != total:
-        print("MISMATCH: expected", args.expect)
-        sys.exit(1)
+    report_fingerprint(sections, total, time.perf_counter() - t0, f"--steps {args.steps} --seed {args.seed}", args.expect)
 
 
 if __name__ == "__main__":

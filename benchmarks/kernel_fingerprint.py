@@ -36,7 +36,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
-from _shots import random_shots  # noqa: E402
+from _shots import random_shots, report_fingerprint  # noqa: E402
 from fuzz import make_actions, make_racks, uniform_actions  # noqa: E402
 
 from billiards.physics import (  # noqa: E402
@@ -139,13 +139,8 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     fp = fingerprint(args.shots, args.seed)
-    for name, digest in fp.sections.items():
-        print(f"{name:32s} {digest}")
-    total = fp.total.hexdigest()
-    print(f"{'TOTAL':32s} {total}   ({time.perf_counter() - t0:.0f} s, --shots {args.shots} --seed {args.seed})")
-    if args.expect is not None and args.expect != total:
-        print("MISMATCH: expected", args.expect)
-        sys.exit(1)
+    report_fingerprint(fp.sections, fp.total.hexdigest(), time.perf_counter() - t0, f"--shots {args.shots} --seed {args.seed}",
+                       args.expect, width=32)
 
 
 if __name__ == "__main__":

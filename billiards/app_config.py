@@ -116,6 +116,25 @@ def job_configs(config: DictConfig) -> list[DictConfig]:
     return [loader.load_sweep_config(config, list(job)) for batch in batches for job in batch]
 
 
+def validate_jobs(config: DictConfig, validate, errors: tuple[type[BaseException], ...] = (Exception,)) -> None:
+    """Compose every job of a basic-sweeper multirun and ``validate`` each, before any job
+    runs: SystemExit naming every failing job (``errors`` are the exceptions that mean an
+    invalid config), or naming the job that does not compose (Hydra would only warn and go on)."""
+    try:
+        jobs = job_configs(config)
+    except Exception as err:
+        raise SystemExit(f"Error: {err}") from None
+    errs = []
+    for job in jobs:
+        try:
+            validate(job)
+        except errors as err:
+            errs.append(f"job {list(job.hydra.overrides.task)}: {err}")
+    if errs:
+        raise SystemExit("Error: " + "\n".join(errs))
+
+
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
 
-__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "job_configs", "register_app", "register_resolvers"]
+__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "job_configs", "register_app", "register_resolvers",
+           "validate_jobs"]

@@ -33,8 +33,7 @@ from omegaconf import MISSING, DictConfig
 
 from billiards.device import device_error
 from billiards.app_config import fixed_job_config as _fixed_job_config
-from billiards.app_config import job_configs as _job_configs
-from billiards.app_config import register_app
+from billiards.app_config import BASIC_SWEEPER, register_app, validate_jobs
 from billiards.files import CHECKPOINT_FILE, repo_path
 from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
@@ -422,21 +421,10 @@ class ValidateConfig(Callback):
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         print(f"sweep: {config.hydra.sweep.dir}", flush=True)
-        if config.hydra.sweeper._target_ != "hydra._internal.core_plugins.basic_sweeper.BasicSweeper":
+        if config.hydra.sweeper._target_ != BASIC_SWEEPER:
             self._check_fixed_part(config)
             return
-        errs = []
-        try:
-            jobs = _job_configs(config)
-        except Exception as err:  # Hydra would only warn and go on
-            raise SystemExit(f"Error: {err}") from None
-        for job in jobs:
-            try:
-                validate(job)
-            except Exception as err:
-                errs.append(f"job {list(job.hydra.overrides.task)}: {err}")
-        if errs:
-            raise SystemExit("Error: " + "\n".join(errs))
+        validate_jobs(config, validate)
 
     @staticmethod
     def _check_fixed_part(config: DictConfig) -> None:

@@ -42,7 +42,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from billiards.app_config import BASIC_SWEEPER, job_configs, register_app
+from billiards.app_config import BASIC_SWEEPER, register_app, validate_jobs
 from billiards.device import device_error
 from billiards.files import CONFIG_FILE, repo_path
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
@@ -484,18 +484,7 @@ class ValidateSearchConfig(Callback):
         if config.hydra.sweeper._target_ != BASIC_SWEEPER:
             self.on_run_start(config)
             return
-        try:
-            jobs = job_configs(config)
-        except Exception as err:  # a job that does not compose; Hydra would only warn and go on
-            raise SystemExit(f"Error: {err}") from None
-        errs = []
-        for job in jobs:
-            try:
-                validate(job)
-            except ValueError as err:
-                errs.append(f"job {list(job.hydra.overrides.task)}: {err}")
-        if errs:
-            raise SystemExit("Error: " + "\n".join(errs))
+        validate_jobs(config, validate, errors=(ValueError,))
 
 
 __all__ = ["FORGIVING", "GeometricProposerConfig", "H2SearchConfig", "OPTIONS", "P1Config", "P3Config",
