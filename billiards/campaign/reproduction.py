@@ -75,11 +75,10 @@ def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out
             state = states[src.key]
             cpu_s += state.cpu_seconds
             commits += list(state.commits)
-            run_dir = entry_dir(root, campaign, src)
-            run = read_run(run_dir) if (run_dir / "config.yaml").is_file() else None
-            if run is None or "summary.json" not in {p.name for p in run_dir.iterdir()}:
+            if state.state != "done":  # the ledger's one definition: eval.json and summary.json written
                 continue
-            runs.append(run)
+            run_dir = entry_dir(root, campaign, src)
+            runs.append(read_run(run_dir))
             if out is not None:
                 _copy(run_dir, out / "training" / campaign.name / src.key, SMALL_RUN_FILES + TRAIN_EXTRA_FILES)
         paper_row = paper_spec["rows"].get(variants[variant], {})
@@ -115,10 +114,8 @@ def search_rows(campaign: Campaign, root: Path, states: dict[str, object], out: 
         method, protocol = cell.rsplit("_", 1)
         run_dir = entry_dir(root, campaign, e)
         path = run_dir / "results.json"
-        res = json.loads(path.read_text()) if path.is_file() else None
-        if res is not None and res.get("extra", {}).get("partial"):
-            res = None
         state = states[e.key]
+        res = json.loads(path.read_text()) if state.state == "done" else None
         row = {"table": 6, "proposer": proposer, "method": method, "protocol": protocol,
                "complete": res is not None, "cpu_hours": round(state.cpu_seconds / 3600, 3),
                "commits": list(state.commits), "proposer_steps": _proposer_steps(campaign, root, proposer)}
