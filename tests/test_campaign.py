@@ -257,6 +257,13 @@ def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     (run_dir / "config.yaml").write_text(yaml.safe_dump({**saved, "algo": {**saved["algo"], "lr": 0.5}}))
     rc, out = cli("status", *common, "--check-config")
     assert rc == 4 and "t1/a/seed0: algo.lr = 0.5 in the run, 0.001 now" in out
+    # a run started before an option existed (no `noise` node) has not drifted: a resume gives the
+    # option its default; a key missing under a group its arguments set (algo=sac) has
+    (run_dir / "config.yaml").write_text(yaml.safe_dump({k: v for k, v in saved.items() if k != "noise"}))
+    assert "noise" in saved and cli("status", *common, "--check-config")[0] == 0
+    (run_dir / "config.yaml").write_text(yaml.safe_dump({**saved, "algo": {k: v for k, v in saved["algo"].items() if k != "lr"}}))
+    rc, out = cli("status", *common, "--check-config")
+    assert rc == 4 and "t1/a/seed0: algo.lr = None in the run, 0.001 now" in out
 
     # the definition changes: the finished run is stale, not re-run without --restart-stale
     _tiny_spec(spec, [a if a != "algo.batch_size=32" else "algo.batch_size=16" for a in TINY_ARGS])

@@ -6,7 +6,9 @@ one variant started before and after the change would train different configs. T
 each started training run's campaign arguments with the *current* ``conf/`` (Hydra's compose
 API, in this process) and lists every key whose value differs from the run's own
 ``config.yaml``, ignoring run-time switches (the trainer's ``RUNTIME_KEYS`` and
-``RESUME_KEYS``), keys the schema has retired (``RETIRED_KEYS``) and the logger. Runs with
+``RESUME_KEYS``), keys the schema has retired (``RETIRED_KEYS``), the logger, and keys the
+schema gained after the run started that its arguments do not set (a resume gives them their
+defaults, which keep the old behaviour: ``noise`` none). Runs with
 drift should start over (``--restart-stale`` after changing their arguments, or delete the
 run dir).
 """
@@ -47,12 +49,25 @@ def config_drift(campaign: Campaign, root: Path, entries: list[Entry]) -> dict[s
             now = flatten_config(OmegaConf.to_container(compose("config", overrides=[fill(a, root) for a in e.args]),
                                                resolve=True, enum_to_str=True))
             saved = flatten_config(yaml.safe_load(path.read_text()) or {})
+            named = {a.split("=", 1)[0].lstrip("+~") for a in e.args}
             diff = [(k, saved.get(k), now.get(k)) for k in sorted(set(now) | set(saved))
-                    if k not in ignored and not k.startswith("logger.") and saved.get(k) != now.get(k)]
+                    if k not in ignored and not k.startswith("logger.") and saved.get(k) != now.get(k)
+                    and not _added_since(k, saved, named)]
             if diff:
                 out[e.key] = diff
     GlobalHydra.instance().clear()
     return out
+
+
+def _added_since(key: str, saved: dict, named: set[str]) -> bool:
+    """A key the schema gained after the run started (absent from its config.yaml) and that the
+    run's arguments do not set: a resume gives it its default, which by the project's rule for
+    new options keeps the old behaviour (``noise`` none, ``device`` the command line's), so it
+    is not drift."""
+    if key in saved:
+        return False
+    parts = key.split(".")
+    return not any(".".join(parts[:i]) in named for i in range(1, len(parts) + 1))
 
 
 def drift_text(drift: dict[str, list[tuple[str, object, object]]], checked: int) -> str:
