@@ -165,8 +165,9 @@ def _take_ball(positions: np.ndarray, index: np.ndarray) -> np.ndarray:
 
 
 def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius,
-               max_half_width: float = AIM_MAX_HALF_WIDTH) -> tuple[np.ndarray, np.ndarray]:
-    """The cone of aim angles whose straight path makes the white hit the nearest red.
+               max_half_width: float = AIM_MAX_HALF_WIDTH, red: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The cone of aim angles whose straight path makes the white hit the nearest red (or the
+    ball ``red`` (...,) names, e.g. the farther red ``RED1 + RED2 - nearest_red(positions)``).
 
     With ``delta = c_red - c_white`` (nearest red) and ``d = |delta|``:
 
@@ -186,7 +187,8 @@ def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius,
     Returns ``(theta_target, half_width)``, each (...,) float64, theta_target in (-pi, pi].
     """
     positions = np.asarray(positions, dtype=np.float64)
-    delta = _take_ball(positions, nearest_red(positions)) - positions[..., WHITE, :]
+    red = nearest_red(positions) if red is None else np.asarray(red, dtype=np.int64)
+    delta = _take_ball(positions, red) - positions[..., WHITE, :]
     d = np.hypot(delta[..., 0], delta[..., 1])
     theta_target = np.arctan2(delta[..., 1], delta[..., 0])
     half_width = np.arcsin(np.minimum(2.0 * R / d, math.sin(max_half_width)))

@@ -42,13 +42,17 @@ class GeometricProposer:
     rather than a full hit or a graze) and the vertical tip offset ``b`` in
     ``[spin_low, spin_high]`` (follow rather than draw). Each draw is the default draw mapped
     onto the narrower range, so the defaults give exactly the default candidates.
+
+    ``far_share`` > 0 sends that share of the candidates (never candidate 0) into the cone of
+    the *farther* red instead, the same u on that cone (one more uniform draw per candidate
+    decides; with the default 0 nothing more is drawn).
     """
 
     name = "geometric"
 
     def __init__(self, power_low: float = 0.15, power_high: float = 0.9, power_mode: float = 0.5,
                  R: float = DEFAULT_PARAMS.ball_radius, u_low: float = 0.0, u_high: float = 1.0,
-                 spin_low: float = -1.0, spin_high: float = 1.0):
+                 spin_low: float = -1.0, spin_high: float = 1.0, far_share: float = 0.0):
         if not 0.0 <= power_low <= power_high <= 1.0:
             raise ValueError(f"GeometricProposer needs 0 <= power_low <= power_high <= 1, got {power_low}, {power_high}")
         if not 0.0 <= u_low <= u_high <= 1.0:
@@ -56,7 +60,10 @@ class GeometricProposer:
         if not -1.0 <= spin_low <= spin_high <= 1.0:
             raise ValueError(f"GeometricProposer needs -1 <= spin_low <= spin_high <= 1, got {spin_low}, {spin_high}")
         self.power_low, self.power_high, self.power_mode, self.R = power_low, power_high, power_mode, R
+        if not 0.0 <= far_share <= 1.0:
+            raise ValueError(f"GeometricProposer needs 0 <= far_share <= 1, got {far_share}")
         self.u_low, self.u_high, self.spin_low, self.spin_high = u_low, u_high, spin_low, spin_high
+        self.far_share = far_share
 
     def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
         S = positions.shape[0]
@@ -69,6 +76,12 @@ class GeometricProposer:
             ab[..., 1] = self.spin_low + 0.5 * (ab[..., 1] + 1.0) * (self.spin_high - self.spin_low)
         u[:, 0], p[:, 0], ab[:, 0] = 0.0, self.power_mode, 0.0
         theta = domain.constrained_theta(positions[:, None], u, self.R)
+        if self.far_share > 0:
+            far = rng.random((S, k)) < self.far_share
+            far[:, 0] = False
+            other = domain.RED1 + domain.RED2 - domain.nearest_red(positions)
+            target, half = domain.aim_window(positions, self.R, red=other)
+            theta = np.where(far, target[:, None] + u * half[:, None], theta)
         return np.concatenate([theta[..., None], p[..., None], ab], axis=-1)
 
 
