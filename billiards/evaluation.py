@@ -7,7 +7,12 @@ drawn from ``seed`` (or the canonical rack), deterministic policy
 
 * points per inning: mean and std (population std, ddof = 0) over innings, and the best inning;
 * foul innings %: share of innings with at least one foul;
-* foul % per shot and success (score) % per shot, over all ``n_innings * max_shots`` shots.
+* foul % per shot and success (score) % per shot, over all ``n_innings * max_shots`` shots;
+* points to the first miss (``first_miss_points``, mean ``first_miss_mean``): the shots each
+  inning scores before its first miss or foul. With a deterministic policy and exact play the
+  inning is, up to that shot, the inning an end-at-first-miss protocol plays from the same
+  rack, so from random racks this is the paper's "random-start eval" (Table 3's "rand. eval",
+  which for i.i.d. success p per shot is about p / (1 - p)).
 
 Execution noise (``noise=``, :mod:`billiards.physics.noise`; off by default) perturbs every
 shot the policy commands; the env draws the errors from its own generator seeded with
@@ -47,6 +52,13 @@ class EvalResult:
     seed: int = 0
     points: list[int] = dataclasses.field(default_factory=list)  # per inning
     noise: str = "none"  # the execution noise the shots were played under (NoiseModel.describe())
+    # per inning, the points scored before its first miss or foul (empty in results written before it existed)
+    first_miss_points: list[int] = dataclasses.field(default_factory=list)
+
+    @property
+    def first_miss_mean(self) -> float | None:
+        """Mean points before the first miss (the end-at-first-miss inning), None if not recorded."""
+        return float(np.mean(self.first_miss_points)) if self.first_miss_points else None
 
     def to_json(self, path: str | Path) -> None:
         """Write the result as JSON, atomically (:func:`billiards.files.atomic_write_text`)."""
@@ -69,6 +81,7 @@ def summarize(score: np.ndarray, foul: np.ndarray, *, start: str = "random", see
     """EvalResult from per-shot outcomes ``score``, ``foul`` of shape (n_innings, max_shots)."""
     score, foul = np.asarray(score, dtype=bool), np.asarray(foul, dtype=bool)
     points = score.sum(axis=1)
+    streak = np.where(score.all(axis=1), score.shape[1], np.argmin(score, axis=1))  # leading scores
     return EvalResult(
         mean=float(points.mean()),
         std=float(points.std()),
@@ -83,6 +96,7 @@ def summarize(score: np.ndarray, foul: np.ndarray, *, start: str = "random", see
         seed=int(seed),
         points=[int(p) for p in points],
         noise=noise,
+        first_miss_points=[int(k) for k in streak],
     )
 
 

@@ -71,15 +71,15 @@ PAPER = {
         "title": "Table 3: structure-free aids on the plain SAC baseline (paper: 3 seeds, 1M steps; "
                  "the RM rows cost 10^7 offline shots; plain and aim rows shared with Table 4)",
         "rows": {
-            "plain": {"mean": 0.487, "std": 0.097, "max": 4, "foul_sh": 20.5, "succ_sh": 4.9},
-            "staged": {"mean": 0.407, "std": 0.052, "max": 4},
-            "rm": {"mean": 0.840, "std": 0.000, "max": 4},
+            "plain": {"mean": 0.487, "std": 0.097, "max": 4, "foul_sh": 20.5, "succ_sh": 4.9, "rand_eval": 0.053},
+            "staged": {"mean": 0.407, "std": 0.052, "max": 4, "rand_eval": 0.053},
+            "rm": {"mean": 0.840, "std": 0.000, "max": 4, "rand_eval": 0.087},
             "aim": {"mean": 2.570, "std": 0.128, "max": 6, "foul_sh": 15.4, "succ_sh": 25.7},
             "rm_aim": {"mean": 2.357, "std": 0.139},
         },
         "labels": {"plain": "plain baseline", "staged": "staged curriculum", "rm": "RM-guided",
                    "aim": "aim constraint", "rm_aim": "RM + aim constraint"},
-        "columns": ["mean", "max", "foul_sh", "succ_sh"],
+        "columns": ["mean", "max", "foul_sh", "succ_sh", "rand_eval"],
     },
     "table4": {
         "title": "Table 4: domain knowledge on the SAC baseline (paper: 3 seeds, 1M steps)",
@@ -124,6 +124,9 @@ COLUMN_TITLES = {
     "foul_sh": "foul/sh (%)",
     "succ_sh": "succ/sh (%)",
     "canonical": "canonical mean",
+    # the paper's "rand. eval" (Table 3): random-start innings that end at the first miss, read as
+    # the points before the first miss of the random-start evaluation (billiards/evaluation.py)
+    "rand_eval": "rand. eval",
 }
 GENERIC_COLUMNS = ["mean", "max", "foul_inn", "foul_sh", "succ_sh"]
 
@@ -349,6 +352,8 @@ def aggregate(runs: list[Run]) -> dict:
     canonical = [r.extra_evals["canonical"]["mean"] for r in runs if "canonical" in r.extra_evals]
     if not canonical:
         canonical = [r.eval["mean"] for r in runs if r.eval.get("start") == "canonical"]
+    random_evals = [r.eval if r.eval.get("start", "random") == "random" else r.extra_evals.get("random") for r in runs]
+    first_miss = [np.mean(e["first_miss_points"]) for e in random_evals if e and e.get("first_miss_points")]
     seconds = [r.summary["train_seconds"] for r in runs if "train_seconds" in r.summary]
     cpu = [r.summary["cpu_seconds"] for r in runs if "cpu_seconds" in r.summary]
     frames = sorted({r.frames for r in runs})
@@ -361,6 +366,8 @@ def aggregate(runs: list[Run]) -> dict:
         "foul_sh": float(np.mean([r.eval["foul_per_shot_pct"] for r in runs])),
         "succ_sh": float(np.mean([r.eval["success_per_shot_pct"] for r in runs])),
         "canonical": float(np.mean(canonical)) if canonical else None,
+        # only when every run recorded it (runs finished before it existed did not)
+        "rand_eval": float(np.mean(first_miss)) if first_miss and len(first_miss) == len(runs) else None,
         "seeds": sorted(r.config.get("seed") for r in runs),
         "frames": frames,
         "minutes": float(np.mean(seconds)) / 60 if seconds else None,
@@ -377,6 +384,8 @@ def _fmt(col: str, row: dict | None) -> str:
         return str(int(row["max"]))
     if col == "canonical":
         return f"{row['canonical']:.2f}"
+    if col == "rand_eval":
+        return f"{row['rand_eval']:.3f}"
     return f"{row[col]:.1f}"
 
 

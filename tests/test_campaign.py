@@ -460,3 +460,23 @@ def test_report_writes_reproduction_rows_from_finished_runs(tmp_path):
 
     rc, text = cli("report", "--spec", str(spec), "--root", str(tmp_path / "nowhere"), "--out", str(out))
     assert rc == 2 and "has not started" in text
+
+
+def test_rand_eval_is_the_points_before_the_first_miss_of_the_random_start_evaluation(tmp_path):
+    """Table 3's "rand. eval" column: the mean over seeds of each run's mean points before the
+    first miss from random racks (eval.json when its start is random, else eval_random.json);
+    missing ("–") unless every run recorded it."""
+    from billiards.report import PAPER, aggregate, read_run
+
+    runs = []
+    for seed, streaks in ((0, [0, 1, 0, 0]), (1, [2, 0, 0, 0])):
+        d = tmp_path / f"seed{seed}"
+        _fake_run(d, "table3", seed, 0.5, 3, 0.0, 400)
+        ev = json.loads((d / "eval.json").read_text())
+        (d / "eval.json").write_text(json.dumps({**ev, "first_miss_points": streaks}))
+        runs.append(read_run(d))
+    assert aggregate(runs)["rand_eval"] == pytest.approx(0.375)
+    legacy = tmp_path / "seed2"
+    _fake_run(legacy, "table3", 2, 0.5, 3, 0.0, 400)
+    assert aggregate([*runs, read_run(legacy)])["rand_eval"] is None
+    assert "rand_eval" in PAPER["table3"]["columns"] and PAPER["table3"]["rows"]["plain"]["rand_eval"] == 0.053

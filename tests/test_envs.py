@@ -4,6 +4,8 @@ import math
 import warnings
 
 import gymnasium as gym
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -582,6 +584,26 @@ def test_summarize_statistics():
     assert res.foul_per_shot_pct == pytest.approx(100 * 2 / 12)
     assert res.success_per_shot_pct == pytest.approx(100 * 7 / 12)
     assert res.n_innings == 4 and res.shots == 12 and res.max_shots == 3
+    assert res.first_miss_points == [2, 0, 1, 3] and res.first_miss_mean == pytest.approx(1.5)
+
+
+def test_points_to_the_first_miss_are_the_end_at_first_miss_innings():
+    """From the same racks, a deterministic policy's continue-on-miss inning is, up to its first
+    miss, the inning the reset-on-miss env plays: its leading points are that inning's points."""
+    n = 400
+    res = evaluate(nearest_red_policy(), n_innings=n, max_shots=4, seed=5)
+    env = make_env(n, on_miss="reset", max_shots=4, seed=5)
+    td = env.reset()
+    points, alive = np.zeros(n, dtype=int), np.ones(n, dtype=bool)
+    for _ in range(4):
+        td = env.step(nearest_red_policy()(td))
+        points += (td["next", "score"][:, 0].numpy() & alive)
+        alive &= ~td["next", "done"][:, 0].numpy()
+        td = step_mdp(td)
+    assert res.first_miss_points == points.tolist()
+    assert res.first_miss_mean == pytest.approx(points.mean()) and 0 < points.sum() < sum(res.points)
+    legacy = {k: v for k, v in dataclasses.asdict(res).items() if k != "first_miss_points"}
+    assert EvalResult(**legacy).first_miss_mean is None  # an eval.json written before the field
 
 
 def test_evaluate_protocol_and_json(tmp_path):

@@ -170,7 +170,7 @@ def _fig(v, key: str) -> str:
         return "–"
     if key == "max":
         return f"{v:.0f}"
-    if key in ("mean", "std"):
+    if key in ("mean", "std", "rand_eval"):
         return f"{v:.3f}"
     if key == "canonical":
         return f"{v:.2f}"

@@ -14,7 +14,8 @@ the options live at ``schema/<group>/<option>``, outside the option groups:
 * ``protocol``: ``p1`` (:class:`P1Config`) | ``p3`` (:class:`P3Config`), ``conf/protocol/*.yaml``;
 * ``noise``: the execution noise (:class:`~billiards.physics.noise.NoiseConfig`, ``conf/noise/*.yaml``,
   shared with train.py);
-* ``proposer``: ``geometric`` or ``forgiving`` (:class:`GeometricProposerConfig`) or a policy ensemble
+* ``proposer``: ``geometric`` or ``forgiving`` (:class:`GeometricProposerConfig`), ``ranked``
+  (:class:`RankedProposerConfig`: geometric draws ranked by a learned shot ranker) or a policy ensemble
   (:class:`PolicyProposerConfig`). The shipped ensembles are one config parametrised by name,
   :func:`shipped_proposer`: ``proposer=<name>`` for every name of :data:`SHIPPED_PROPOSERS`
   plays ``results/policies/<name>/seed{0,1,2}.pt``. Policies of your own:
@@ -201,6 +202,39 @@ class GeometricProposerConfig:
 FORGIVING = dict(name="forgiving", power_low=0.5, power_high=1.0, u_low=0.3, u_high=0.9, spin_low=-0.2, spin_high=1.0)
 
 
+RANKER_COMMAND = "python -m billiards.search.ranker --out {out} --noise {noise}"
+
+
+@dataclass
+class RankedProposerConfig:
+    """Geometric draws ranked by a learned shot ranker (:mod:`billiards.search.ranker`): per
+    decision and state, ``pool`` draws (at least as many as the search asks for), the best by
+    the ranker first. Nothing is simulated to rank them. ``ranker`` is the ranker file (a
+    relative path: from the working directory if it exists there, else from the repository
+    root); the shipped one, ``results/rankers/fastfiz/ranker.pt``, was trained for
+    ``noise=fastfiz`` on ``korean_medium`` (``command`` says how)."""
+
+    kind: str = "ranked"
+    name: str = "ranked"
+    ranker: str = "results/rankers/fastfiz/ranker.pt"
+    pool: int = 2000
+    command: Optional[str] = RANKER_COMMAND.format(out="results/rankers/fastfiz/ranker.pt", noise="fastfiz")
+
+    def path(self) -> str:
+        return str(repo_path(self.ranker))
+
+    def build(self, params, device=None):
+        """The proposer (NumPy, on the CPU whatever ``device`` says); a ranker trained on
+        another table warns (PhysicsMismatchWarning)."""
+        from billiards.physics.config import warn_physics_mismatch
+
+        from .ranker import RankedProposer, ShotRanker
+
+        ranker = ShotRanker.load(self.path())
+        warn_physics_mismatch(f"proposer {self.name!r} (ranker {self.ranker})", ranker.params, params)
+        return RankedProposer(ranker, pool=self.pool, name=self.name, params=params)
+
+
 @dataclass
 class PolicyProposerConfig:
     """An ensemble of trained policies: ``checkpoints`` are exported policy files, training run
@@ -269,7 +303,8 @@ class SearchAppConfig:
 OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
     "search": ("kind", {"h2": H2SearchConfig, "puct": PUCTSearchConfig, "robust": RobustSearchConfig}),
     "protocol": ("name", {"p1": P1Config, "p3": P3Config}),
-    "proposer": ("kind", {"geometric": GeometricProposerConfig, "policy": PolicyProposerConfig}),
+    "proposer": ("kind", {"geometric": GeometricProposerConfig, "policy": PolicyProposerConfig,
+                          "ranked": RankedProposerConfig}),
 }
 
 # `search_schema` (the root), schema/{search,protocol,proposer}/<option>, schema/physics, the
@@ -277,11 +312,12 @@ OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
 # hold the other groups' options as YAML)
 def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConfig]:
     """The ``proposer=`` options: ``geometric``, ``forgiving`` (geometric, narrowed for noise:
-    :data:`FORGIVING`), the shipped ensembles by name, and ``policy``
+    :data:`FORGIVING`), ``ranked`` (geometric draws ranked by a learned shot ranker,
+    :class:`RankedProposerConfig`), the shipped ensembles by name, and ``policy``
     (``proposer=policy proposer.checkpoints=[a.pt,b.pt,...]``: an ensemble of your own)."""
     return {"geometric": GeometricProposerConfig(), "forgiving": GeometricProposerConfig(**FORGIVING),
             **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS},
-            "policy": PolicyProposerConfig(name="policy", checkpoints=[])}
+            "policy": PolicyProposerConfig(name="policy", checkpoints=[]), "ranked": RankedProposerConfig()}
 
 
 _store = register_app("search_schema", SearchAppConfig, {group: schemas for group, (_, schemas) in OPTIONS.items()})
@@ -444,6 +480,12 @@ def errors(cfg) -> list[str]:
         if missing:
             how = f" (trained with: {proposer.command})" if proposer.command else ""
             errs.append(f"proposer {proposer.name!r}: no checkpoint at {', '.join(missing)}{how}")
+    if isinstance(proposer, RankedProposerConfig):
+        if proposer.pool < 1:
+            errs.append(f"proposer.pool must be >= 1, got {proposer.pool}")
+        if not Path(proposer.path()).is_file():
+            how = f" (trained with: {proposer.command})" if proposer.command else ""
+            errs.append(f"proposer {proposer.name!r}: no ranker file at {proposer.ranker}{how}")
     if protocol is not None:
         for key in (f.name for f in dataclasses.fields(protocol) if f.name != "name"):
             if getattr(protocol, key) < 1:
@@ -488,6 +530,6 @@ class ValidateSearchConfig(Callback):
 
 
 __all__ = ["FORGIVING", "GeometricProposerConfig", "H2SearchConfig", "OPTIONS", "P1Config", "P3Config",
-           "PUCTSearchConfig", "PolicyProposerConfig", "RobustSearchConfig", "SHIPPED_PROPOSERS", "SearchAppConfig",
+           "PUCTSearchConfig", "PolicyProposerConfig", "RankedProposerConfig", "RobustSearchConfig", "SHIPPED_PROPOSERS", "SearchAppConfig",
            "SearchConfigError", "ValidateSearchConfig", "errors", "option", "proposer_options", "saved_config",
            "shipped_proposer", "typed", "upgrade", "validate"]

@@ -168,7 +168,8 @@ class RankedProposer:
     """Geometric candidates ranked by a :class:`ShotRanker`: for each state, ``pool`` draws of
     the geometric proposer (:data:`POOL_DRAWS`: both reds, the whole cone, every power and
     spin), the best ``k`` by the ranker's score, best first (candidate 0 is the ranker's pick).
-    Nothing is simulated. ``k > pool`` is refused (it would repeat shots)."""
+    Nothing is simulated. Asked for more than ``pool`` candidates it ranks ``k`` draws (all of
+    them, best first)."""
 
     def __init__(self, ranker: ShotRanker, pool: int = 2000, name: str = "ranked",
                  params: PhysicsParams = DEFAULT_PARAMS):
@@ -178,11 +179,8 @@ class RankedProposer:
         self.draws = GeometricProposer(R=params.ball_radius, **POOL_DRAWS)
 
     def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
-        if k > self.pool:
-            raise ValueError(f"proposer {self.name!r} ranks a pool of {self.pool} draws: it cannot give k={k} "
-                             f"candidates (raise proposer.pool)")
         positions = np.asarray(positions, dtype=np.float64)
-        cand = self.draws.propose(positions, self.pool, rng)
+        cand = self.draws.propose(positions, max(k, self.pool), rng)
         logit = self.ranker.score(positions[:, None], cand, self.params)
         top = np.argsort(-logit, axis=1, kind="stable")[:, :k]
         return np.take_along_axis(cand, top[..., None], axis=1)
