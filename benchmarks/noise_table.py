@@ -27,8 +27,9 @@ P1 = ["protocol=p1", "protocol.n_innings={innings}", "protocol.shots={shots}"]
 P3 = ["protocol=p3", "protocol.seeds={seeds}", "protocol.cap={cap}"]
 
 
-def rows(budget: int) -> dict[str, list[str]]:
-    """Row name -> search.py overrides (without noise, budget and protocol)."""
+def rows(budget: int, noise: str = "fastfiz") -> dict[str, list[str]]:
+    """Row name -> search.py overrides (without noise, budget and protocol); the ``ranked`` rows
+    play the shot ranker trained for the row's noise (results/rankers/<noise>/ranker.pt)."""
     b = budget
     geo, trained = ["proposer=geometric"], ["proposer=both"]
     h2 = ["search=h2", f"search.k1={b // 2}", "search.m1=10"]
@@ -37,6 +38,7 @@ def rows(budget: int) -> dict[str, list[str]]:
     halving = ["search=robust", f"search.k1={b * 5 // 8}", "search.target=0"]  # a fixed screen
     adaptive = ["search=robust", f"search.k1={b * 3 // 4}", f"search.target={10 if b <= 400 else 20}"]
     forgiving = ["proposer=forgiving"]
+    ranked = ["proposer=ranked", f"proposer.ranker=results/rankers/{noise}/ranker.pt"]
     return {
         "geo_h2": geo + h2,
         "geo_uniform_x4": geo + uniform(b // 4),
@@ -53,6 +55,8 @@ def rows(budget: int) -> dict[str, list[str]]:
         "both_halving": trained + halving,
         "both_adaptive": trained + adaptive,
         "both_puct": trained + ["search=puct"],
+        "ranked_h2": ranked + h2,
+        "ranked_adaptive": ranked + adaptive,
     }
 
 
@@ -90,7 +94,7 @@ def main() -> None:
     done = {(r["row"], r["noise"], r["budget"]) for r in table["rows"]}
     for noise in args.noises:
         for budget in args.budgets:
-            for name, over in rows(budget).items():
+            for name, over in rows(budget, noise).items():
                 if args.only and name not in args.only or (name, noise, budget) in done:
                     continue
                 base = over + [f"noise={noise}", f"search.budget={budget}", f"seed={args.seed}", "threads=1",
