@@ -293,6 +293,7 @@ def main(argv=None) -> int:
     import torch
 
     torch.set_num_threads(1)
+    commit = git_commit()  # the code the ranker is made with (read before anything runs)
     params, noise = PRESETS[args.physics], NOISE_PRESETS[args.noise]
     rng = np.random.default_rng(args.seed)
     t0 = time.time()
@@ -306,7 +307,7 @@ def main(argv=None) -> int:
                                                                                     "sigma_tip_mm")},
                    "noise_preset": args.noise, "command": "python -m billiards.search.ranker " + " ".join(
                        sys.argv[1:] if argv is None else argv),
-                   "commit": git_commit(), "args": vars(args), "held_out": report,
+                   "commit": commit, "args": vars(args), "held_out": report,
                    "cpu_seconds": round(time.process_time(), 1)}
     ranker.save(args.out)
     print(json.dumps(report), flush=True)
