@@ -67,6 +67,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     chain in ``chains.jsonl`` as it ends, ``results.json`` at the end. Ctrl-C writes
     ``results.json`` from what finished, marked ``partial``; ``resume=<out_dir>`` continues a
     stopped P3 from its next chain."""
+    commit = git_commit()  # the code that runs (read before anything runs: files may change meanwhile)
     out_dir = Path(out_dir)
     cfg = typed(cfg)
     if cfg.get("resume"):
@@ -109,7 +110,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         **noise_record(noise),
         device=str(device),
         config=OmegaConf.to_container(cfg, resolve=True),
-        commit=git_commit(),
+        commit=commit,
     )
     atomic_write_text(out_dir / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
     if interrupted:
