@@ -128,12 +128,8 @@ def test_fit_learns_to_rank_a_learnable_target():
     X = rng.standard_normal((4000, N_FEATURES)).astype(np.float32)
     y = (1 / (1 + np.exp(-3 * (X[:, 4] - X[:, 7])))).astype(np.float32)
     ranker = fit(X, y, hidden=16, layers=2, epochs=8, batch=256, seed=0, log=lambda m: None)
-    x = (X - ranker.mean) / ranker.std
-    for i, (w, b) in enumerate(zip(ranker.weights, ranker.biases)):
-        x = x @ w + b
-        x = np.maximum(x, 0) if i + 1 < len(ranker.weights) else x
     rank = lambda v: np.argsort(np.argsort(v))
-    assert np.corrcoef(rank(x[:, 0]), rank(y))[0, 1] > 0.95  # Spearman: the ranker orders as the target does
+    assert np.corrcoef(rank(ranker.logits(X)), rank(y))[0, 1] > 0.95  # Spearman: the ranker orders as the target does
 
 
 def test_training_command_writes_a_ranker_the_search_app_plays(tmp_path):
@@ -163,3 +159,26 @@ def test_a_missing_ranker_fails_fast_and_writes_nothing(tmp_path):
                            "proposer.ranker=nowhere/r.pt"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and "no ranker file at nowhere/r.pt" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr and list(tmp_path.iterdir()) == []
+
+
+def test_the_shipped_rankers_load_and_record_how_they_were_made():
+    """proposer=ranked plays results/rankers/fastfiz/ranker.pt by default: it validates, builds a
+    RankedProposer over a ranker trained for fastfiz on korean_medium, and every shipped ranker
+    records its command, commit and held-out ranking figures."""
+    from billiards.search.config import RankedProposerConfig, errors, option, search_config
+
+    cfg = search_config("robust", "p1", "ranked")
+    cfg.noise.preset = "fastfiz"
+    assert errors(cfg) == []
+    node = option("proposer", cfg.proposer)
+    assert isinstance(node, RankedProposerConfig)
+    proposer = node.build(K)
+    assert isinstance(proposer, RankedProposer) and proposer.ranker.meta["noise_preset"] == "fastfiz"
+    files = sorted((ROOT / "results" / "rankers").glob("*/ranker.pt"))
+    assert files
+    for path in files:
+        ranker = ShotRanker.load(path)
+        assert ranker.params == K and ranker.noise == NOISE_PRESETS[path.parent.name]
+        assert ranker.meta["command"].startswith("python -m billiards.search.ranker") and ranker.meta["commit"]
+        held = ranker.meta["held_out"]
+        assert held["best_of_top_ranked"] > held["best_of_first_drawn"]  # it ranks better than drawing

@@ -126,7 +126,11 @@ class ShotRanker:
 
     def score(self, positions: np.ndarray, actions: np.ndarray, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
         """Logits (...,) for shots ``actions`` (..., 4) on tables ``positions`` (..., 4, 2)."""
-        x = (shot_features(positions, actions, params) - self.mean) / self.std
+        return self.logits(shot_features(positions, actions, params))
+
+    def logits(self, features: np.ndarray) -> np.ndarray:
+        """Logits (...,) of :func:`shot_features` rows (..., N_FEATURES)."""
+        x = (features - self.mean) / self.std
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             x = x @ w + b
             if i + 1 < len(self.weights):
@@ -253,12 +257,7 @@ def ranking_report(ranker: ShotRanker, X: np.ndarray, y: np.ndarray, per_rack: i
     """How well ``ranker`` orders held-out candidates (``per_rack`` consecutive rows per rack):
     the best target among its top ``top`` against the first ``top`` in draw order, and the
     share of targets >= 0.9 among its top ``top`` against all."""
-    x = (X - ranker.mean) / ranker.std
-    for i, (w, b) in enumerate(zip(ranker.weights, ranker.biases)):
-        x = x @ w + b
-        if i + 1 < len(ranker.weights):
-            np.maximum(x, 0.0, out=x)
-    s, q = x[:, 0].reshape(-1, per_rack), y.reshape(-1, per_rack)
+    s, q = ranker.logits(X).reshape(-1, per_rack), y.reshape(-1, per_rack)
     ranked = np.take_along_axis(q, np.argsort(-s, axis=1, kind="stable")[:, :top], axis=1)
     return {"racks": int(q.shape[0]), "candidates_per_rack": per_rack, "top": top,
             "best_of_top_ranked": round(float(ranked.max(1).mean()), 4),
