@@ -55,7 +55,6 @@ def rows(budget: int, noise: str = "fastfiz") -> dict[str, list[str]]:
         "both_halving": trained + halving,
         "both_adaptive": trained + adaptive,
         "both_puct": trained + ["search=puct"],
-        "ranked_h2": ranked + h2,
         "ranked_adaptive": ranked + adaptive,
     }
 

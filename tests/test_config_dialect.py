@@ -85,7 +85,8 @@ def test_option_groups_list_only_real_options():
     assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "h2", "puct",
                                        "robust"]
     assert group_options("protocol") == ["p1", "p3"]
-    assert group_options("proposer") == ["base", "both", "forgiving", "gentle", "geometric", "near_miss", "policy"]
+    assert group_options("proposer") == ["base", "both", "forgiving", "gentle", "geometric", "near_miss", "policy",
+                                         "ranked"]
     assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none"]
     assert group_options("algo") == ["ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
     assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name
