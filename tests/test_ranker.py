@@ -182,3 +182,15 @@ def test_the_shipped_rankers_load_and_record_how_they_were_made():
         assert ranker.meta["command"].startswith("python -m billiards.search.ranker") and ranker.meta["commit"]
         held = ranker.meta["held_out"]
         assert held["best_of_top_ranked"] > held["best_of_first_drawn"]  # it ranks better than drawing
+
+
+def test_a_ranker_used_under_another_noise_says_so_and_names_the_right_one():
+    from billiards.search.ranker import noise_mismatch
+
+    ranker = ShotRanker.load(ROOT / "results" / "rankers" / "fastfiz" / "ranker.pt")
+    proposer = RankedProposer(ranker, pool=10, params=K)
+    assert noise_mismatch(proposer, FASTFIZ) is None
+    assert noise_mismatch(GeometricProposer(), NOISE_PRESETS["fastfiz_x5"]) is None
+    msg = noise_mismatch(proposer, NOISE_PRESETS["fastfiz_x5"])
+    assert "trained for noise fastfiz" in msg and "proposer.ranker=results/rankers/fastfiz_x5/ranker.pt" in msg
+    assert "proposer.ranker=" not in noise_mismatch(proposer, FASTFIZ.scaled(2.0))  # no shipped ranker for it

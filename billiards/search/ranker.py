@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from billiards.files import atomic_write_bytes, load_tagged
+from billiards.files import atomic_write_bytes, load_tagged, repo_path
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, random_racks, simulate_batch
 from billiards.physics.core import RED1, RED2, WHITE, YELLOW
 from billiards.physics.noise import NOISE_PRESETS, NoiseModel
@@ -190,6 +190,20 @@ class RankedProposer:
         return np.take_along_axis(cand, top[..., None], axis=1)
 
 
+def noise_mismatch(proposer, noise: NoiseModel) -> str | None:
+    """If ``proposer`` is a :class:`RankedProposer` whose ranker was trained for another noise
+    than ``noise``, what to say (naming the shipped ranker for that noise, if there is one)."""
+    if not isinstance(proposer, RankedProposer) or proposer.ranker.noise == noise:
+        return None
+    trained = proposer.ranker.meta.get("noise_preset") or proposer.ranker.noise.describe()
+    msg = (f"proposer {proposer.name!r}: its ranker was trained for noise {trained}, this run plays "
+           f"{noise.describe()}; it ranks for the noise it was trained for")
+    name = noise.describe()
+    if name in NOISE_PRESETS and repo_path(f"results/rankers/{name}/ranker.pt").is_file():
+        msg += f" (the ranker for {name}: proposer.ranker=results/rankers/{name}/ranker.pt)"
+    return msg
+
+
 # ----------------------------------------------------------------------------- making a ranker
 
 
@@ -319,4 +333,4 @@ if __name__ == "__main__":
 
 
 __all__ = ["N_FEATURES", "POOL_DRAWS", "RankedProposer", "RankerFileError", "ShotRanker", "fit", "make_dataset",
-           "ranking_report", "shot_features"]
+           "noise_mismatch", "ranking_report", "shot_features"]

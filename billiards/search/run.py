@@ -23,6 +23,7 @@ from billiards.provenance import git_commit
 from .actors import SearchActor
 from .config import option, saved_config, typed, validate
 from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, read_chains, run_p1, run_p3
+from .ranker import noise_mismatch
 
 __all__ = ["CONFIG_FILE", "RESULTS_FILE", "describe", "make_actor", "make_proposer", "resume_config", "run"]
 
@@ -83,7 +84,10 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     print(f"search: {describe(cfg, params)}\noutput: {out_dir}", flush=True)
     warm_up(params, log=lambda msg: print(msg, flush=True))
     device = resolve_device(cfg.get("device", "auto"))
-    actor = make_actor(cfg, make_proposer(cfg.proposer, params, device=device), params)
+    proposer = make_proposer(cfg.proposer, params, device=device)
+    if (warning := noise_mismatch(proposer, noise)) is not None:
+        print(f"warning: {warning}", flush=True)
+    actor = make_actor(cfg, proposer, params)
     proto = cfg.protocol.name
     ledger = out_dir / CHAINS_FILE
     interrupted = False
