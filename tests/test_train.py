@@ -669,6 +669,9 @@ BAD = [
     (["device=gpu"], "device='gpu' is not a device: use auto, cpu, cuda or cuda:N"),
     (["device=cpu:0"], "device='cpu:0' is not a device"),
     (["budget.kill_after_checkpoint=1"], "Key 'kill_after_checkpoint' not in 'BudgetConfig'"),  # tests kill runs from outside
+    (["+algo.lrr=0.1"], "algo.lrr: not a key of SACConfig"),  # '+' appends even to a closed node
+    (["+foo=1"], "foo: not a key of TrainConfig"),
+    (["-m", "seed=0,1", "+env.shots=3"], "env.shots: not a key of EnvConfig"),
 ]
 
 

@@ -21,6 +21,7 @@ This module imports neither torch nor the simulator's kernels, so the checks sta
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 import os
@@ -29,7 +30,7 @@ from pathlib import Path
 from typing import Any, List, Optional
 
 from hydra.experimental.callback import Callback
-from omegaconf import MISSING, DictConfig
+from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.device import device_error
 from billiards.app_config import fixed_job_config as _fixed_job_config
@@ -261,6 +262,22 @@ class ConfigError(ValueError):
     """An invalid training configuration; the message names the key and what is allowed."""
 
 
+def appended_keys(cfg: DictConfig) -> list[str]:
+    """Keys a command line appended (``+algo.foo=1``) that no schema has: Hydra's ``+`` adds
+    them even to a closed node, and nothing would ever read them. One message per node."""
+    errs = []
+    for node, path in [(cfg, ""), *((cfg[k], f"{k}.") for k in cfg if k != "hydra" and isinstance(cfg[k], DictConfig))]:
+        schema = OmegaConf.get_type(node)
+        if not dataclasses.is_dataclass(schema):
+            continue
+        own = {f.name for f in dataclasses.fields(schema)}
+        extra = [f"{path}{k}" for k in node if k not in own and not (path == "" and k == "hydra")]
+        if extra:
+            errs.append(f"{', '.join(extra)}: not a key of {schema.__name__} (a '+' override adds a key "
+                        f"nothing reads; drop it, or set an existing key without '+')")
+    return errs
+
+
 def _errors(cfg: DictConfig) -> list[str]:
     errs: list[str] = []
 
@@ -272,6 +289,7 @@ def _errors(cfg: DictConfig) -> list[str]:
         ok = value > 0 if strict else value >= 0
         need(ok and math.isfinite(value), f"{path} must be {'> 0' if strict else '>= 0'}, got {value!r}")
 
+    errs.extend(appended_keys(cfg))
     b, a, e = cfg.budget, cfg.algo, cfg.env
     positive("budget.total_steps", b.total_steps)
     for key in ("init_random_steps", "eval_every", "checkpoint_every"):
