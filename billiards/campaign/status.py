@@ -28,10 +28,13 @@ from .spec import Campaign, Entry
 # own. sac, td3, ppo_paper: measured on the paper's table, 16,384 steps each (budget=smoke
 # based, final evaluation of 10 innings), results/campaign/priors.md; the periodic
 # evaluations of budget=paper (100 innings every 50k steps) come on top. sac_paper, td3_paper: 5.7
-# CPU-h per 1M steps (physics_reference.md §10). h2, puct: results/search/*.json (400
-# simulations, international table): h2 6-116 ms, PUCT 250-1,600 ms per decision.
+# CPU-h per 1M steps (physics_reference.md §10). h2, puct: ms per decision at 400 simulations
+# with a trained 3-policy ensemble on the paper's table, one thread, after the search speed-ups
+# (results/bench_search_korean_medium.json, `python benchmarks/bench_search.py --decisions 200
+# --puct-decisions 30 --out results/bench_search_korean_medium.json` at 58a3f53): h2 3.2 ms,
+# PUCT 12.8 ms (the geometric proposer: 2.7 and 9.6 ms).
 PRIORS = {"sac": 2.75e-3, "td3": 1.93e-3, "sac_paper": 2.05e-2, "td3_paper": 2.05e-2, "ppo_paper": 2.22e-3,
-          "h2": 0.05, "puct": 1.0}
+          "h2": 3.2e-3, "puct": 1.28e-2}
 
 
 @dataclass
