@@ -288,6 +288,38 @@ def test_gym_and_torchrl_envs_play_the_same_noisy_shots():
         np.testing.assert_array_equal(info["hits"], nxt["hits"][0].numpy())
 
 
+def test_the_power_gentle_bonus_reads_the_commanded_power_under_noise_in_both_envs():
+    """Under execution noise the played power differs from the commanded one; the gentle power
+    bonus rewards the agent's choice, the commanded power, in the gymnasium env as in the TorchRL
+    transform (beta * score * (1 - p))."""
+    beta = 0.5
+    kw = dict(SHAPED, gentle=beta, gentle_kind="power", noise="fastfiz_x5")
+    gym_env = Billiards4BallInningEnv(normalize_actions=False, **kw)
+    trl_env = make_env(1, seed=3, normalize_actions=False, **kw)
+    gym_env.reset(seed=5)
+    td = trl_env.reset()
+    rng = np.random.default_rng(0)
+    gym_scored = trl_scored = 0
+    for _ in range(400):
+        target, _ = domain.aim_window(gym_env.positions)
+        action = np.array([target, rng.uniform(0.2, 0.9), 0.0, 0.0])
+        _, reward, terminated, truncated, info = gym_env.step(action)
+        p_cmd, p_played = info["commanded_action"][1], info["raw_action"][1]
+        assert p_cmd != p_played
+        assert reward == float(info["score"]) * (1 + beta * (1 - p_cmd))
+        gym_scored += int(info["score"])
+        if terminated or truncated:
+            gym_env.reset()
+        target, _ = domain.aim_window(td["positions"][0].numpy())
+        td["action"] = torch.tensor([[target, rng.uniform(0.2, 0.9), 0.0, 0.0]])
+        full, td = trl_env.step_and_maybe_reset(td)
+        score = float(full["next", "score"][0, 0])
+        expected = score * (1 + beta * (1 - float(full["action"][0, 1])))
+        assert float(full["next", "reward"][0, 0]) == pytest.approx(expected, rel=0, abs=5e-7)
+        trl_scored += int(score)
+    assert gym_scored and trl_scored  # the bonus was exercised
+
+
 # ----------------------------------------------------------------------------- TorchRL specs
 
 

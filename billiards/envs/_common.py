@@ -137,6 +137,7 @@ class Shots(NamedTuple):
     shot: np.ndarray  # (B,) int64: shots played in each inning, this one included
     terminated: np.ndarray  # (B,) bool
     truncated: np.ndarray  # (B,) bool
+    commanded: np.ndarray  # (B, 4) float64: the raw shots asked for (``played`` without the noise)
 
 
 def play_shots(positions: np.ndarray, commanded: np.ndarray, shots_before: np.ndarray, *, params: PhysicsParams,
@@ -149,7 +150,7 @@ def play_shots(positions: np.ndarray, commanded: np.ndarray, shots_before: np.nd
     result = simulate_batch(positions, played, params)
     shot = np.asarray(shots_before) + 1
     terminated, truncated = terminated_truncated(result.score, shot, on_miss, max_shots)
-    return Shots(played, result, shot, terminated, truncated)
+    return Shots(played, result, shot, terminated, truncated, np.asarray(commanded, dtype=np.float64))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,9 +174,11 @@ class Shaping:
             raise ValueError(f"gentle_kind must be one of {domain.GENTLE_KINDS}, got {self.gentle_kind!r}")
 
     def reward(self, shots: Shots) -> np.ndarray:
-        """(B,) float64: the carom score plus every enabled term, for the shots played."""
+        """(B,) float64: the carom score plus every enabled term, for the shots played. The
+        power-based gentle bonus reads the *commanded* power (the agent's choice, as the TorchRL
+        transform does): under execution noise the played power differs from it."""
         res = shots.result
-        return domain.shaped_reward(res.score, res.foul, shots.played[..., 1], res.hits, res.closest, res.positions,
+        return domain.shaped_reward(res.score, res.foul, shots.commanded[..., 1], res.hits, res.closest, res.positions,
                                     res.second_red, foul_c=self.foul_penalty, gentle_beta=self.gentle,
                                     gentle_kind=self.gentle_kind, near_miss_beta=self.near_miss,
                                     near_miss_sigma=self.near_miss_sigma)
