@@ -129,6 +129,7 @@ BAD = [
     (["noise=fastfiz", "search.quantile=1.5"], "quantile must lie in [0, 1]"),
     (["noise=fastfiz", "search.schedule=race"], "schedule must be one of uniform, halving"),
     (["proposer.u_low=0.95", "proposer.u_high=0.5"], "proposer.u_low and proposer.u_high must satisfy"),
+    (["proposer=forgiving", "proposer.far_share=1.5"], "proposer.far_share must lie in [0, 1], got 1.5"),
     (["search=h2", "search.samples=4"], "H2SearchConfig"),  # a robust knob: not h2's
     (["noise=fastfiz", "search=puct", "search.k1=10"], "PUCTSearchConfig"),
 ]

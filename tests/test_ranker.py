@@ -74,6 +74,9 @@ def test_far_share_zero_draws_as_before_and_one_aims_every_candidate_but_the_mod
     np.testing.assert_array_equal(got[:, 0, 0], domain.constrained_theta(pos, np.zeros(8), K.ball_radius))
     with pytest.raises(ValueError, match="far_share"):
         GeometricProposer(far_share=1.5)
+    from billiards.search.config import GeometricProposerConfig
+
+    assert GeometricProposerConfig(far_share=0.3).build(K).far_share == 0.3  # proposer.far_share=0.3
 
 
 def test_ranked_proposer_returns_the_best_of_its_pool_by_the_ranker_best_first():

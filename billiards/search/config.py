@@ -185,13 +185,15 @@ class GeometricProposerConfig:
     u_high: float = 1.0
     spin_low: float = -1.0  # vertical tip offset b in [spin_low, spin_high] (-1 draw, 1 follow)
     spin_high: float = 1.0
+    far_share: float = 0.0  # this share of the candidates aims into the farther red's cone (0: the nearer red only)
 
     def build(self, params, device=None):
         """The proposer (NumPy, on the CPU whatever ``device`` says)."""
         from .proposers import GeometricProposer
 
         return GeometricProposer(power_low=self.power_low, power_high=self.power_high, R=params.ball_radius,
-                                 u_low=self.u_low, u_high=self.u_high, spin_low=self.spin_low, spin_high=self.spin_high)
+                                 u_low=self.u_low, u_high=self.u_high, spin_low=self.spin_low, spin_high=self.spin_high,
+                                 far_share=self.far_share)
 
 
 # ``proposer=forgiving``: no training needed, the geometric proposer with its draws narrowed toward
@@ -473,6 +475,8 @@ def errors(cfg) -> list[str]:
         if not -1.0 <= proposer.spin_low <= proposer.spin_high <= 1.0:
             errs.append(f"proposer.spin_low and proposer.spin_high must satisfy -1 <= low <= high <= 1, "
                         f"got {proposer.spin_low}, {proposer.spin_high}")
+        if not 0.0 <= proposer.far_share <= 1.0:
+            errs.append(f"proposer.far_share must lie in [0, 1], got {proposer.far_share}")
     if isinstance(proposer, PolicyProposerConfig):
         if not proposer.checkpoints:
             errs.append(f"proposer {proposer.name!r} is a policy ensemble but lists no checkpoints")
