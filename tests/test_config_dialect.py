@@ -122,7 +122,7 @@ def test_geometric_proposer_and_a_missing_checkpoint():
     cfg = compose_search()
     assert OmegaConf.to_container(cfg.proposer) == {"kind": "geometric", "name": "geometric", "power_low": 0.15,
                                                      "power_high": 0.9, "u_low": 0.0, "u_high": 1.0,
-                                                     "spin_low": -1.0, "spin_high": 1.0}
+                                                     "spin_low": -1.0, "spin_high": 1.0, "far_share": 0.0}
     cfg = compose_search("proposer=near_miss", "proposer.checkpoints=[nowhere/seed0.pt]")
     with pytest.raises(search_config.SearchConfigError, match=r"proposer 'near_miss': no checkpoint at nowhere/seed0.pt "
                                                                r"\(trained with: python train.py"):
