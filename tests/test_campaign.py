@@ -480,3 +480,20 @@ def test_rand_eval_is_the_points_before_the_first_miss_of_the_random_start_evalu
     _fake_run(legacy, "table3", 2, 0.5, 3, 0.0, 400)
     assert aggregate([*runs, read_run(legacy)])["rand_eval"] is None
     assert "rand_eval" in PAPER["table3"]["columns"] and PAPER["table3"]["rows"]["plain"]["rand_eval"] == 0.053
+
+
+def test_report_writes_table3_rand_eval_beside_the_papers(tmp_path):
+    spec = tmp_path / "mini.yaml"
+    spec.write_text(yaml.safe_dump({"name": "mini", "runs": [
+        {"table": "table3", "variant": "plain", "seed": s, "steps": 400, "cost": "sac", "args": ["algo=sac"]} for s in range(2)]}))
+    root, out = tmp_path / "state", tmp_path / "results"
+    for seed, streaks in ((0, [0, 1, 0, 0]), (1, [2, 0, 0, 0])):
+        d = root / "table3" / "plain" / f"seed{seed}"
+        _fake_run(d, "table3", seed, 0.5, 3, 0.0, 400)
+        ev = json.loads((d / "eval.json").read_text())
+        (d / "eval.json").write_text(json.dumps({**ev, "first_miss_points": streaks}))
+    rc, text = cli("report", "--spec", str(spec), "--root", str(root), "--out", str(out))
+    assert rc == 0, text
+    row = next(r for r in json.loads((out / "reproduction.json").read_text())["rows"] if r["table"] == 3)
+    assert row["ours"]["rand_eval"] == pytest.approx(0.375) and row["paper"]["rand_eval"] == 0.053
+    assert "0.375 \\| 0.053" in (out / "reproduction.md").read_text()

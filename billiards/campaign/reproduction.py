@@ -40,7 +40,7 @@ TRAIN_TABLES: dict[str, tuple[int, dict[str, str]]] = {
     "table5": (5, {"aim_features": "none", "foul_penalty": "foul_penalty", "gentle": "gentle",
                    "near_miss": "near_miss", "both": "both"}),
 }
-OUR_KEYS = ("mean", "std", "max", "foul_inn", "foul_sh", "succ_sh", "canonical")
+OUR_KEYS = ("mean", "std", "max", "foul_inn", "foul_sh", "succ_sh", "canonical", "rand_eval")
 SEARCH_FILES = ("results.json", "chains.jsonl", "config.yaml", "search.log")
 TRAIN_EXTRA_FILES = (STARTS, "train.log")
 
