@@ -638,6 +638,57 @@ def plot_curves(curves: list[Curve], path: Path) -> Path:
     return path
 
 
+def mean_curve(group: list[Curve]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Steps every run of ``group`` has evaluated at, and the mean and population std over the
+    runs of their evaluation means there."""
+    common = sorted(set.intersection(*({p["step"] for p in c.points} for c in group))) if group else []
+    if not common:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    means = np.array([[next(p["eval_mean"] for p in c.points if p["step"] == s) for s in common] for c in group])
+    return np.array(common, dtype=float), means.mean(axis=0), means.std(axis=0)
+
+
+def plot_seed_bands(series: list[tuple[str, list[Curve], dict | None]], path: Path, title: str) -> Path:
+    """One line per ``(label, runs, paper)``: the mean over its runs (seeds) of the evaluation
+    mean against env steps, shaded ± the std over seeds, each seed faint behind it; ``paper``
+    (``{"mean", "std"}`` or None) is drawn as a hollow marker with its error bar just right of
+    the series' last step, in the series' colour."""
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
+    fig = Figure(figsize=(7.5, 4.4), dpi=110)
+    ax = fig.subplots()
+    last = max((p["step"] for _, runs, _ in series for c in runs for p in c.points), default=1)
+    any_paper = False
+    for i, (label, runs, paper) in enumerate(series):
+        colour = f"C{i % 10}"
+        for c in runs:
+            ax.plot([p["step"] for p in c.points], [p["eval_mean"] for p in c.points], "-", lw=0.7,
+                    color=colour, alpha=0.25)
+        steps, mean, std = mean_curve(runs)
+        if len(steps):
+            ax.plot(steps, mean, "-o", ms=3, lw=1.8, color=colour, label=f"{label} ({len(runs)} seeds)")
+            ax.fill_between(steps, mean - std, mean + std, color=colour, alpha=0.15, lw=0)
+        if paper and paper.get("mean") is not None:
+            any_paper = True
+            x = (steps[-1] if len(steps) else last) * (1.02 + 0.012 * i)
+            ax.errorbar([x], [paper["mean"]], yerr=[[paper.get("std") or 0.0]] * 2, fmt="o", mfc="none",
+                        ms=6, color=colour, capsize=3, lw=1.2)
+    handles, labels = ax.get_legend_handles_labels()
+    if any_paper:
+        handles.append(Line2D([], [], marker="o", mfc="none", color="0.3", ls="none"))
+        labels.append("paper (mean ± std at its budget)")
+    ax.legend(handles, labels, fontsize=8, loc="best")
+    ax.set_xlabel("env steps (shots)")
+    ax.set_ylabel("points per inning (eval, random racks)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
 def copy_runs(dirs: list[Path], dest: Path) -> list[Path]:
     """Copy the small files of every finished run under ``dirs`` (no checkpoint) to
     ``dest/<run dir name>/``; the report reads the copies like the originals."""

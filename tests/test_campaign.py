@@ -497,3 +497,32 @@ def test_report_writes_table3_rand_eval_beside_the_papers(tmp_path):
     row = next(r for r in json.loads((out / "reproduction.json").read_text())["rows"] if r["table"] == 3)
     assert row["ours"]["rand_eval"] == pytest.approx(0.375) and row["paper"]["rand_eval"] == 0.053
     assert "0.375 \\| 0.053" in (out / "reproduction.md").read_text()
+
+
+def test_report_draws_each_tables_learning_curves_from_its_finished_runs(tmp_path):
+    """`report` draws, per table with a finished run, the mean over its finished seeds of their
+    periodic evaluations (only steps all of them reached) to img/reproduction_<table>.png and
+    links it under the table; an unfinished run's evaluations are left out."""
+    from billiards.report import mean_curve, read_curve
+
+    spec = tmp_path / "mini.yaml"
+    spec.write_text(yaml.safe_dump({"name": "mini", "runs": [
+        {"table": "table1", "variant": "sac", "seed": s, "steps": 400, "cost": "sac", "args": ["algo=sac"]} for s in range(3)]}))
+    root, out = tmp_path / "state", tmp_path / "results"
+    for seed, evals in ((0, [0.1, 0.3, 0.5]), (1, [0.3, 0.5]), (2, [0.9, 0.9, 0.9])):
+        d = root / "table1" / "sac" / f"seed{seed}"
+        _fake_run(d, "table1", seed, evals[-1], 3, 0.0, 400)
+        (d / "eval_history.jsonl").write_text("".join(
+            json.dumps({"step": 100 * (i + 1), "cpu_time": 60.0 * i, "wall_time": 60.0 * i, "eval_mean": m,
+                        "eval_best": 2, "start": "random"}) + "\n" for i, m in enumerate(evals)))
+    (root / "table1" / "sac" / "seed2" / "eval.json").unlink()  # seed 2 unfinished
+
+    steps, mean, std = mean_curve([read_curve(root / "table1" / "sac" / f"seed{s}") for s in (0, 1)])
+    assert steps.tolist() == [100, 200] and mean == pytest.approx([0.2, 0.4]) and std == pytest.approx([0.1, 0.1])
+
+    rc, text = cli("report", "--spec", str(spec), "--root", str(root), "--out", str(out))
+    assert rc == 0, text
+    figure = out / "img" / "reproduction_table1.png"
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((out / "reproduction.json").read_text())["figures"] == {"table1": "img/reproduction_table1.png"}
+    assert "](img/reproduction_table1.png)" in (out / "reproduction.md").read_text()

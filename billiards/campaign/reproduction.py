@@ -23,7 +23,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from billiards.files import atomic_write_text
-from billiards.report import COLUMN_TITLES, PAPER, SMALL_RUN_FILES, aggregate, read_run
+from billiards.report import COLUMN_TITLES, PAPER, SMALL_RUN_FILES, aggregate, plot_seed_bands, read_curve, read_run
 from billiards.search.report import PAPER_TABLE6
 
 from .ledger import STARTS, entry_dir
@@ -57,14 +57,19 @@ def _copy(src_dir: Path, dest: Path, patterns: tuple[str, ...]) -> None:
                 shutil.copy2(f, dest / f.name)
 
 
-def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out: Path | None) -> list[dict]:
-    """One row per (table, variant) of Tables 1-5 present in ``campaign``."""
+def _train_groups(campaign: Campaign) -> dict[tuple[str, str], list[Entry]]:
+    """The training entries of Tables 1-5 by (table, variant), in the campaign's order."""
     groups: dict[tuple[str, str], list[Entry]] = defaultdict(list)
     for e in campaign.entries:
         if e.kind == "train" and e.table in TRAIN_TABLES and e.variant in TRAIN_TABLES[e.table][1]:
             groups[(e.table, e.variant)].append(e)
+    return groups
+
+
+def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out: Path | None) -> list[dict]:
+    """One row per (table, variant) of Tables 1-5 present in ``campaign``."""
     rows = []
-    for (table, variant), entries in groups.items():
+    for (table, variant), entries in _train_groups(campaign).items():
         number, variants = TRAIN_TABLES[table]
         paper_spec = PAPER[table]
         runs, cpu_s, commits, shared = [], 0.0, [], set()
@@ -102,6 +107,30 @@ def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out
         row["complete"] = len(runs) == len(entries)
         rows.append(row)
     return rows
+
+
+def curve_figures(campaign: Campaign, root: Path, states: dict[str, object], out: Path) -> dict[str, str]:
+    """Per table of Tables 1-5 with a finished run: its learning curves (each variant's mean
+    over its finished seeds, ± their std, the paper's figure beside them) drawn to
+    ``out/img/reproduction_<table>.png``; returns ``{table: path relative to out}``."""
+    by_table: dict[str, list] = defaultdict(list)
+    for (table, variant), entries in _train_groups(campaign).items():
+        runs = []
+        for e in entries:
+            src = campaign.source(e)
+            if states[src.key].state == "done":
+                curve = read_curve(entry_dir(root, campaign, src))
+                if curve is not None:
+                    runs.append(curve)
+        if runs:
+            spec, key = PAPER[table], TRAIN_TABLES[table][1][variant]
+            by_table[table].append((spec["labels"].get(key, variant), runs, spec["rows"].get(key)))
+    figures = {}
+    for table, series in by_table.items():
+        rel = f"img/reproduction_{table}.png"
+        plot_seed_bands(series, out / rel, f"{PAPER[table]['title'].split(' (paper')[0]}: learning curves")
+        figures[table] = rel
+    return figures
 
 
 def search_rows(campaign: Campaign, root: Path, states: dict[str, object], out: Path | None) -> list[dict]:
@@ -208,6 +237,9 @@ def markdown(data: dict) -> str:
             parts.append(f"| {r['variant']}{shared} | {len(r['seeds'])}/{len(r['seeds_planned'])} | {r['steps']:,} | "
                          + " | ".join(cells) + f" | {r['cpu_hours']:.2f} | {', '.join(r['commits']) or '–'} |")
         parts.append("")
+        figure = data.get("figures", {}).get(f"table{number}")
+        if figure:
+            parts += [f"![Table {number}: learning curves of the finished seeds, the paper's figure beside them]({figure})", ""]
     t6 = [r for r in rows if r["table"] == 6]
     if t6:
         parts += ["## Table 6: proposers at 400 simulations per shot", "",
@@ -234,6 +266,8 @@ def markdown(data: dict) -> str:
 def write_report(campaign: Campaign, root: Path, out: Path) -> tuple[Path, Path]:
     """Copy the finished runs' small files under ``out`` and write reproduction.json / .md."""
     data = reproduction(campaign, root, out)
+    states = {s.entry.key: s for s in entry_states(campaign, root)}
+    data["figures"] = curve_figures(campaign, root, states, out)
     out.mkdir(parents=True, exist_ok=True)
     json_path, md_path = out / "reproduction.json", out / "reproduction.md"
     atomic_write_text(json_path, json.dumps(data, indent=2) + "\n")
