@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--extra", default="", help="extra overrides for the chosen config, space separated")
     args = parser.parse_args(argv)
 
-    from billiards.rl.train import set_threads
+    from billiards.device import set_threads
 
     set_threads(args.threads)
     configs = {

@@ -11,8 +11,12 @@ losses, optimizers, the replay buffer -- onto a GPU. Two functions, shared by ev
   ``cuda`` is the current GPU (``cuda:0`` unless ``CUDA_VISIBLE_DEVICES`` or the process chose
   another), always with its index.
 
-Importing this module costs nothing: torch is imported inside the functions, and only when a
-spelling needs it (``cpu`` and ``auto`` are checked without it).
+And the threads a process computes with, for the networks (torch) and the simulator's batches
+(numba): :func:`set_threads` sets both, :func:`start_numba_threads` starts numba's thread pool
+without disturbing torch's count (see there why the order matters).
+
+Importing this module costs nothing: torch and numba are imported inside the functions, and
+only when needed (``cpu`` and ``auto`` are checked without torch).
 """
 
 from __future__ import annotations
@@ -69,4 +73,41 @@ def resolve_device(spec: str) -> torch.device:
     return torch.device("cuda", torch.cuda.current_device() if index is None else index)
 
 
-__all__ = ["DEVICES", "device_error", "resolve_device"]
+def start_numba_threads() -> None:
+    """Start numba's thread pool now (a no-op once started), keeping torch's thread count.
+
+    numba starts its pool on the first parallel simulator batch or thread-count call. With its
+    OpenMP layer (numba's default where OpenMP is found, as here) the start sets OpenMP's
+    thread count to ``NUMBA_NUM_THREADS`` (all cores by default) in the OpenMP runtime torch
+    shares, silently undoing an earlier ``torch.set_num_threads``: a ``threads=1`` training run
+    then computed its networks with two threads and spent about five times the CPU time on a
+    busy two-core machine. Called before torch's count is set (:func:`set_threads`) or when a
+    TorchRL env is made, the count a process chose stays. (Starting the pool also fixes
+    multiprocessing's start method; the torch-free gymnasium env, whose single shots never
+    start it, does not call this.)
+    """
+    import sys
+
+    import numba
+
+    torch = sys.modules.get("torch")
+    keep = torch.get_num_threads() if torch is not None else None
+    numba.get_num_threads()  # starts the pool
+    if keep is not None and torch.get_num_threads() != keep:
+        torch.set_num_threads(keep)
+
+
+def set_threads(n: int) -> None:
+    """``n`` threads for torch's operations and for the simulator's batches (numba's, at most
+    ``NUMBA_NUM_THREADS``) in this process; numba's pool first (:func:`start_numba_threads`)."""
+    import numba
+    import torch
+
+    if int(n) < 1:
+        raise ValueError(f"threads must be >= 1, got {n!r}")
+    start_numba_threads()
+    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+    torch.set_num_threads(int(n))
+
+
+__all__ = ["DEVICES", "device_error", "resolve_device", "set_threads", "start_numba_threads"]

@@ -49,6 +49,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from billiards.device import start_numba_threads
 from billiards.domain import ACTION_DIM, OBS_DIM, action_bounds, observation
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, check_positions
 from billiards.physics.noise import NoiseModel, get_noise
@@ -142,6 +143,8 @@ class BilliardsEnv(EnvBase):
             raise ValueError(f"BilliardsEnv needs a 1-D batch_size [B] with B >= 1, got {list(batch_size)}")
         super().__init__(device="cpu", batch_size=batch_size)
         self.max_shots = check_inning_options(start, on_miss, max_shots)
+        # numba's pool now, not on the first parallel batch, whose start would reset torch's thread count
+        start_numba_threads()
         self.start, self.on_miss, self.params = start, on_miss, params
         self._make_specs()
         self._set_seed(seed)

@@ -41,7 +41,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tqdm import tqdm
 
-from billiards.device import resolve_device
+from billiards.device import resolve_device, set_threads
 from billiards.files import atomic_write_text
 from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.noise import noise_from_config, noise_record
@@ -79,14 +79,6 @@ __all__ = ["RESUME_KEYS", "RETIRED_KEYS", "RUNTIME_KEYS", "OnDevice", "Run", "fi
 
 
 # ----------------------------------------------------------------------------- setup helpers
-
-
-def set_threads(n: int) -> None:
-    """torch intra-op threads and numba's (the simulator's) threads for this process."""
-    torch.set_num_threads(n)
-    import numba
-
-    numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
 
 
 def seed_everything(seed: int) -> None:

@@ -33,6 +33,7 @@ import numba
 import numpy as np
 from tqdm import tqdm
 
+from billiards.device import start_numba_threads
 from billiards.domain import ACTION_HIGH, ACTION_LOW
 from billiards.files import atomic_write_text
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params, random_racks, simulate_batch
@@ -244,6 +245,7 @@ def generate(
     first = meta["chunks_done"]
     last = total if max_chunks is None else min(total, first + max_chunks)
 
+    start_numba_threads()  # before numba's first thread query, which would reset torch's count
     previous_threads = numba.get_num_threads()
     if threads is not None:
         numba.set_num_threads(threads)

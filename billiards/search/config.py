@@ -292,7 +292,7 @@ class SearchAppConfig:
     protocol: Any = MISSING  # P1Config | P3Config, chosen by protocol=
     noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise: noise=none|fastfiz|fastfiz_x5
     seed: int = 0
-    threads: Optional[int] = None  # numba threads for simulate_batch (default: all cores)
+    threads: Optional[int] = None  # threads for the simulator's batches (numba) and the proposer networks (torch); default: all cores
     progress: bool = True
     picture: bool = True
     resume: Optional[str] = None  # a stopped search's run dir: continue it (P3: from its next chain)

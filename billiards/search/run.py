@@ -9,10 +9,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numba
 from omegaconf import OmegaConf
 
-from billiards.device import resolve_device
+from billiards.device import resolve_device, set_threads
 from billiards.files import CONFIG_FILE, RESULTS_FILE, atomic_write_text
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import params_from_config, physics_record
@@ -78,7 +77,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     if not cfg.get("resume"):
         atomic_write_text(out_dir / CONFIG_FILE, OmegaConf.to_yaml(cfg, resolve=True))
     if cfg.threads is not None:
-        numba.set_num_threads(cfg.threads)
+        set_threads(cfg.threads)
     params = params_from_config(cfg.physics)
     noise = noise_from_config(cfg.get("noise"))
     print(f"search: {describe(cfg, params)}\noutput: {out_dir}", flush=True)
