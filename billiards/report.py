@@ -655,6 +655,7 @@ def plot_seed_bands(series: list[tuple[str, list[Curve], dict | None]], path: Pa
     the series' last step, in the series' colour."""
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
+    from matplotlib.ticker import FuncFormatter
 
     fig = Figure(figsize=(7.5, 4.4), dpi=110)
     ax = fig.subplots()
@@ -667,7 +668,8 @@ def plot_seed_bands(series: list[tuple[str, list[Curve], dict | None]], path: Pa
                     color=colour, alpha=0.25)
         steps, mean, std = mean_curve(runs)
         if len(steps):
-            ax.plot(steps, mean, "-o", ms=3, lw=1.8, color=colour, label=f"{label} ({len(runs)} seeds)")
+            n = f"{len(runs)} seed" + ("s" if len(runs) > 1 else "")
+            ax.plot(steps, mean, "-o", ms=3, lw=1.8, color=colour, label=f"{label} ({n})")
             ax.fill_between(steps, mean - std, mean + std, color=colour, alpha=0.15, lw=0)
         if paper and paper.get("mean") is not None:
             any_paper = True
@@ -680,6 +682,7 @@ def plot_seed_bands(series: list[tuple[str, list[Curve], dict | None]], path: Pa
         labels.append("paper (mean ± std at its budget)")
     ax.legend(handles, labels, fontsize=8, loc="best")
     ax.set_xlabel("env steps (shots)")
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e6:g}M" if x >= 1e6 else f"{x / 1e3:g}k"))
     ax.set_ylabel("points per inning (eval, random racks)")
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
