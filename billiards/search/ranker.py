@@ -305,6 +305,9 @@ def main(argv=None) -> int:
             ap.error(f"--{key.replace('_', '-')} must be >= 1")
     import torch
 
+    from billiards.device import start_numba_threads
+
+    start_numba_threads()  # the simulator's pool first: its start would undo torch's count
     torch.set_num_threads(1)
     commit = git_commit()  # the code the ranker is made with (read before anything runs)
     params, noise = PRESETS[args.physics], NOISE_PRESETS[args.noise]
