@@ -106,7 +106,7 @@ def set_threads(n: int) -> None:
     if int(n) < 1:
         raise ValueError(f"threads must be >= 1, got {n!r}")
     start_numba_threads()
-    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(min(int(n), numba.config.NUMBA_NUM_THREADS))
     torch.set_num_threads(int(n))
 
 

@@ -178,11 +178,15 @@ def _proposer_steps(campaign: Campaign, root: Path, proposer: str) -> int:
 
 
 def reproduction(campaign: Campaign, root: Path, out: Path | None = None) -> dict:
-    """The rows of ``reproduction.json``; with ``out``, also copies the run files there."""
+    """The rows of ``reproduction.json``; with ``out``, also copies the run files there and
+    draws each table's learning curves (``figures``)."""
     states = {s.entry.key: s for s in entry_states(campaign, root)}
-    return {"campaign": campaign.name,
+    data = {"campaign": campaign.name,
             "rows": training_rows(campaign, root, states, out) + search_rows(campaign, root, states, out),
             "cpu_hours_by_table": _cpu_by_table(states)}
+    if out is not None:
+        data["figures"] = curve_figures(campaign, root, states, out)
+    return data
 
 
 def _cpu_by_table(states: dict) -> dict[str, float]:
@@ -266,8 +270,6 @@ def markdown(data: dict) -> str:
 def write_report(campaign: Campaign, root: Path, out: Path) -> tuple[Path, Path]:
     """Copy the finished runs' small files under ``out`` and write reproduction.json / .md."""
     data = reproduction(campaign, root, out)
-    states = {s.entry.key: s for s in entry_states(campaign, root)}
-    data["figures"] = curve_figures(campaign, root, states, out)
     out.mkdir(parents=True, exist_ok=True)
     json_path, md_path = out / "reproduction.json", out / "reproduction.md"
     atomic_write_text(json_path, json.dumps(data, indent=2) + "\n")
