@@ -254,3 +254,24 @@ def test_rgb_array_shows_the_last_shot():
     still = table_rgb_array(env.positions, env.params)  # the same rest table without the shot
     assert after.shape == still.shape
     assert (np.abs(after.astype(int) - still.astype(int)).sum(-1) > 60).sum() > 200  # the paths and start balls
+
+
+def test_citation_file_matches_the_package_metadata():
+    """CITATION.cff (GitHub's "Cite this repository") names the version and license pyproject
+    ships and the paper it reproduces; a version bump that forgets it fails here."""
+    import tomllib
+
+    import yaml
+
+    import billiards
+
+    root = Path(__file__).resolve().parents[1]
+    cff = yaml.safe_load((root / "CITATION.cff").read_text())
+    project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
+    assert cff["cff-version"] == "1.2.0" and cff["type"] == "software"
+    assert str(cff["version"]) == project["version"] == billiards.__version__
+    assert cff["license"] == project["license"]["text"]
+    assert cff["authors"] and all("name" in a or "family-names" in a for a in cff["authors"])
+    (paper,) = cff["references"]
+    assert paper["title"].startswith("Korean 4-Ball Billiards")
+    assert [a["family-names"] for a in paper["authors"]] == ["Oh", "Kang", "Park"]
