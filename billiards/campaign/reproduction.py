@@ -35,7 +35,7 @@ from .status import entry_states
 TRAIN_TABLES: dict[str, tuple[int, dict[str, str]]] = {
     "table1": (1, {"sac": "sac", "td3": "td3", "ppo": "ppo"}),
     "table2": (2, {v: v for v in ("canonical_reset", "canonical_continue", "random_reset", "random_continue")}),
-    "table3": (3, {"plain": "plain", "staged": "staged", "rm": "rm", "rm_aim": "rm_aim"}),
+    "table3": (3, {"plain": "plain", "staged": "staged", "rm": "rm", "rm_aim": "rm_aim", "aim": "aim"}),
     "table4": (4, {"plain": "plain", "aim": "aim", "aim_features": "aim_features"}),
     "table5": (5, {"aim_features": "none", "foul_penalty": "foul_penalty", "gentle": "gentle",
                    "near_miss": "near_miss", "both": "both"}),
