@@ -182,6 +182,30 @@ def _ledger(root: Path) -> dict:
     return json.loads((root / LEDGER).read_text())
 
 
+def test_a_drained_run_is_stopped_after_its_next_checkpoint_not_its_last(tmp_path):
+    """Draining waits for a checkpoint written after the drain began: one the run wrote earlier
+    (its work since then would be lost) does not count, and neither does none at all."""
+    from billiards.campaign.runner import Slot
+
+    entry = Entry("t1", "a", "train", 0, ("seed=0",), 1024, "sac")
+    ckpt = tmp_path / "checkpoint.pt"
+    slot = Slot(entry, tmp_path, pid=os.getpid())
+    assert not slot.checkpointed()  # the drain has not begun
+    slot.drain_began()
+    assert not slot.checkpointed()  # no checkpoint yet
+    ckpt.write_bytes(b"first")
+    assert slot.checkpointed()  # the first checkpoint came after the drain began
+
+    old = Slot(entry, tmp_path, pid=os.getpid())  # a run that checkpointed before the drain
+    os.utime(ckpt, ns=(1_000_000_000, 1_000_000_000))
+    old.drain_began()
+    assert not old.checkpointed()
+    os.utime(ckpt, ns=(2_000_000_000, 2_000_000_000))  # its next checkpoint
+    assert old.checkpointed()
+    ckpt.unlink()
+    assert not old.checkpointed()
+
+
 def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     spec, root = _tiny_spec(tmp_path / "tiny.yaml"), tmp_path / "state"
     common = ("--spec", str(spec), "--root", str(root), "--only", "t1,t2")

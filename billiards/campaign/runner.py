@@ -12,7 +12,8 @@ last checkpoint (at most ``budget.checkpoint_every`` steps, 50k at ``budget=pape
 runner *drains* instead of killing where it can: from ``deadline - grace`` on (``--until`` /
 ``--hours``, ``--grace-minutes``), on a first Ctrl-C / SIGTERM, or when ``<root>/STOP``
 appears (``python -m billiards.campaign stop``), it starts nothing new and stops each
-training run right after its next checkpoint (or lets it finish). 20 s before the deadline,
+training run right after its next checkpoint (or lets it finish): a grace of one checkpoint
+interval (about 1.5 minutes of one core at ``budget=paper``) loses nothing. 20 s before the deadline,
 on a second Ctrl-C or on ``stop --now`` (``<root>/STOP_NOW``) it stops whatever still runs
 (SIGTERM to the run's process group, SIGKILL 10 s later, so nothing runs past the deadline);
 that loss is bounded as above. A search run gets SIGINT instead: it writes the chains it
@@ -126,16 +127,20 @@ class Slot:
     run_dir: Path
     pid: int
     proc: subprocess.Popen | None = None  # None: adopted
-    ckpt_mtime: int | None = None  # checkpoint.pt's mtime at the start: a newer one is this process's
-    draining: bool = False
+    ckpt_mtime: int | None = None  # checkpoint.pt's mtime when the drain began (None: none yet)
+    drain_seen: bool = False  # the drain reached this run: ckpt_mtime holds its checkpoint's mtime then
+    draining: bool = False  # checkpointed since the drain began: being stopped
     term_at: float | None = None
 
+    def drain_began(self) -> None:
+        """Remember the checkpoint the run has now; :meth:`checkpointed` waits for a newer one."""
+        self.ckpt_mtime, self.drain_seen = _mtime(self.run_dir / "checkpoint.pt"), True
+
     def checkpointed(self) -> bool:
-        path = self.run_dir / "checkpoint.pt"
-        try:
-            return path.stat().st_mtime_ns != self.ckpt_mtime
-        except FileNotFoundError:
-            return False
+        """Whether the run wrote a checkpoint since :meth:`drain_began`: stopping it now loses
+        nothing (the trainer writes checkpoint.pt atomically)."""
+        mtime = _mtime(self.run_dir / "checkpoint.pt")
+        return self.drain_seen and mtime is not None and mtime != self.ckpt_mtime
 
 
 def _mtime(path: Path) -> int | None:
@@ -151,7 +156,7 @@ class Runner:
     root: Path
     jobs: int = 2
     deadline: float | None = None
-    grace: float = 900.0  # seconds before the deadline from which the runner drains
+    grace: float = 300.0  # seconds before the deadline from which the runner drains
     only: list[str] | None = None
     restart_stale: bool = False
     retry_failed: bool = False
@@ -239,7 +244,7 @@ class Runner:
         self.ledger.save()
         with (run_dir / STARTS).open("a") as f:
             f.write(json.dumps(start | {"command": cmd}) + "\n")
-        self.slots.append(Slot(entry, run_dir, proc.pid, proc, _mtime(run_dir / "checkpoint.pt")))
+        self.slots.append(Slot(entry, run_dir, proc.pid, proc))
         self.say(f"start  {entry.key} ({mode}{f' at {frames:,} steps' if frames else ''}), pid {proc.pid}")
 
     def _reap(self, slot: Slot) -> tuple[int, float | None] | None:
@@ -286,7 +291,7 @@ class Runner:
             if rec and rec.get("pid"):
                 run_dir = self.dir_of(e)
                 if pid_alive(rec["pid"], run_dir):
-                    self.slots.append(Slot(e, run_dir, rec["pid"], None, _mtime(run_dir / "checkpoint.pt")))
+                    self.slots.append(Slot(e, run_dir, rec["pid"], None))
                     self.say(f"adopt  {e.key}: pid {rec['pid']} of an earlier runner still runs it")
                 else:
                     rec["pid"] = None
@@ -350,10 +355,13 @@ class Runner:
                 continue
             if self.stop_now:
                 self.terminate(slot)
-            elif drain and not slot.draining and slot.entry.kind == "train" and slot.checkpointed():
-                slot.draining = True
-                self.say(f"drain  {slot.entry.key}: stopping right after its checkpoint")
-                self.terminate(slot)
+            elif drain and not slot.draining and slot.entry.kind == "train":
+                if not slot.drain_seen:
+                    slot.drain_began()
+                elif slot.checkpointed():
+                    slot.draining = True
+                    self.say(f"drain  {slot.entry.key}: stopping right after its checkpoint")
+                    self.terminate(slot)
         self._escalate()
         if drain or self.stop_now:
             return
