@@ -95,27 +95,54 @@ def test_option_groups_list_only_real_options():
 # ----------------------------------------------------------------------------- proposers
 
 
-# The policy proposers' former YAML (conf/proposer/<name>.yaml), as composed before they became
-# one config: name, kind, checkpoints and command must come out the same.
-FORMER_COMMANDS = {
-    "base": "shaping=foul_penalty",
-    "gentle": "shaping=gentle shaping.gentle=0.5 shaping.gentle_kind=power",
-    "near_miss": "shaping=near_miss shaping.near_miss=0.5 shaping.near_miss_sigma=0.05",
-    "both": "shaping=both shaping.gentle=0.5 shaping.gentle_kind=power shaping.near_miss=0.5 shaping.near_miss_sigma=0.05",
-}
+# proposer=<name>: the campaign's Table 5 ensemble of that shaping, its command the campaign's
+SHAPING_OF = {"base": "foul_penalty", "gentle": "gentle", "near_miss": "near_miss", "both": "both"}
 
 
-@pytest.mark.parametrize("name", sorted(FORMER_COMMANDS))
-def test_proposer_by_name_composes_as_its_former_yaml(name):
-    cfg = compose_search(f"proposer={name}", "physics=international")
-    assert OmegaConf.to_container(cfg.proposer) == {
-        "kind": "policy", "name": name,
-        "checkpoints": [f"results/policies/{name}/seed{s}.pt" for s in range(3)],
-        "command": (f"python train.py physics=international table=table5 env=aim_features {FORMER_COMMANDS[name]} "
-                    f"budget=quick algo.lr=3e-4 algo.gamma=0.99 seed=0,1,2 -m && python -m billiards.rl.policy export "
-                    f"<the three run dirs> --out results/policies/{name}"),
-    }
+@pytest.mark.parametrize("name", sorted(SHAPING_OF))
+def test_a_shipped_proposer_by_name_is_the_campaigns_table5_ensemble(name):
+    import shlex
+
+    from billiards.campaign.spec import paper_campaign
+
+    cfg = compose_search(f"proposer={name}")
+    node = OmegaConf.to_container(cfg.proposer)
+    assert {k: node[k] for k in ("kind", "name", "checkpoints")} == {
+        "kind": "policy", "name": name, "checkpoints": [f"results/policies/{name}/seed{s}.pt" for s in range(3)]}
+    train, export = node["command"].split(" && ")
+    assert export == f"python -m billiards.rl.policy export <the three run dirs> --out results/policies/{name}"
+    words = shlex.split(train)
+    assert words[:2] == ["python", "train.py"] and words[-2:] == ["seed=0,1,2", "-m"]
+    entries = paper_campaign().by_key()
+    for s in range(3):  # the command trains exactly the campaign's runs that the files were exported from
+        entry = entries[f"table5/{SHAPING_OF[name]}/seed{s}"]
+        assert sorted(entry.args) == sorted([*words[2:-2], f"seed={s}"])
+        assert entries[f"table6/export/{name}"].args[s] == f"{{dir:table5/{SHAPING_OF[name]}/seed{s}}}"
     search_config.validate(cfg)  # the shipped files are there
+
+
+def test_the_shipped_proposers_were_trained_as_their_command_says():
+    """Each shipped file's saved training config is the campaign's Table 5 run of its shaping and
+    seed, on the paper's table, for 1M steps; so on the default table nothing warns."""
+    import warnings
+
+    from billiards.files import load_tagged
+    from billiards.physics.config import PhysicsMismatchWarning
+    from billiards.rl.checkpoint import CheckpointError
+    from billiards.rl.policy import POLICY_FORMAT
+    from billiards.search.proposers import load_policy_proposer
+
+    for name, shaping in SHAPING_OF.items():
+        paths = [ROOT / f"results/policies/{name}/seed{s}.pt" for s in range(3)]
+        for s, path in enumerate(paths):
+            state = load_tagged(path, POLICY_FORMAT, CheckpointError, "exported policy")
+            run = OmegaConf.create(state["config"])
+            assert (run.seed, run.physics.preset, run.env.constrain_aim, run.env.extra_features) == (s, "korean_medium", True, True)
+            assert (run.shaping.name, run.algo.name, run.budget.total_steps) == (shaping, "sac", 1_000_000), (name, s)
+            assert state["summary"]["frames"] == 1_000_000 and state["eval"]["n_innings"] == 100
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", PhysicsMismatchWarning)
+            load_policy_proposer(paths, name=name)
 
 
 def test_geometric_proposer_and_a_missing_checkpoint():
@@ -230,7 +257,7 @@ def test_a_search_multirun_over_proposers_runs_and_a_bad_job_stops_it_first(tmp_
     assert bad.returncode != 0 and "Key 'c_puct' not in 'H2SearchConfig'" in bad.stderr, bad.stderr[-2000:]
     assert "Traceback" not in bad.stderr and not (tmp_path / "bad").exists()
     good = subprocess.run([*search, "proposer=geometric,base", "search=puct", "search.budget=4", "search.pool=2",
-                           "protocol=p1", "protocol.n_innings=1", "protocol.shots=1", "physics=international",
+                           "protocol=p1", "protocol.n_innings=1", "protocol.shots=1",
                            "progress=false", f"hydra.sweep.dir={tmp_path / 'sweep'}"],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert good.returncode == 0, good.stderr[-3000:]

@@ -24,9 +24,8 @@ BASE = [ROOT / "results" / "policies" / "base" / f"seed{s}.pt" for s in range(3)
 def test_the_device_path_gives_the_cpu_candidates():
     """``device=cpu`` through the torch path equals the default torch path bit for bit and the
     batched NumPy path to float32 rounding; the generator advances identically."""
-    with pytest.warns(Warning):  # the shipped policies were made on the international table
-        default = load_policy_proposer(BASE, name="base")
-        on_device = load_policy_proposer(BASE, name="base", device="cpu")
+    default = load_policy_proposer(BASE, name="base")
+    on_device = load_policy_proposer(BASE, name="base", device="cpu")
     reference = PolicyProposer(on_device.policies, constrain_aim=True, extra_features=True, impl="reference",
                                device=torch.device("cpu"))
     assert (default.impl, reference.impl, str(reference.device)) == ("batched", "reference", "cpu")
@@ -41,8 +40,7 @@ def test_the_device_path_gives_the_cpu_candidates():
 
 
 def test_a_gpu_proposer_needs_the_torch_implementation_and_a_gpu():
-    with pytest.warns(Warning):
-        prop = load_policy_proposer(BASE, name="base")
+    prop = load_policy_proposer(BASE, name="base")
     with pytest.raises(ValueError, match="the batched implementation runs in NumPy on the CPU"):
         PolicyProposer(prop.policies, constrain_aim=True, extra_features=True, impl="batched", device="cuda")
     if not torch.cuda.is_available():
@@ -61,7 +59,7 @@ def _search(tmp_path, *overrides: str, timeout: float = 300):
 def test_search_app_device_cpu_end_to_end(tmp_path):
     """``python search.py device=cpu`` with a trained ensemble plays through the device path and
     records the device; its decisions equal the default's (``auto``, the CPU here)."""
-    common = ["proposer=base", "physics=international", "protocol=p1", "protocol.n_innings=1", "protocol.shots=3",
+    common = ["proposer=base", "protocol=p1", "protocol.n_innings=1", "protocol.shots=3",
               "search.budget=60", "search.k1=20", "search.m1=4", "picture=false", "progress=false", "threads=1"]
     results = {}
     for device in ("cpu", "auto"):

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from omegaconf import OmegaConf
 
 from billiards.physics import (
@@ -173,7 +174,6 @@ def test_physics_reaches_the_envs_the_verifier_and_the_rm_data(tmp_path):
     """Each consumer, given physics=international, simulates exactly what simulate_batch does on
     that table, which differs from the default table's outcome for the same shots."""
     import gymnasium as gym
-    import torch
 
     import billiards.envs  # noqa: F401  (registers the gym id)
     from billiards.envs import make_env, reset_to
@@ -251,12 +251,22 @@ def test_things_made_on_another_table_warn_loudly(tmp_path):
         warnings.simplefilter("error", PhysicsMismatchWarning)
         make_env(2, rm=1.0, rm_model=path, params="international")
 
-    shipped = [str(REPO / "results/policies/base/seed0.pt")]  # trained on international (before the presets)
-    with pytest.warns(PhysicsMismatchWarning, match="proposer 'base'"):
-        load_policy_proposer(shipped, name="base")
+    shipped = [str(REPO / "results/policies/base/seed0.pt")]  # trained on korean_medium (the campaign's Table 5)
     with warnings.catch_warnings():
         warnings.simplefilter("error", PhysicsMismatchWarning)
-        prop = load_policy_proposer(shipped, name="base", params=I)
+        load_policy_proposer(shipped, name="base")
+    with pytest.warns(PhysicsMismatchWarning, match="proposer 'base'"):
+        load_policy_proposer(shipped, name="base", params=I)
+    # the same networks saved as if trained on international: they warn on the default table
+    state = torch.load(shipped[0], map_location="cpu", weights_only=True)
+    state["config"]["physics"] = {"preset": "international"}
+    made_on_i = tmp_path / "made_on_international.pt"
+    torch.save(state, made_on_i)
+    with pytest.warns(PhysicsMismatchWarning, match="proposer 'mine'.*'international'"):
+        load_policy_proposer([made_on_i], name="mine")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PhysicsMismatchWarning)
+        prop = load_policy_proposer([made_on_i], name="mine", params=I)
     assert prop.R == I.ball_radius
 
 
