@@ -9,6 +9,7 @@ the mean chain length.
 
     python benchmarks/noise_table.py --out results/noise                 # the full table
     python benchmarks/noise_table.py --out /tmp/t --only geo_h2 --budgets 400 --noises fastfiz
+    python benchmarks/noise_table.py --out results/noise --only both_h2 --redo   # again, replacing its cells
 """
 
 from __future__ import annotations
@@ -81,6 +82,9 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=100)
     ap.add_argument("--cap", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--redo", action="store_true",
+                    help="run the selected cells again and replace their records (default: skip recorded cells), "
+                         "e.g. after the ensemble a row plays changed")
     args = ap.parse_args()
 
     from billiards.provenance import git_commit
@@ -90,7 +94,7 @@ def main() -> None:
     (out / "runs").mkdir(parents=True, exist_ok=True)
     table_path = out / "table.json"
     table = json.loads(table_path.read_text()) if table_path.is_file() else {"rows": []}
-    done = {(r["row"], r["noise"], r["budget"]) for r in table["rows"]}
+    done = set() if args.redo else {(r["row"], r["noise"], r["budget"]) for r in table["rows"]}
     for noise in args.noises:
         for budget in args.budgets:
             for name, over in rows(budget, noise).items():
@@ -114,6 +118,7 @@ def main() -> None:
                         rec.update(p3_mean=res["mean"], p3_se=res["std"] / math.sqrt(len(vals)), p3_chains=len(vals),
                                    p3_max=res["max"], p3_reached_cap=res["extra"]["reached_cap"])
                 rec.update(seconds=round(time.perf_counter() - t0, 1), commit=git_commit())
+                table["rows"] = [r for r in table["rows"] if (r["row"], r["noise"], r["budget"]) != (name, noise, budget)]
                 table["rows"].append(rec)
                 table_path.write_text(json.dumps(table, indent=2) + "\n")
                 print(f"{name:18s} {noise:10s} {budget:5d}: success {100 * rec['success']:.1f} ± "
