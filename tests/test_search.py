@@ -110,7 +110,9 @@ def test_actors_use_exactly_the_configured_number_of_simulations(count_sims):
     assert count_sims["shots"] == 3 * 400 == 3 * cfg.sims_per_decision
     count_sims["shots"] = 0
     actor = PUCTActor(GeometricProposer(), PUCTConfig(budget=60))
-    actor(td.clone())
+    with pytest.MonkeyPatch.context() as mp:  # every round through simulate_batch, where it is counted
+        mp.setattr(puct_mod, "_max_serial", lambda S: 0)
+        actor(td.clone())
     assert count_sims["shots"] == 3 * 60 == actor.n_sims
     count_sims["shots"] = 0
     puct_search(racks, GeometricProposer(), PUCTConfig(budget=60), np.random.default_rng(0), impl="reference")
@@ -144,6 +146,36 @@ def test_compiled_puct_makes_the_reference_decisions(cfg, prior):
     check = simulate_batch(racks, new.actions)
     np.testing.assert_array_equal(check.positions, new.positions)
     np.testing.assert_array_equal(verifier_reward(check), new.r1)
+
+
+@pytest.mark.parametrize("S", [1, 3, 70])
+def test_puct_rounds_simulated_inside_the_tree_equal_simulate_batchs(monkeypatch, S):
+    """The compiled rounds simulate their own shots (kernel, carom rule, verifier reward); routed
+    instead through simulate_batch, round by round, the search makes the same decisions to the
+    bit. 70 states: simulate_batch's threads take rounds of 64 or more when numba has threads."""
+    racks = random_racks(np.random.default_rng(21), S)
+    cfg = PUCTConfig(budget=80, foul_penalty=0.7)
+    inside = puct_search(racks, ScoringFirst(), cfg, np.random.default_rng(5))
+    monkeypatch.setattr(puct_mod, "_max_serial", lambda S: 0)
+    outside = puct_search(racks, ScoringFirst(), cfg, np.random.default_rng(5))
+    for field in ("actions", "value", "r1", "positions"):
+        np.testing.assert_array_equal(getattr(inside, field), getattr(outside, field), err_msg=field)
+    assert inside.n_sims == outside.n_sims == S * 80
+
+
+def test_puct_rejects_a_proposers_invalid_shot_with_the_simulators_message():
+    class TooHard:
+        name = "too-hard"
+
+        def propose(self, positions, k, rng):
+            cand = GeometricProposer().propose(positions, k, rng)
+            cand[:, -1, 1] = 1.5  # the last sample of every pool: power outside [0, 1]
+            return cand
+
+    racks = random_racks(np.random.default_rng(2), 2)
+    for impl in ("compiled", "reference"):
+        with pytest.raises(ValueError, match=r"power p = 1.5 is outside \[0, 1\]"):
+            puct_search(racks, TooHard(), PUCTConfig(budget=200, pool=4), np.random.default_rng(0), impl=impl)
 
 
 def test_compiled_puct_with_a_trained_ensemble_and_a_stall(base_policies):

@@ -28,10 +28,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from billiards import domain
-from billiards.physics import DEFAULT_PARAMS, PhysicsParams, simulate_batch
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams, core, simulate_batch
+from billiards.physics.api import PARALLEL_MIN_BATCH, POSITION_TOL
 
 from . import puct_tree as tree
 from .lookahead import VERIFIER_FOUL_PENALTY, SearchResult, verifier_reward
@@ -88,26 +90,43 @@ def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random
     pool[:, 0] = proposer.propose(positions, P, rng)
     ints[:, 0, tree.DRAWN] = P
     start, actions, rounds = np.empty((S, 4, 2)), np.empty((S, 4)), np.zeros(1, dtype=np.int64)
-    after, score, reward = np.empty((0, 4, 2)), np.empty(0, dtype=bool), np.empty(0)
+    after, score, reward = np.empty((S, 4, 2)), np.empty(S, dtype=bool), np.empty(S)
+    out_int, out_float = np.empty((S, core.N_OUT_INT), dtype=np.int64), np.empty((S, core.N_OUT_FLOAT))
+    io = np.zeros(2, dtype=np.int64)  # (shots gathered, not yet simulated; shots simulated this round)
+    # rounds run compiled, simulating their own shots (tree.run_rounds), except batches large
+    # enough for simulate_batch's threads; the outcomes are the same bits either way
+    max_serial = _max_serial(S)
+    c = domain.check_coefficient("foul penalty c", cfg.foul_penalty)
     while True:
-        m = tree.advance(ints, floats, t["positions"], t["actions"], pool, t["n_nodes"], t["sims"], t["path"],
-                         t["path_len"], t["kind"], start, actions, after, score, reward, rounds, cfg.budget,
-                         cfg.max_depth, cfg.c_puct, cfg.pw_c, cfg.pw_alpha, cfg.gamma)
+        m = tree.run_rounds(ints, floats, t["positions"], t["actions"], pool, t["n_nodes"], t["sims"], t["path"],
+                            t["path_len"], t["kind"], start, actions, after, score, reward, out_int, out_float, io,
+                            rounds, cfg.budget, cfg.max_depth, cfg.c_puct, cfg.pw_c, cfg.pw_alpha, cfg.gamma,
+                            params.array, POSITION_TOL, c, max_serial)
         if m == tree.DONE:
             break
         if m == tree.STALLED:
             raise RuntimeError("PUCT made no progress: every path ends at max_depth")
         if m == tree.DRAW_POOLS:
             _draw_pools(t, proposer, rng, P)
-            m = tree.gather(ints, t["positions"], pool, t["path"], t["path_len"], t["kind"], start, actions)
-        res = simulate_batch(start[:m], actions[:m], params)
-        after, score, reward = res.positions, res.score, verifier_reward(res, cfg.foul_penalty)
+            io[:] = tree.gather(ints, t["positions"], pool, t["path"], t["path_len"], t["kind"], start, actions), 0
+            continue
+        if m == tree.BAD_SHOTS:
+            m = int(io[0])
+        res = simulate_batch(start[:m], actions[:m], params)  # raises the message for BAD_SHOTS
+        after[:m], score[:m], reward[:m] = res.positions, res.score, verifier_reward(res, cfg.foul_penalty)
+        io[:] = 0, m
 
     best, value = np.empty(S, dtype=np.int64), np.empty(S)
     tree.root_choice(ints, floats, cfg.gamma, best, value)
     rows = np.arange(S)
     return SearchResult(t["actions"][rows, best], value, floats[rows, best, tree.REWARD].copy(),
                         t["positions"][rows, best], int(t["sims"].sum()))
+
+
+def _max_serial(S: int) -> int:
+    """Rounds of at least this many shots go to :func:`simulate_batch` (its threads); smaller
+    ones are simulated inside the compiled rounds (0: every round through simulate_batch)."""
+    return PARALLEL_MIN_BATCH if numba.get_num_threads() > 1 else S + 1
 
 
 def _draw_pools(t: dict, proposer, rng: np.random.Generator, P: int) -> None:

@@ -20,6 +20,8 @@ import math
 import numpy as np
 from numba import njit
 
+from billiards.physics.core import ERR_OK, O_HIT1, O_HIT2, O_HIT3, check_actions, check_positions, run_batch_serial
+
 # integer fields of a node
 DEPTH, TERMINAL, VISITS, N_CHILD, FIRST, LAST, NEXT, DRAWN = range(8)
 N_INT = 8
@@ -219,3 +221,46 @@ def advance(ints, floats, node_pos, node_actions, pool, n_nodes, sims, path, pat
             return m
         attach_and_back_up(ints, floats, node_pos, node_actions, n_nodes, sims, path, path_len, kind,
                            actions, after, score, reward, gamma)
+
+
+# what run_rounds() may also answer: the gathered shots hold an invalid action or table
+BAD_SHOTS = -4
+
+
+@njit(cache=True)
+def run_rounds(ints, floats, node_pos, node_actions, pool, n_nodes, sims, path, path_len, kind, start, actions,
+               after, score, reward, out_int, out_float, io, rounds, budget, max_depth, c_puct, pw_c, pw_alpha,
+               gamma, p, tol, foul_penalty, max_serial):
+    """:func:`advance`, simulating the gathered shots itself, so the caller only hears of the
+    rounds that need it: ``DONE``, ``STALLED``, ``DRAW_POOLS`` (it draws, gathers and sets
+    ``io[0]``), ``BAD_SHOTS`` (it builds the error message from ``start, actions[:io[0]]``), or
+    a batch of ``m >= max_serial`` shots (``m`` > 0) to simulate on all threads (it fills ``after,
+    score, reward[:m]`` and sets ``io = 0, m``).
+
+    ``io = (to simulate, simulated)``: the shots gathered in ``start, actions`` and not yet
+    simulated, and how many of ``after, score, reward`` hold the current round's outcomes. A
+    shot is simulated as :func:`billiards.physics.simulate_batch` does (the same kernel on the
+    calling thread, same validation); its verifier reward is score - foul_penalty * foul with
+    the carom rule of :func:`billiards.physics.rules.carom_outcome` (score: both reds and not
+    the yellow; foul: the yellow), bit for bit what :func:`~billiards.search.lookahead.verifier_reward` computes.
+    """
+    while True:
+        m = io[0]
+        if m > 0:
+            if m >= max_serial:
+                return m
+            if check_actions(actions[:m])[0] != ERR_OK or check_positions(start[:m], p, tol)[0] != ERR_OK:
+                return BAD_SHOTS
+            run_batch_serial(start[:m], actions[:m], p, after[:m], out_int[:m], out_float[:m])
+            for i in range(m):
+                foul = out_int[i, O_HIT1] != 0
+                score[i] = out_int[i, O_HIT2] != 0 and out_int[i, O_HIT3] != 0 and not foul
+                reward[i] = (1.0 if score[i] else 0.0) + -foul_penalty * (1.0 if foul else 0.0)
+            io[0], io[1] = 0, m
+        k = io[1]
+        m = advance(ints, floats, node_pos, node_actions, pool, n_nodes, sims, path, path_len, kind, start, actions,
+                    after[:k], score[:k], reward[:k], rounds, budget, max_depth, c_puct, pw_c, pw_alpha, gamma)
+        io[1] = 0
+        if m <= 0:
+            return m
+        io[0] = m
