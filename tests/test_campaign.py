@@ -447,10 +447,12 @@ def test_report_writes_reproduction_rows_from_finished_runs(tmp_path):
         *({"table": "table2", "variant": "random_continue", "seed": s, "same_as": f"table1/sac/seed{s}"} for s in range(2)),
         {"table": "table6", "variant": "geometric/h2_p3", "kind": "search", "steps": 10, "cost": "h2", "args": ["search=h2"]},
         {"table": "table6", "variant": "geometric/puct_p1", "kind": "search", "steps": 10, "cost": "puct", "args": ["search=puct"]},
+        {"table": "extra", "variant": "sac_paper", "seed": 0, "steps": 400, "cost": "sac_paper", "args": ["algo=sac_paper"]},
     ]}))
     root, out = tmp_path / "state", tmp_path / "results"
     for seed, mean, best, canonical in ((0, 0.5, 3, 1.0), (1, 0.3, 4, 0.0)):
         _fake_run(root / "table1" / "sac" / f"seed{seed}", "table1", seed, mean, best, canonical, 400)
+    _fake_run(root / "extra" / "sac_paper" / "seed0", "extra", 0, 0.25, 2, 0.0, 400)
     search_dir = root / "table6" / "geometric" / "h2_p3"
     search_dir.mkdir(parents=True)
     (search_dir / "results.json").write_text(json.dumps({
@@ -481,6 +483,14 @@ def test_report_writes_reproduction_rows_from_finished_runs(tmp_path):
     assert (out / "search" / "mini" / "table6" / "geometric" / "h2_p3" / "results.json").is_file()
     md = (out / "reproduction.md").read_text()
     assert "| sac | 2/3 | 400 | 0.400 ± 0.100 \\| 0.418 ± 0.038 |" in md and "| geometric | h2 | p3 | 228.9 (496) |" in md
+
+    # the extra run sits beside the tables, compared with the paper's SAC row and ours
+    assert all(r["table"] != "extra" for r in data["rows"])
+    (extra,) = data["extra"]
+    assert (extra["variant"], extra["paper_row"], extra["complete"], extra["seeds"]) == ("sac_paper", "sac", True, [0])
+    assert extra["ours"]["mean"] == pytest.approx(0.25) and extra["paper"]["mean"] == 0.418
+    assert "| sac_paper | 1/1 | 400 | 0.250 ± 0.000 | 2 |" in md
+    assert "| Table 1 `sac` (project CPU settings) | 2/3 | 400 | 0.400 ± 0.100 | 4 |" in md
 
     rc, text = cli("report", "--spec", str(spec), "--root", str(tmp_path / "nowhere"), "--out", str(out))
     assert rc == 2 and "has not started" in text

@@ -7,7 +7,8 @@ run's ``results.json``), copies their small files into ``<out>/training/<campaig
 
 * ``<out>/reproduction.json``: ``{"rows": [...]}``, one row per table variant (Tables 1-5) and
   per proposer x method x protocol (Table 6), ours beside the paper's figures, with the seeds
-  finished and planned, the steps per seed, the physics, the CPU-hours and the commits;
+  finished and planned, the steps per seed, the physics, the CPU-hours and the commits; and
+  ``"extra"``: the runs beside the tables (:data:`EXTRA_TABLES`) in the same form;
 * ``<out>/reproduction.md``: the same as Markdown tables, and the CPU-hours per table.
 
 Rows whose seeds are not all finished are written with ``"complete": false``; the report
@@ -40,6 +41,10 @@ TRAIN_TABLES: dict[str, tuple[int, dict[str, str]]] = {
     "table5": (5, {"aim_features": "none", "foul_penalty": "foul_penalty", "gentle": "gentle",
                    "near_miss": "near_miss", "both": "both"}),
 }
+# runs beside the tables (``data["extra"]``, not rows of the paper's tables): each compared with a
+# table's row of the paper: the authors' SAC settings on Table 1's task, beside Table 1's SAC
+EXTRA_TABLES: dict[str, tuple[str, dict[str, str]]] = {"extra": ("extra", {"sac_paper": "sac"})}
+PAPER_OF = {"extra": "table1"}
 OUR_KEYS = ("mean", "std", "max", "foul_inn", "foul_sh", "succ_sh", "canonical", "rand_eval")
 SEARCH_FILES = ("results.json", "chains.jsonl", "config.yaml", "search.log")
 TRAIN_EXTRA_FILES = (STARTS, "train.log")
@@ -57,21 +62,22 @@ def _copy(src_dir: Path, dest: Path, patterns: tuple[str, ...]) -> None:
                 shutil.copy2(f, dest / f.name)
 
 
-def _train_groups(campaign: Campaign) -> dict[tuple[str, str], list[Entry]]:
-    """The training entries of Tables 1-5 by (table, variant), in the campaign's order."""
+def _train_groups(campaign: Campaign, tables=TRAIN_TABLES) -> dict[tuple[str, str], list[Entry]]:
+    """The training entries of ``tables`` (Tables 1-5) by (table, variant), in the campaign's order."""
     groups: dict[tuple[str, str], list[Entry]] = defaultdict(list)
     for e in campaign.entries:
-        if e.kind == "train" and e.table in TRAIN_TABLES and e.variant in TRAIN_TABLES[e.table][1]:
+        if e.kind == "train" and e.table in tables and e.variant in tables[e.table][1]:
             groups[(e.table, e.variant)].append(e)
     return groups
 
 
-def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out: Path | None) -> list[dict]:
-    """One row per (table, variant) of Tables 1-5 present in ``campaign``."""
+def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out: Path | None,
+                  tables=TRAIN_TABLES) -> list[dict]:
+    """One row per (table, variant) of ``tables`` (Tables 1-5, or :data:`EXTRA_TABLES`) present in ``campaign``."""
     rows = []
-    for (table, variant), entries in _train_groups(campaign).items():
-        number, variants = TRAIN_TABLES[table]
-        paper_spec = PAPER[table]
+    for (table, variant), entries in _train_groups(campaign, tables).items():
+        number, variants = tables[table]
+        paper_spec = PAPER[PAPER_OF.get(table, table)]
         runs, cpu_s, commits, shared = [], 0.0, [], set()
         for e in entries:
             src = campaign.source(e)
@@ -89,7 +95,7 @@ def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out
         paper_row = paper_spec["rows"].get(variants[variant], {})
         columns = ["mean", *paper_spec["columns"]]
         row = {
-            "table": number, "variant": variant,
+            "table": number, "variant": variant, **({"paper_row": variants[variant]} if table in PAPER_OF else {}),
             "seeds": sorted(r.config.get("seed") for r in runs),
             "seeds_planned": sorted(e.seed for e in entries),
             "steps": max(e.steps if not e.same_as else campaign.source(e).steps for e in entries),
@@ -183,6 +189,7 @@ def reproduction(campaign: Campaign, root: Path, out: Path | None = None) -> dic
     states = {s.entry.key: s for s in entry_states(campaign, root)}
     data = {"campaign": campaign.name,
             "rows": training_rows(campaign, root, states, out) + search_rows(campaign, root, states, out),
+            "extra": training_rows(campaign, root, states, out, EXTRA_TABLES),
             "cpu_hours_by_table": _cpu_by_table(states)}
     if out is not None:
         data["figures"] = curve_figures(campaign, root, states, out)
@@ -261,6 +268,20 @@ def markdown(data: dict) -> str:
             parts.append(f"| {r['proposer']} | {r['method']} | {r['protocol']} | {ours} | {ptxt} | "
                          f"{r['proposer_steps']:,} | {r['cpu_hours']:.2f} |")
         parts.append("")
+    for r in data.get("extra", []):
+        base = next((x for x in rows if x["table"] == 1 and x["variant"] == r["paper_row"]), None)
+        ours, paper = r["ours"] or {}, r["paper"] or {}
+        fig = lambda d: f"{_fig(d.get('mean'), 'mean')} ± {_fig(d.get('std'), 'std')}" if d.get("mean") is not None else "–"
+        parts += [f"## Extra: `algo={r['variant']}` on Table 1's task (the authors' SAC settings)", "",
+                  "| run | seeds | steps | mean ± std | max | CPU-h | commits |", "|---|---|---|---|---|---|---|",
+                  f"| {r['variant']} | {len(r['seeds'])}/{len(r['seeds_planned'])} | {r['steps']:,} | {fig(ours)} | "
+                  f"{_fig(ours.get('max'), 'max')} | {r['cpu_hours']:.2f} | {', '.join(r['commits']) or '–'} |"]
+        if base is not None:
+            b = base["ours"] or {}
+            parts.append(f"| Table 1 `{base['variant']}` (project CPU settings) | {len(base['seeds'])}/"
+                         f"{len(base['seeds_planned'])} | {base['steps']:,} | {fig(b)} | {_fig(b.get('max'), 'max')} | "
+                         f"{base['cpu_hours']:.2f} | {', '.join(base['commits']) or '–'} |")
+        parts += [f"| the paper's SAC | | | {fig(paper)} | {_fig(paper.get('max'), 'max')} | | |", ""]
     parts += ["## CPU-hours per table", "", "| table | CPU-h |", "|---|---|"]
     parts += [f"| {t} | {h:.2f} |" for t, h in data["cpu_hours_by_table"].items()]
     parts.append(f"| total | {sum(data['cpu_hours_by_table'].values()):.2f} |")
