@@ -217,6 +217,17 @@ def _fig(v, key: str) -> str:
     return f"{v:.1f}"
 
 
+def _mean_std(fig: dict) -> str:
+    return f"{_fig(fig.get('mean'), 'mean')} ± {_fig(fig.get('std'), 'std')}" if fig.get("mean") is not None else "–"
+
+
+def _extra_line(label: str, r: dict) -> str:
+    """A training row of the extra section: seeds, steps, mean ± std, max, CPU-h, commits."""
+    ours = r["ours"] or {}
+    return (f"| {label} | {len(r['seeds'])}/{len(r['seeds_planned'])} | {r['steps']:,} | {_mean_std(ours)} | "
+            f"{_fig(ours.get('max'), 'max')} | {r['cpu_hours']:.2f} | {', '.join(r['commits']) or '–'} |")
+
+
 def markdown(data: dict) -> str:
     rows = data["rows"]
     parts = [f"# Reproduction of the paper's tables (campaign `{data['campaign']}`)", "",
@@ -269,19 +280,15 @@ def markdown(data: dict) -> str:
                          f"{r['proposer_steps']:,} | {r['cpu_hours']:.2f} |")
         parts.append("")
     for r in data.get("extra", []):
-        base = next((x for x in rows if x["table"] == 1 and x["variant"] == r["paper_row"]), None)
-        ours, paper = r["ours"] or {}, r["paper"] or {}
-        fig = lambda d: f"{_fig(d.get('mean'), 'mean')} ± {_fig(d.get('std'), 'std')}" if d.get("mean") is not None else "–"
-        parts += [f"## Extra: `algo={r['variant']}` on Table 1's task (the authors' SAC settings)", "",
+        number = TRAIN_TABLES[PAPER_OF[r["table"]]][0]
+        base = next((x for x in rows if x["table"] == number and x["variant"] == r["paper_row"]), None)
+        parts += [f"## Extra: `algo={r['variant']}` on Table {number}'s task (the authors' SAC settings)", "",
                   "| run | seeds | steps | mean ± std | max | CPU-h | commits |", "|---|---|---|---|---|---|---|",
-                  f"| {r['variant']} | {len(r['seeds'])}/{len(r['seeds_planned'])} | {r['steps']:,} | {fig(ours)} | "
-                  f"{_fig(ours.get('max'), 'max')} | {r['cpu_hours']:.2f} | {', '.join(r['commits']) or '–'} |"]
+                  _extra_line(r["variant"], r)]
         if base is not None:
-            b = base["ours"] or {}
-            parts.append(f"| Table 1 `{base['variant']}` (project CPU settings) | {len(base['seeds'])}/"
-                         f"{len(base['seeds_planned'])} | {base['steps']:,} | {fig(b)} | {_fig(b.get('max'), 'max')} | "
-                         f"{base['cpu_hours']:.2f} | {', '.join(base['commits']) or '–'} |")
-        parts += [f"| the paper's SAC | | | {fig(paper)} | {_fig(paper.get('max'), 'max')} | | |", ""]
+            parts.append(_extra_line(f"Table {number} `{base['variant']}` (project CPU settings)", base))
+        paper = r["paper"] or {}
+        parts += [f"| the paper's SAC | | | {_mean_std(paper)} | {_fig(paper.get('max'), 'max')} | | |", ""]
     parts += ["## CPU-hours per table", "", "| table | CPU-h |", "|---|---|"]
     parts += [f"| {t} | {h:.2f} |" for t, h in data["cpu_hours_by_table"].items()]
     parts.append(f"| total | {sum(data['cpu_hours_by_table'].values()):.2f} |")
