@@ -234,7 +234,7 @@ def test_search_app_plays_the_chosen_table(tmp_path):
     assert bad.returncode != 0 and "physics.e_ball" in bad.stderr and "Traceback" not in bad.stderr
 
 
-def test_things_made_on_another_table_warn_loudly(tmp_path):
+def test_things_made_on_another_table_warn_loudly(tmp_path, international_policy):
     import warnings
 
     from billiards.envs import make_env
@@ -258,10 +258,7 @@ def test_things_made_on_another_table_warn_loudly(tmp_path):
     with pytest.warns(PhysicsMismatchWarning, match="proposer 'base'"):
         load_policy_proposer(shipped, name="base", params=I)
     # the same networks saved as if trained on international: they warn on the default table
-    state = torch.load(shipped[0], map_location="cpu", weights_only=True)
-    state["config"]["physics"] = {"preset": "international"}
-    made_on_i = tmp_path / "made_on_international.pt"
-    torch.save(state, made_on_i)
+    made_on_i = international_policy
     with pytest.warns(PhysicsMismatchWarning, match="proposer 'mine'.*'international'"):
         load_policy_proposer([made_on_i], name="mine")
     with warnings.catch_warnings():

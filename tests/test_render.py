@@ -60,21 +60,15 @@ def test_command_line(tmp_path, capsys):
     assert str(out) in capsys.readouterr().out
 
 
-def test_render_draws_a_trained_policys_shots_on_its_own_table(tmp_path, capsys):
+def test_render_draws_a_trained_policys_shots_on_its_own_table(tmp_path, capsys, international_policy):
     from pathlib import Path
 
     from billiards.physics import PRESETS
 
-    import torch
-
     shipped = Path(__file__).resolve().parents[1] / "results" / "policies" / "base" / "seed0.pt"
     policy, constrain_aim, extra_features, made_on = pictures.load_player(str(shipped))
     assert constrain_aim and extra_features and made_on == PRESETS["korean_medium"]
-    # the same networks, saved as if trained on the international table (not the default one)
-    state = torch.load(shipped, map_location="cpu", weights_only=True)
-    state["config"]["physics"] = {"preset": "international"}
-    foreign = tmp_path / "international.pt"
-    torch.save(state, foreign)
+    foreign = international_policy  # the same networks, saved as if trained on the international table
     assert pictures.load_player(str(foreign))[3] == PRESETS["international"]
     out = tmp_path / "policy.png"
     pictures.main(["shot", "--out", str(out), "--policy", str(foreign), "--seed", "2", "--dpi", "40"])
