@@ -55,7 +55,9 @@ def test_paper_campaign_lists_every_table_at_its_budget():
     assert c.by_key()["table6/export/base"].needs() == [f"table5/foul_penalty/seed{s}" for s in range(3)]
     # the optional run of the authors' SAC runs only when asked for
     assert "extra/sac_paper/seed0" not in {e.key for e in c.select(None)}
-    assert [e.key for e in c.select(["extra"])] == ["extra/sac_paper/seed0"]
+    assert [e.key for e in c.select(["extra"])] == ["extra/sac_paper/seed0", "extra/sac_paper_t5_aim_features/seed0",
+                                                    "extra/sac_paper_t5_foul_penalty/seed0"]
+    assert all(e.optional for e in c.entries if e.table == "extra")
     # --only table2 brings the Table 1 SAC runs its random_continue row shares
     assert {e.key for e in c.select(["table2"])} >= {"table1/sac/seed0", "table1/sac/seed2"}
 
@@ -107,6 +109,11 @@ def test_paper_training_runs_compose_and_validate():
                                                                "aim_features": (True, True)}[e.variant]
         if e.table == "table5":
             assert env.constrain_aim and env.extra_features and shaping.name == e.variant and shaping.foul_penalty == 1.0
+        if e.table == "extra":  # the authors' SAC on Table 1's task and on Table 5's first two rows
+            assert (cfg.algo.name, cfg.algo.utd, cfg.algo.lr, cfg.algo.gamma) == ("sac", 1.0, 3e-4, 0.99)
+            t5 = e.variant.startswith("sac_paper_t5_")
+            assert (env.constrain_aim, env.extra_features, cfg.budget.total_steps) == (t5, t5, 1_000_000 if t5 else 400_000)
+            assert shaping.foul_penalty == (1.0 if e.variant.endswith("foul_penalty") else 0.0)
     # a shared row is the same training config as its source (Table 3's own preset, variant=aim),
     # only the table label differs
     t3.table = t4.table
@@ -421,11 +428,12 @@ def test_a_stopped_search_is_not_done_and_p3_resumes(tmp_path):
     assert states["table6/geometric/h2_p3"].state == "done" and states["table6/geometric/h2_p3"].frames == 900
 
 
-def _fake_run(run_dir: Path, table: str, seed: int, mean: float, best: int, canonical: float, frames: int) -> None:
+def _fake_run(run_dir: Path, table: str, seed: int, mean: float, best: int, canonical: float, frames: int,
+              **config_extra) -> None:
     """A finished training run's small files, as train.py writes them (the numbers made up)."""
     run_dir.mkdir(parents=True)
     config = {"seed": seed, "table": table, "algo": {"name": "sac"}, "env": {"paradigm": "random_continue"},
-              "physics": {"preset": "korean_medium"}, "budget": {"total_steps": frames}}
+              "physics": {"preset": "korean_medium"}, "budget": {"total_steps": frames}, **config_extra}
     (run_dir / "config.yaml").write_text(yaml.safe_dump(config))
     ev = {"mean": mean, "best": best, "foul_innings_pct": 50.0 + seed, "foul_per_shot_pct": 10.0 + seed,
           "success_per_shot_pct": 4.0 + seed, "start": "random"}
@@ -448,11 +456,17 @@ def test_report_writes_reproduction_rows_from_finished_runs(tmp_path):
         {"table": "table6", "variant": "geometric/h2_p3", "kind": "search", "steps": 10, "cost": "h2", "args": ["search=h2"]},
         {"table": "table6", "variant": "geometric/puct_p1", "kind": "search", "steps": 10, "cost": "puct", "args": ["search=puct"]},
         {"table": "extra", "variant": "sac_paper", "seed": 0, "steps": 400, "cost": "sac_paper", "args": ["algo=sac_paper"]},
+        {"table": "table5", "variant": "foul_penalty", "seed": 0, "steps": 1000, "cost": "sac", "args": ["algo=sac"]},
+        {"table": "extra", "variant": "sac_paper_t5_foul_penalty", "seed": 0, "steps": 1000, "cost": "sac_paper",
+         "args": ["algo=sac_paper"]},
     ]}))
     root, out = tmp_path / "state", tmp_path / "results"
     for seed, mean, best, canonical in ((0, 0.5, 3, 1.0), (1, 0.3, 4, 0.0)):
         _fake_run(root / "table1" / "sac" / f"seed{seed}", "table1", seed, mean, best, canonical, 400)
     _fake_run(root / "extra" / "sac_paper" / "seed0", "extra", 0, 0.25, 2, 0.0, 400)
+    shaping = {"shaping": {"name": "foul_penalty", "foul_penalty": 1.0}}
+    _fake_run(root / "table5" / "foul_penalty" / "seed0", "table5", 0, 6.5, 9, 0.0, 1000, **shaping)
+    _fake_run(root / "extra" / "sac_paper_t5_foul_penalty" / "seed0", "extra", 0, 5.5, 8, 0.0, 1000, **shaping)
     search_dir = root / "table6" / "geometric" / "h2_p3"
     search_dir.mkdir(parents=True)
     (search_dir / "results.json").write_text(json.dumps({
@@ -486,11 +500,18 @@ def test_report_writes_reproduction_rows_from_finished_runs(tmp_path):
 
     # the extra run sits beside the tables, compared with the paper's SAC row and ours
     assert all(r["table"] != "extra" for r in data["rows"])
-    (extra,) = data["extra"]
+    extra, t5 = data["extra"]
     assert (extra["variant"], extra["paper_row"], extra["complete"], extra["seeds"]) == ("sac_paper", "sac", True, [0])
     assert extra["ours"]["mean"] == pytest.approx(0.25) and extra["paper"]["mean"] == 0.418
-    assert "| sac_paper | 1/1 | 400 | 0.250 ± 0.000 | 2 |" in md
-    assert "| Table 1 `sac` (project CPU settings) | 2/3 | 400 | 0.400 ± 0.100 | 4 |" in md
+    # ... and on Table 5's foul penalty row: its paper row and our row with the project's settings
+    assert (t5["table"], t5["compared_with"], t5["paper_row"], t5["steps"]) == (5, "foul_penalty", "foul_penalty", 1000)
+    assert t5["ours"]["mean"] == pytest.approx(5.5) and t5["paper"]["mean"] == 5.553
+    assert "| sac_paper | 1/1 | 400 | 0.250 ± 0.000 | 2 | 50.0 | 0.50 |" in md
+    assert "| Table 1 `sac` (project CPU settings) | 2/3 | 400 | 0.400 ± 0.100 | 4 | 50.5 |" in md
+    table5 = md.split("on Table 5's task", 1)[1]
+    assert "| sac_paper_t5_foul_penalty | 1/1 | 1,000 | 5.500 ± 0.000 | 10.0 | 4.0 | 0.50 |" in table5
+    assert "| Table 5 `foul_penalty` (project CPU settings) | 1/1 | 1,000 | 6.500 ± 0.000 | 10.0 | 4.0 |" in table5
+    assert "| the paper's `foul_penalty` | | | 5.553 ± 0.162 | 6.0 |" in table5
 
     rc, text = cli("report", "--spec", str(spec), "--root", str(tmp_path / "nowhere"), "--out", str(out))
     assert rc == 2 and "has not started" in text

@@ -8,7 +8,7 @@ run's ``results.json``), copies their small files into ``<out>/training/<campaig
 * ``<out>/reproduction.json``: ``{"rows": [...]}``, one row per table variant (Tables 1-5) and
   per proposer x method x protocol (Table 6), ours beside the paper's figures, with the seeds
   finished and planned, the steps per seed, the physics, the CPU-hours and the commits; and
-  ``"extra"``: the runs beside the tables (:data:`EXTRA_TABLES`) in the same form;
+  ``"extra"``: the runs beside the tables (:data:`EXTRA_RUNS`) in the same form;
 * ``<out>/reproduction.md``: the same as Markdown tables, and the CPU-hours per table.
 
 Rows whose seeds are not all finished are written with ``"complete": false``; the report
@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import shutil
 from collections import defaultdict
+from itertools import groupby
 from pathlib import Path
 
 from billiards.files import atomic_write_text
@@ -41,10 +42,15 @@ TRAIN_TABLES: dict[str, tuple[int, dict[str, str]]] = {
     "table5": (5, {"aim_features": "none", "foul_penalty": "foul_penalty", "gentle": "gentle",
                    "near_miss": "near_miss", "both": "both"}),
 }
-# runs beside the tables (``data["extra"]``, not rows of the paper's tables): each compared with a
-# table's row of the paper: the authors' SAC settings on Table 1's task, beside Table 1's SAC
-EXTRA_TABLES: dict[str, tuple[str, dict[str, str]]] = {"extra": ("extra", {"sac_paper": "sac"})}
-PAPER_OF = {"extra": "table1"}
+# runs beside the tables (``data["extra"]``, not rows of the paper's tables), the campaign's
+# ``extra`` table: variant -> the table and its variant (the issue's spelling) each is compared
+# with, ours and the paper's: the authors' SAC settings on Table 1's task and on two of Table 5's
+EXTRA_TABLE = "extra"
+EXTRA_RUNS: dict[str, tuple[str, str]] = {
+    "sac_paper": ("table1", "sac"),
+    "sac_paper_t5_aim_features": ("table5", "aim_features"),
+    "sac_paper_t5_foul_penalty": ("table5", "foul_penalty"),
+}
 OUR_KEYS = ("mean", "std", "max", "foul_inn", "foul_sh", "succ_sh", "canonical", "rand_eval")
 SEARCH_FILES = ("results.json", "chains.jsonl", "config.yaml", "search.log")
 TRAIN_EXTRA_FILES = (STARTS, "train.log")
@@ -62,22 +68,28 @@ def _copy(src_dir: Path, dest: Path, patterns: tuple[str, ...]) -> None:
                 shutil.copy2(f, dest / f.name)
 
 
-def _train_groups(campaign: Campaign, tables=TRAIN_TABLES) -> dict[tuple[str, str], list[Entry]]:
-    """The training entries of ``tables`` (Tables 1-5) by (table, variant), in the campaign's order."""
+def _train_groups(campaign: Campaign, extra: bool = False) -> dict[tuple[str, str], list[Entry]]:
+    """The training entries of Tables 1-5 (or, with ``extra``, of :data:`EXTRA_RUNS`) by
+    (table, variant), in the campaign's order."""
     groups: dict[tuple[str, str], list[Entry]] = defaultdict(list)
     for e in campaign.entries:
-        if e.kind == "train" and e.table in tables and e.variant in tables[e.table][1]:
+        if e.kind != "train":
+            continue
+        if (e.table == EXTRA_TABLE and e.variant in EXTRA_RUNS) if extra else \
+                (e.table in TRAIN_TABLES and e.variant in TRAIN_TABLES[e.table][1]):
             groups[(e.table, e.variant)].append(e)
     return groups
 
 
 def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out: Path | None,
-                  tables=TRAIN_TABLES) -> list[dict]:
-    """One row per (table, variant) of ``tables`` (Tables 1-5, or :data:`EXTRA_TABLES`) present in ``campaign``."""
+                  extra: bool = False) -> list[dict]:
+    """One row per (table, variant) of Tables 1-5 present in ``campaign``; with ``extra``, one
+    per run of :data:`EXTRA_RUNS`, with ``compared_with`` (the table's variant) and ``paper_row``."""
     rows = []
-    for (table, variant), entries in _train_groups(campaign, tables).items():
-        number, variants = tables[table]
-        paper_spec = PAPER[PAPER_OF.get(table, table)]
+    for (table, variant), entries in _train_groups(campaign, extra).items():
+        paper_table, compared = EXTRA_RUNS[variant] if extra else (table, variant)
+        number, variants = TRAIN_TABLES[paper_table]
+        paper_spec = PAPER[paper_table]
         runs, cpu_s, commits, shared = [], 0.0, [], set()
         for e in entries:
             src = campaign.source(e)
@@ -92,10 +104,11 @@ def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out
             runs.append(read_run(run_dir))
             if out is not None:
                 _copy(run_dir, out / "training" / campaign.name / src.key, SMALL_RUN_FILES + TRAIN_EXTRA_FILES)
-        paper_row = paper_spec["rows"].get(variants[variant], {})
+        paper_row = paper_spec["rows"].get(variants[compared], {})
         columns = ["mean", *paper_spec["columns"]]
         row = {
-            "table": number, "variant": variant, **({"paper_row": variants[variant]} if table in PAPER_OF else {}),
+            "table": number, "variant": variant,
+            **({"compared_with": compared, "paper_row": variants[compared]} if extra else {}),
             "seeds": sorted(r.config.get("seed") for r in runs),
             "seeds_planned": sorted(e.seed for e in entries),
             "steps": max(e.steps if not e.same_as else campaign.source(e).steps for e in entries),
@@ -189,7 +202,7 @@ def reproduction(campaign: Campaign, root: Path, out: Path | None = None) -> dic
     states = {s.entry.key: s for s in entry_states(campaign, root)}
     data = {"campaign": campaign.name,
             "rows": training_rows(campaign, root, states, out) + search_rows(campaign, root, states, out),
-            "extra": training_rows(campaign, root, states, out, EXTRA_TABLES),
+            "extra": training_rows(campaign, root, states, out, extra=True),
             "cpu_hours_by_table": _cpu_by_table(states)}
     if out is not None:
         data["figures"] = curve_figures(campaign, root, states, out)
@@ -221,11 +234,15 @@ def _mean_std(fig: dict) -> str:
     return f"{_fig(fig.get('mean'), 'mean')} ± {_fig(fig.get('std'), 'std')}" if fig.get("mean") is not None else "–"
 
 
-def _extra_line(label: str, r: dict) -> str:
-    """A training row of the extra section: seeds, steps, mean ± std, max, CPU-h, commits."""
-    ours = r["ours"] or {}
-    return (f"| {label} | {len(r['seeds'])}/{len(r['seeds_planned'])} | {r['steps']:,} | {_mean_std(ours)} | "
-            f"{_fig(ours.get('max'), 'max')} | {r['cpu_hours']:.2f} | {', '.join(r['commits']) or '–'} |")
+def _extra_line(label: str, r: dict | None, cols: list[str], figs: dict | None = None) -> str:
+    """A line of the extra section: seeds, steps, the compared table's ``cols``, CPU-h and
+    commits of run row ``r``; or, with ``r`` None, the figures ``figs`` alone (the paper's)."""
+    figs = (r["ours"] if r is not None else figs) or {}
+    cells = " | ".join(_mean_std(figs) if c == "mean" else _fig(figs.get(c), c) for c in cols)
+    if r is None:
+        return f"| {label} | | | {cells} | | |"
+    return (f"| {label} | {len(r['seeds'])}/{len(r['seeds_planned'])} | {r['steps']:,} | {cells} | "
+            f"{r['cpu_hours']:.2f} | {', '.join(r['commits']) or '–'} |")
 
 
 def markdown(data: dict) -> str:
@@ -279,16 +296,18 @@ def markdown(data: dict) -> str:
             parts.append(f"| {r['proposer']} | {r['method']} | {r['protocol']} | {ours} | {ptxt} | "
                          f"{r['proposer_steps']:,} | {r['cpu_hours']:.2f} |")
         parts.append("")
-    for r in data.get("extra", []):
-        number = TRAIN_TABLES[PAPER_OF[r["table"]]][0]
-        base = next((x for x in rows if x["table"] == number and x["variant"] == r["paper_row"]), None)
-        parts += [f"## Extra: `algo={r['variant']}` on Table {number}'s task (the authors' SAC settings)", "",
-                  "| run | seeds | steps | mean ± std | max | CPU-h | commits |", "|---|---|---|---|---|---|---|",
-                  _extra_line(r["variant"], r)]
-        if base is not None:
-            parts.append(_extra_line(f"Table {number} `{base['variant']}` (project CPU settings)", base))
-        paper = r["paper"] or {}
-        parts += [f"| the paper's SAC | | | {_mean_std(paper)} | {_fig(paper.get('max'), 'max')} | | |", ""]
+    for number, group in groupby(data.get("extra", []), key=lambda r: r["table"]):
+        cols = PAPER[f"table{number}"]["columns"]
+        parts += [f"## Extra: the authors' SAC settings (`algo=sac_paper`) on Table {number}'s task", "",
+                  "| run | seeds | steps | " + " | ".join(COLUMN_TITLES.get(c, c) for c in cols) + " | CPU-h | commits |",
+                  "|---|---|---|" + "---|" * len(cols) + "---|---|"]
+        for r in group:
+            base = next((x for x in rows if x["table"] == number and x["variant"] == r["compared_with"]), None)
+            parts.append(_extra_line(r["variant"], r, cols))
+            if base is not None:
+                parts.append(_extra_line(f"Table {number} `{base['variant']}` (project CPU settings)", base, cols))
+            parts.append(_extra_line(f"the paper's `{r['compared_with']}`", None, cols, r["paper"]))
+        parts.append("")
     parts += ["## CPU-hours per table", "", "| table | CPU-h |", "|---|---|"]
     parts += [f"| {t} | {h:.2f} |" for t, h in data["cpu_hours_by_table"].items()]
     parts.append(f"| total | {sum(data['cpu_hours_by_table'].values()):.2f} |")
