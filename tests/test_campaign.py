@@ -562,15 +562,19 @@ def test_report_draws_each_tables_learning_curves_from_its_finished_runs(tmp_pat
 
     spec = tmp_path / "mini.yaml"
     spec.write_text(yaml.safe_dump({"name": "mini", "runs": [
-        {"table": "table1", "variant": "sac", "seed": s, "steps": 400, "cost": "sac", "args": ["algo=sac"]} for s in range(3)]}))
+        *({"table": "table1", "variant": "sac", "seed": s, "steps": 400, "cost": "sac", "args": ["algo=sac"]} for s in range(3)),
+        *({"table": "extra", "variant": v, "seed": 0, "steps": 400, "cost": "sac_paper", "args": ["algo=sac_paper"]}
+          for v in ("sac_paper", "sac_paper_t5_foul_penalty"))]}))
     root, out = tmp_path / "state", tmp_path / "results"
-    for seed, evals in ((0, [0.1, 0.3, 0.5]), (1, [0.3, 0.5]), (2, [0.9, 0.9, 0.9])):
-        d = root / "table1" / "sac" / f"seed{seed}"
-        _fake_run(d, "table1", seed, evals[-1], 3, 0.0, 400)
+    for name, seed, evals in (("table1/sac", 0, [0.1, 0.3, 0.5]), ("table1/sac", 1, [0.3, 0.5]), ("table1/sac", 2, [0.9, 0.9, 0.9]),
+                              ("extra/sac_paper", 0, [0.1, 0.2]), ("extra/sac_paper_t5_foul_penalty", 0, [1.0, 2.0])):
+        d = root / name / f"seed{seed}"
+        _fake_run(d, name.split("/")[0], seed, evals[-1], 3, 0.0, 400)
         (d / "eval_history.jsonl").write_text("".join(
             json.dumps({"step": 100 * (i + 1), "cpu_time": 60.0 * i, "wall_time": 60.0 * i, "eval_mean": m,
                         "eval_best": 2, "start": "random"}) + "\n" for i, m in enumerate(evals)))
     (root / "table1" / "sac" / "seed2" / "eval.json").unlink()  # seed 2 unfinished
+    (root / "extra" / "sac_paper_t5_foul_penalty" / "seed0" / "eval.json").unlink()  # unfinished: no Table 5 extra figure
 
     steps, mean, std = mean_curve([read_curve(root / "table1" / "sac" / f"seed{s}") for s in (0, 1)])
     assert steps.tolist() == [100, 200] and mean == pytest.approx([0.2, 0.4]) and std == pytest.approx([0.1, 0.1])
@@ -579,5 +583,10 @@ def test_report_draws_each_tables_learning_curves_from_its_finished_runs(tmp_pat
     assert rc == 0, text
     figure = out / "img" / "reproduction_table1.png"
     assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert json.loads((out / "reproduction.json").read_text())["figures"] == {"table1": "img/reproduction_table1.png"}
-    assert "](img/reproduction_table1.png)" in (out / "reproduction.md").read_text()
+    # a finished extra run is drawn beside the variant it is compared with, in a figure of its own
+    assert json.loads((out / "reproduction.json").read_text())["figures"] == {
+        "table1": "img/reproduction_table1.png", "extra_table1": "img/reproduction_extra_table1.png"}
+    assert (out / "img" / "reproduction_extra_table1.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    md = (out / "reproduction.md").read_text()
+    assert "](img/reproduction_table1.png)" in md
+    assert md.index("](img/reproduction_extra_table1.png)") > md.index("## Extra: the authors' SAC settings (`algo=sac_paper`) on Table 1")

@@ -128,26 +128,47 @@ def training_rows(campaign: Campaign, root: Path, states: dict[str, object], out
     return rows
 
 
+def _done_curves(campaign: Campaign, root: Path, states: dict[str, object], entries: list[Entry]) -> list:
+    """The learning curves of the finished runs among ``entries`` (a shared entry: its source's)."""
+    runs = []
+    for e in entries:
+        src = campaign.source(e)
+        if states[src.key].state == "done":
+            curve = read_curve(entry_dir(root, campaign, src))
+            if curve is not None:
+                runs.append(curve)
+    return runs
+
+
 def curve_figures(campaign: Campaign, root: Path, states: dict[str, object], out: Path) -> dict[str, str]:
     """Per table of Tables 1-5 with a finished run: its learning curves (each variant's mean
     over its finished seeds, ± their std, the paper's figure beside them) drawn to
-    ``out/img/reproduction_<table>.png``; returns ``{table: path relative to out}``."""
+    ``out/img/reproduction_<table>.png``; and per table with a finished extra run, that run
+    beside the table's variant it is compared with (``out/img/reproduction_extra_<table>.png``,
+    key ``extra_<table>``). Returns ``{key: path relative to out}``."""
+    groups = _train_groups(campaign)
     by_table: dict[str, list] = defaultdict(list)
-    for (table, variant), entries in _train_groups(campaign).items():
-        runs = []
-        for e in entries:
-            src = campaign.source(e)
-            if states[src.key].state == "done":
-                curve = read_curve(entry_dir(root, campaign, src))
-                if curve is not None:
-                    runs.append(curve)
+    for (table, variant), entries in groups.items():
+        runs = _done_curves(campaign, root, states, entries)
         if runs:
             spec, key = PAPER[table], TRAIN_TABLES[table][1][variant]
             by_table[table].append((spec["labels"].get(key, variant), runs, spec["rows"].get(key)))
+    titles = {table: f"{PAPER[table]['title'].split(' (paper')[0]}: learning curves" for table in PAPER}
+    for (_, variant), entries in _train_groups(campaign, extra=True).items():
+        runs = _done_curves(campaign, root, states, entries)
+        if not runs:
+            continue
+        table, compared = EXTRA_RUNS[variant]
+        spec, key = PAPER[table], TRAIN_TABLES[table][1][compared]
+        series = by_table[f"extra_{table}"]
+        series.append((f"{variant} (authors' SAC)", runs, None))
+        series.append((f"{compared} (project CPU settings)",
+                       _done_curves(campaign, root, states, groups.get((table, compared), [])), spec["rows"].get(key)))
+        titles[f"extra_{table}"] = f"Table {TRAIN_TABLES[table][0]}'s task: the authors' SAC settings and ours"
     figures = {}
     for table, series in by_table.items():
         rel = f"img/reproduction_{table}.png"
-        plot_seed_bands(series, out / rel, f"{PAPER[table]['title'].split(' (paper')[0]}: learning curves")
+        plot_seed_bands(series, out / rel, titles[table])
         figures[table] = rel
     return figures
 
@@ -308,6 +329,10 @@ def markdown(data: dict) -> str:
                 parts.append(_extra_line(f"Table {number} `{base['variant']}` (project CPU settings)", base, cols))
             parts.append(_extra_line(f"the paper's `{r['compared_with']}`", None, cols, r["paper"]))
         parts.append("")
+        figure = data.get("figures", {}).get(f"extra_table{number}")
+        if figure:
+            parts += [f"![Table {number}'s task: learning curves of the authors' SAC settings and ours, "
+                      f"the paper's figure beside them]({figure})", ""]
     parts += ["## CPU-hours per table", "", "| table | CPU-h |", "|---|---|"]
     parts += [f"| {t} | {h:.2f} |" for t, h in data["cpu_hours_by_table"].items()]
     parts.append(f"| total | {sum(data['cpu_hours_by_table'].values()):.2f} |")
