@@ -213,6 +213,59 @@ def test_a_drained_run_is_stopped_after_its_next_checkpoint_not_its_last(tmp_pat
     assert not old.checkpointed()
 
 
+def test_a_run_with_long_checkpoint_intervals_drains_one_interval_before_the_deadline(tmp_path):
+    """A run whose checkpoints are further apart than the grace (the authors' SAC: ~13 min)
+    drains on its own when its next checkpoint is its last before the deadline: its interval
+    comes from its eval history until two checkpoints written while watched measure it; it is
+    stopped right after that checkpoint (nothing lost) and not started again, while a run with
+    short intervals keeps running."""
+    import subprocess
+
+    from billiards.campaign.runner import HARD_STOP, LEAD_MARGIN, Slot, checkpoint_interval_estimate
+
+    spec = _tiny_spec(tmp_path / "tiny.yaml")
+    root = tmp_path / "state"
+    slow_dir, fast_dir = root / "t1" / "a" / "seed0", root / "t3" / "b" / "seed0"
+    for d, per_step in ((slow_dir, 0.016), (fast_dir, 0.002)):  # wall seconds per step
+        d.mkdir(parents=True)
+        (d / "config.yaml").write_text(yaml.safe_dump({"budget": {"checkpoint_every": 50_000}}))
+        (d / "eval_history.jsonl").write_text("".join(json.dumps(
+            {"step": k * 50_000, "wall_time": 10.0 + k * 50_000 * per_step, "final": False}) + "\n" for k in (1, 2, 3)))
+    assert checkpoint_interval_estimate(slow_dir) == pytest.approx(800.0)
+    assert checkpoint_interval_estimate(tmp_path) is None  # no history: the grace alone
+
+    campaign = load_spec(spec)
+    runner = Runner(campaign, root, deadline=time.time() + 600.0, grace=120.0, out=io.StringIO())
+    procs = [subprocess.Popen(["sleep", "60"], start_new_session=True) for _ in range(2)]
+    try:
+        slow, fast = (Slot(campaign.by_key()[k], d, p.pid, p) for k, d, p in
+                      (("t1/a/seed0", slow_dir, procs[0]), ("t3/b/seed0", fast_dir, procs[1])))
+        assert (slow.checkpoint_interval(), fast.checkpoint_interval()) == (pytest.approx(800.0), pytest.approx(100.0))
+        runner.slots += [slow, fast]
+        assert runner.lead_reached(slow) and not runner.lead_reached(fast) and not runner.draining()
+        runner.step()
+        assert slow.drain_seen and not slow.draining and not fast.drain_seen  # waiting for the slow run's checkpoint
+        (slow_dir / "checkpoint.pt").write_bytes(b"its last before the deadline")
+        runner.step()
+        assert slow.draining and slow.term_at is not None and fast.term_at is None
+        assert "t1/a/seed0" in runner.wound_down and "t1/a/seed0" not in {e.key for e in runner.runnable()}
+        log = runner.out.getvalue()
+        assert "drain  t1/a/seed0: checkpoints every 13.3 min, its next is its last before the deadline" in log
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+    # two checkpoints written while watched measure the interval, replacing the estimate
+    watched = Slot(campaign.by_key()["t1/a/seed0"], slow_dir, os.getpid())
+    for second in (1_000, 1_030):
+        os.utime(slow_dir / "checkpoint.pt", ns=(second * 10**9, second * 10**9))
+        watched.watch()
+    assert watched.checkpoint_interval() == pytest.approx(30.0)
+    late = Runner(campaign, root, deadline=time.time() + HARD_STOP + LEAD_MARGIN * 30.0 + 60.0)
+    assert not late.lead_reached(watched)
+
+
 def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     spec, root = _tiny_spec(tmp_path / "tiny.yaml"), tmp_path / "state"
     common = ("--spec", str(spec), "--root", str(root), "--only", "t1,t2")

@@ -43,7 +43,9 @@ def _parser() -> argparse.ArgumentParser:
             p.add_argument("--grace-minutes", type=float, default=5.0,
                            help="drain this long before the deadline: start nothing new and stop each training run "
                                 "right after its next checkpoint; longer than one checkpoint interval (about 1.5 min "
-                                "of one core at budget=paper) loses nothing, longer still only idles the cores")
+                                "of one core for algo=sac at budget=paper) loses nothing, longer still only idles the "
+                                "cores; a run with longer intervals (algo=sac_paper: ~13 min) drains that much earlier "
+                                "on its own")
             p.add_argument("--dry-run", action="store_true", help="list what would run, run nothing, write nothing")
             p.add_argument("--restart-stale", action="store_true",
                            help="re-run from scratch entries whose arguments changed since they started")

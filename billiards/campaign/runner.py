@@ -13,7 +13,13 @@ runner *drains* instead of killing where it can: from ``deadline - grace`` on (`
 ``--hours``, ``--grace-minutes``), on a first Ctrl-C / SIGTERM, or when ``<root>/STOP``
 appears (``python -m billiards.campaign stop``), it starts nothing new and stops each
 training run right after its next checkpoint (or lets it finish): a grace of one checkpoint
-interval (about 1.5 minutes of one core at ``budget=paper``) loses nothing. 20 s before the deadline,
+interval (about 1.5 minutes of one core for ``algo=sac`` at ``budget=paper``) loses nothing.
+A run whose checkpoints come further apart than the grace (the authors' settings,
+``algo=sac_paper``: about 13 minutes) drains on its own earlier, :data:`LEAD_MARGIN` of its
+checkpoint interval before the deadline (the interval measured between two checkpoints it
+wrote while watched, else estimated from its ``eval_history.jsonl`` and
+``budget.checkpoint_every``), so the checkpoint it writes then is its last before the deadline
+and nothing it did is lost; it is not started again by this runner. 20 s before the deadline,
 on a second Ctrl-C or on ``stop --now`` (``<root>/STOP_NOW``) it stops whatever still runs
 (SIGTERM to the run's process group, SIGKILL 10 s later, so nothing runs past the deadline);
 that loss is bounded as above. A search run gets SIGINT instead: it writes the chains it
@@ -54,6 +60,7 @@ from .spec import Campaign, Entry, SpecError
 MAX_FAILURES = 3  # starts that ended in an error before an entry is left alone (--retry-failed resets)
 KILL_WAIT = 10.0  # seconds between SIGTERM and SIGKILL
 HARD_STOP = 20.0  # seconds before the deadline at which whatever still runs is stopped, so all is gone by then
+LEAD_MARGIN = 1.15  # a slow-checkpointing run drains this many checkpoint intervals (+ HARD_STOP) before the deadline
 
 
 def runtime_args(kind: str) -> list[str]:
@@ -131,6 +138,28 @@ class Slot:
     drain_seen: bool = False  # the drain reached this run: ckpt_mtime holds its checkpoint's mtime then
     draining: bool = False  # checkpointed since the drain began: being stopped
     term_at: float | None = None
+    ckpt_seen: int | None = None  # checkpoint.pt's mtime at the last look (watch)
+    ckpt_written: int | None = None  # the mtime of the last checkpoint seen written while watched
+    interval: float | None = None  # seconds between the last two checkpoints seen written
+    estimate: float | None = None  # the interval estimated from the run's history, before any is measured
+
+    def __post_init__(self) -> None:
+        self.ckpt_seen = _mtime(self.run_dir / "checkpoint.pt")
+        if self.entry.kind == "train":
+            self.estimate = checkpoint_interval_estimate(self.run_dir)
+
+    def watch(self) -> None:
+        """Look at checkpoint.pt: two checkpoints seen written give the run's interval."""
+        mtime = _mtime(self.run_dir / "checkpoint.pt")
+        if mtime is not None and mtime != self.ckpt_seen:
+            if self.ckpt_written is not None:
+                self.interval = (mtime - self.ckpt_written) / 1e9
+            self.ckpt_written = mtime
+        self.ckpt_seen = mtime
+
+    def checkpoint_interval(self) -> float | None:
+        """Seconds between the run's checkpoints: measured, else estimated, else None."""
+        return self.interval if self.interval is not None else self.estimate
 
     def drain_began(self) -> None:
         """Remember the checkpoint the run has now; :meth:`checkpointed` waits for a newer one."""
@@ -141,6 +170,24 @@ class Slot:
         nothing (the trainer writes checkpoint.pt atomically)."""
         mtime = _mtime(self.run_dir / "checkpoint.pt")
         return self.drain_seen and mtime is not None and mtime != self.ckpt_mtime
+
+
+def checkpoint_interval_estimate(run_dir: Path) -> float | None:
+    """Wall seconds between a training run's checkpoints, from its last two periodic evaluations
+    in ``eval_history.jsonl`` (cumulative wall time per step) times ``budget.checkpoint_every``
+    of its ``config.yaml``; None when the run has not two evaluations or no periodic checkpoints."""
+    import yaml
+
+    try:
+        every = int(yaml.safe_load((run_dir / "config.yaml").read_text())["budget"]["checkpoint_every"])
+        rows = [json.loads(line) for line in (run_dir / "eval_history.jsonl").read_text().splitlines() if line.strip()]
+        by_step = {int(r["step"]): float(r["wall_time"]) for r in rows if not r.get("final")}
+    except (OSError, ValueError, TypeError, KeyError, yaml.YAMLError):
+        return None
+    if every <= 0 or len(by_step) < 2:
+        return None
+    (a, wa), (b, wb) = sorted(by_step.items())[-2:]
+    return (wb - wa) / (b - a) * every if wb > wa else None
 
 
 def _mtime(path: Path) -> int | None:
@@ -165,6 +212,7 @@ class Runner:
     slots: list[Slot] = field(default_factory=list)
     drain_requested: bool = False
     stop_now: bool = False
+    wound_down: set = field(default_factory=set)  # keys drained early for their long checkpoint interval
 
     def __post_init__(self) -> None:
         self.root = Path(self.root).resolve()
@@ -195,7 +243,7 @@ class Runner:
         running = {s.entry.key for s in self.slots}
         out = []
         for e in self.selected:
-            if e.same_as or e.key in running or self.done(e) or not self.ready(e):
+            if e.same_as or e.key in running or e.key in self.wound_down or self.done(e) or not self.ready(e):
                 continue
             rec = self.ledger.get(e.key) or {}
             if self.stale(e) and not self.restart_stale:
@@ -326,6 +374,14 @@ class Runner:
         near = self.deadline is not None and time.time() >= self.deadline - self.grace
         return self.drain_requested or near
 
+    def lead_reached(self, slot: Slot) -> bool:
+        """Whether a training run must drain now so that its next checkpoint, its last before
+        the deadline, comes in time: within LEAD_MARGIN of its interval of the hard stop."""
+        if self.deadline is None or slot.entry.kind != "train":
+            return False
+        interval = slot.checkpoint_interval()
+        return interval is not None and time.time() >= self.deadline - HARD_STOP - LEAD_MARGIN * interval
+
     def _signal(self, signum, frame) -> None:
         if self.drain_requested:
             self.stop_now = True
@@ -353,13 +409,19 @@ class Runner:
                 self.slots.remove(slot)
                 self.finish(slot, *ended)
                 continue
+            slot.watch()
             if self.stop_now:
                 self.terminate(slot)
-            elif drain and not slot.draining and slot.entry.kind == "train":
+            elif not slot.draining and slot.entry.kind == "train" and (drain or self.lead_reached(slot)):
                 if not slot.drain_seen:
                     slot.drain_began()
+                    if not drain:
+                        self.say(f"drain  {slot.entry.key}: checkpoints every {slot.checkpoint_interval() / 60:.1f} min, "
+                                 "its next is its last before the deadline")
                 elif slot.checkpointed():
                     slot.draining = True
+                    if not drain:
+                        self.wound_down.add(slot.entry.key)
                     self.say(f"drain  {slot.entry.key}: stopping right after its checkpoint")
                     self.terminate(slot)
         self._escalate()
