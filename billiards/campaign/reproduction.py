@@ -146,10 +146,9 @@ def curve_figures(campaign: Campaign, root: Path, states: dict[str, object], out
     ``out/img/reproduction_<table>.png``; and per table with a finished extra run, that run
     beside the table's variant it is compared with (``out/img/reproduction_extra_<table>.png``,
     key ``extra_<table>``). Returns ``{key: path relative to out}``."""
-    groups = _train_groups(campaign)
+    curves = {k: _done_curves(campaign, root, states, entries) for k, entries in _train_groups(campaign).items()}
     by_table: dict[str, list] = defaultdict(list)
-    for (table, variant), entries in groups.items():
-        runs = _done_curves(campaign, root, states, entries)
+    for (table, variant), runs in curves.items():
         if runs:
             spec, key = PAPER[table], TRAIN_TABLES[table][1][variant]
             by_table[table].append((spec["labels"].get(key, variant), runs, spec["rows"].get(key)))
@@ -163,7 +162,7 @@ def curve_figures(campaign: Campaign, root: Path, states: dict[str, object], out
         series = by_table[f"extra_{table}"]
         series.append((f"{variant} (authors' SAC)", runs, None))
         series.append((f"{compared} (project CPU settings)",
-                       _done_curves(campaign, root, states, groups.get((table, compared), [])), spec["rows"].get(key)))
+                       curves.get((table, compared), []), spec["rows"].get(key)))
         titles[f"extra_{table}"] = f"Table {TRAIN_TABLES[table][0]}'s task: the authors' SAC settings and ours"
     figures = {}
     for table, series in by_table.items():
