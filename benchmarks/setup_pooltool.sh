@@ -3,7 +3,7 @@
 # reference oracle (benchmarks/pooltool_oracle.py). Idempotent: re-running it on a working
 # venv only re-checks it.
 #
-#   bash benchmarks/setup_pooltool.sh            # venv at /work/main/.venv-pooltool
+#   bash benchmarks/setup_pooltool.sh            # venv at .venv-pooltool in the repository
 #   POOLTOOL_VENV=/some/dir bash benchmarks/setup_pooltool.sh
 #   PYTHON=python3.11 bash benchmarks/setup_pooltool.sh
 #

@@ -35,6 +35,7 @@ import math
 
 import numpy as np
 
+from billiards import numerics
 from billiards.physics import DEFAULT_PARAMS, unhit_red_gap
 from billiards.physics.core import N_BALLS, RED1, RED2, WHITE, YELLOW  # noqa: F401  (the simulator's ball order)
 from billiards.physics.core import N_STATE as BALL_STATE_DIM  # x, y, vx, vy, wx, wy, wz
@@ -190,8 +191,8 @@ def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius,
     red = nearest_red(positions) if red is None else np.asarray(red, dtype=np.int64)
     delta = _take_ball(positions, red) - positions[..., WHITE, :]
     d = np.hypot(delta[..., 0], delta[..., 1])
-    theta_target = np.arctan2(delta[..., 1], delta[..., 0])
-    half_width = np.arcsin(np.minimum(2.0 * R / d, math.sin(max_half_width)))
+    theta_target = numerics.atan2(delta[..., 1], delta[..., 0])  # the C library's, not NumPy's CPU-dependent loops
+    half_width = numerics.asin(np.minimum(2.0 * R / d, math.sin(max_half_width)))
     return theta_target, half_width
 
 
@@ -305,7 +306,7 @@ def gentle_bonus(
     positions = np.asarray(positions, dtype=np.float64)
     red = np.where(np.asarray(second_red) >= RED1, second_red, RED1).astype(np.int64)
     d = np.linalg.norm(_take_ball(positions, red) - positions[..., WHITE, :], axis=-1)
-    return np.where(score, beta * np.exp(-((d - center) ** 2) / (2.0 * width * width)), 0.0)
+    return np.where(score, beta * numerics.exp(-((d - center) ** 2) / (2.0 * width * width)), 0.0)
 
 
 def gentle_power_bonus(score: np.ndarray, power: np.ndarray, beta: float) -> np.ndarray:
@@ -344,7 +345,7 @@ def near_miss_bonus(
     one_red = hits[..., 1] ^ hits[..., 2]
     eligible = one_red & ~np.asarray(score, dtype=bool) & ~np.asarray(foul, dtype=bool)
     gap = unhit_red_gap(hits, closest)
-    return np.where(eligible, beta * np.exp(-gap / sigma), 0.0)
+    return np.where(eligible, beta * numerics.exp(-gap / sigma), 0.0)
 
 
 def shaped_reward(

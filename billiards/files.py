@@ -44,6 +44,25 @@ def repo_path(path) -> Path:
     return ROOT / p
 
 
+def display_path(path) -> str:
+    """How a path is written into logs and records: relative to the repository when it lies
+    inside it, so no committed file names a folder of the machine that wrote it."""
+    p = Path(path)
+    try:
+        return str(p.resolve().relative_to(ROOT.resolve()))
+    except ValueError:
+        return str(path)
+
+
+def recorded_command(cmd) -> list[str]:
+    """A command line as recorded: the interpreter as ``python`` and paths inside the repository
+    relative to it (``hydra.run.dir=/abs/repo/x`` -> ``hydra.run.dir=x``)."""
+    import sys
+
+    root = str(ROOT.resolve()) + "/"
+    return ["python" if c == sys.executable else c.replace(root, "") for c in cmd]
+
+
 @contextlib.contextmanager
 def atomic_open(path, mode: str = "w", **kwargs) -> Iterator[IO]:
     """Open ``path + ".tmp"`` for writing (``mode`` "w" or "wb", ``kwargs`` as for

@@ -1,8 +1,27 @@
-"""Fixtures shared by several test modules."""
+"""Fixtures shared by several test modules, and a patient ``subprocess.Popen``."""
 
+import subprocess
+import time
 from pathlib import Path
 
 import pytest
+
+_popen_init = subprocess.Popen.__init__
+
+
+def _patient_popen_init(self, *args, **kwargs):
+    """On a loaded machine (CI beside training jobs, many threads) the kernel may refuse a fork
+    for a moment (EAGAIN, ``BlockingIOError``): try again with a back-off before failing. Every
+    test that starts a process (the apps, the campaign runner's children) goes through here."""
+    for attempt in range(6):
+        try:
+            return _popen_init(self, *args, **kwargs)
+        except BlockingIOError:
+            time.sleep(0.25 * 2 ** attempt)
+    return _popen_init(self, *args, **kwargs)
+
+
+subprocess.Popen.__init__ = _patient_popen_init
 
 SHIPPED_BASE = Path(__file__).resolve().parents[1] / "results" / "policies" / "base" / "seed0.pt"
 

@@ -35,7 +35,7 @@ def test_paper_campaign_lists_every_table_at_its_budget():
     for e in c.select(None):
         by_table.setdefault(e.table, []).append(e)
     assert {t: len(v) for t, v in by_table.items()} == {
-        "table1": 15, "table2": 12, "table4": 9, "table3": 15, "table5": 15, "table6": 24}
+        "table1": 15, "table2": 12, "table4": 9, "table3": 15, "table5": 15, "table6": 20}
     runs = [e for e in c.select(None) if e.kind == "train" and not e.same_as]
     assert len(runs) == 15 + 9 + 9 + 9 + 12
     for e in runs:
@@ -51,12 +51,12 @@ def test_paper_campaign_lists_every_table_at_its_budget():
     searches = [e for e in c.entries if e.kind == "search"]
     assert len(searches) == 5 * 2 * 2 and all("search.budget=400" in e.args for e in searches)
     base = c.by_key()["table6/base/puct_p3"]
-    assert base.needs() == ["table6/export/base"] and "protocol.cap=10000" in base.args
-    assert c.by_key()["table6/export/base"].needs() == [f"table5/foul_penalty/seed{s}" for s in range(3)]
+    # Table 6 searches the shipped ensembles (committed files), 20 chains per P3 cell
+    assert base.needs() == [] and "proposer=base" in base.args and "protocol.cap=10000" in base.args
+    assert "protocol.seeds=20" in base.args and not any("checkpoints" in a for a in base.args)
     # the optional run of the authors' SAC runs only when asked for
     assert "extra/sac_paper/seed0" not in {e.key for e in c.select(None)}
-    assert [e.key for e in c.select(["extra"])] == ["extra/sac_paper/seed0", "extra/sac_paper_t5_aim_features/seed0",
-                                                    "extra/sac_paper_t5_foul_penalty/seed0"]
+    assert [e.key for e in c.select(["extra"])] == ["extra/sac_paper/seed0"]
     assert all(e.optional for e in c.entries if e.table == "extra")
     # --only table2 brings the Table 1 SAC runs its random_continue row shares
     assert {e.key for e in c.select(["table2"])} >= {"table1/sac/seed0", "table1/sac/seed2"}
@@ -369,9 +369,9 @@ def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     assert [s["outcome"] for s in rec["starts"]] == ["stopped", "finished", "finished"]
 
 
-def test_search_runs_compose_with_the_exported_policies(tmp_path):
-    """Table 6's search.py overrides compose through conf/search.yaml; a policy proposer gets
-    the three policy files its export entry writes."""
+def test_search_runs_compose_with_the_shipped_policies(tmp_path):
+    """Table 6's search.py overrides compose through conf/search.yaml and validate; a policy
+    proposer plays the three committed policy files of its shipped ensemble."""
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
@@ -390,11 +390,10 @@ def test_search_runs_compose_with_the_exported_policies(tmp_path):
             proposer, rest = e.variant.split("/")
             assert (cfg.proposer.name, f"{cfg.search.kind}_{cfg.protocol.name}", cfg.search.budget) == (proposer, rest, 400)
             assert cfg.physics.preset == "korean_medium"
-            if proposer == "geometric":
-                validate(cfg)
-            else:
-                export = tmp_path.resolve() / "table6" / "export" / proposer
-                assert list(cfg.proposer.checkpoints) == [str(export / f"seed{s}.pt") for s in range(3)]
+            validate(cfg)
+            if proposer != "geometric":
+                assert list(cfg.proposer.checkpoints) == [f"results/policies/{proposer}/seed{s}.pt" for s in range(3)]
+                assert all((REPO / p).is_file() for p in cfg.proposer.checkpoints)
 
 
 def test_a_failing_run_is_retried_then_left_alone(tmp_path):
@@ -509,22 +508,16 @@ def test_report_writes_reproduction_rows_from_finished_runs(tmp_path):
         {"table": "table6", "variant": "geometric/h2_p3", "kind": "search", "steps": 10, "cost": "h2", "args": ["search=h2"]},
         {"table": "table6", "variant": "geometric/puct_p1", "kind": "search", "steps": 10, "cost": "puct", "args": ["search=puct"]},
         {"table": "extra", "variant": "sac_paper", "seed": 0, "steps": 400, "cost": "sac_paper", "args": ["algo=sac_paper"]},
-        {"table": "table5", "variant": "foul_penalty", "seed": 0, "steps": 1000, "cost": "sac", "args": ["algo=sac"]},
-        {"table": "extra", "variant": "sac_paper_t5_foul_penalty", "seed": 0, "steps": 1000, "cost": "sac_paper",
-         "args": ["algo=sac_paper"]},
     ]}))
     root, out = tmp_path / "state", tmp_path / "results"
     for seed, mean, best, canonical in ((0, 0.5, 3, 1.0), (1, 0.3, 4, 0.0)):
         _fake_run(root / "table1" / "sac" / f"seed{seed}", "table1", seed, mean, best, canonical, 400)
     _fake_run(root / "extra" / "sac_paper" / "seed0", "extra", 0, 0.25, 2, 0.0, 400)
-    shaping = {"shaping": {"name": "foul_penalty", "foul_penalty": 1.0}}
-    _fake_run(root / "table5" / "foul_penalty" / "seed0", "table5", 0, 6.5, 9, 0.0, 1000, **shaping)
-    _fake_run(root / "extra" / "sac_paper_t5_foul_penalty" / "seed0", "extra", 0, 5.5, 8, 0.0, 1000, **shaping)
     search_dir = root / "table6" / "geometric" / "h2_p3"
     search_dir.mkdir(parents=True)
     (search_dir / "results.json").write_text(json.dumps({
         "protocol": "p3", "search": "h2", "proposer": "geometric", "mean": 228.9, "max": 496.0, "seconds": 36.0,
-        "shots": 2289, "physics": "korean_medium", "sims_per_decision": 400,
+        "shots": 2289, "physics": "korean_medium", "sims_per_decision": 400, "values": [100.0] * 9 + [1389.0],
         "extra": {"cap": 10000, "seeds": list(range(10)), "reached_cap": 0}}))
 
     rc, text = cli("report", "--spec", str(spec), "--root", str(root), "--out", str(out))
@@ -543,28 +536,36 @@ def test_report_writes_reproduction_rows_from_finished_runs(tmp_path):
     h2 = rows[(6, "geometric/h2_p3")]
     assert h2["complete"] and (h2["mean"], h2["max"], h2["cap"], h2["seeds"]) == (228.9, 496.0, 10000, list(range(10)))
     assert h2["proposer_steps"] == 0 and h2["paper"] is None and h2["cpu_hours"] == pytest.approx(0.01)
+    lo, hi = h2["ci95"]  # percentile bootstrap of the mean: one long chain among ten short ones
+    assert 100.0 <= lo < 228.9 < hi <= 1389.0 * 0.5
     assert not rows[(6, "geometric/puct_p1")]["complete"]
     copied = out / "training" / "mini" / "table1" / "sac" / "seed1"
     assert (copied / "eval_canonical.json").is_file() and (copied / STARTS).is_file()
     assert not (copied / "checkpoint.pt").exists()
     assert (out / "search" / "mini" / "table6" / "geometric" / "h2_p3" / "results.json").is_file()
     md = (out / "reproduction.md").read_text()
-    assert "| sac | 2/3 | 400 | 0.400 ± 0.100 \\| 0.418 ± 0.038 |" in md and "| geometric | h2 | p3 | 228.9 (496) |" in md
+    assert "| sac | 2/3 | 400 | 0.400 ± 0.100 \\| 0.418 ± 0.038 |" in md
+    assert f"| geometric | h2 | p3 | 228.9 (496) [{lo:.0f}, {hi:.0f}], 10 chains |" in md
 
     # the extra run sits beside the tables, compared with the paper's SAC row and ours
     assert all(r["table"] != "extra" for r in data["rows"])
-    extra, t5 = data["extra"]
+    (extra,) = data["extra"]
     assert (extra["variant"], extra["paper_row"], extra["complete"], extra["seeds"]) == ("sac_paper", "sac", True, [0])
     assert extra["ours"]["mean"] == pytest.approx(0.25) and extra["paper"]["mean"] == 0.418
-    # ... and on Table 5's foul penalty row: its paper row and our row with the project's settings
-    assert (t5["table"], t5["compared_with"], t5["paper_row"], t5["steps"]) == (5, "foul_penalty", "foul_penalty", 1000)
-    assert t5["ours"]["mean"] == pytest.approx(5.5) and t5["paper"]["mean"] == 5.553
+
+    # the copied run directories alone (no campaign state) give the same report
+    from billiards.campaign.reproduction import write_report
+    from billiards.campaign.spec import load_spec
+
+    again = tmp_path / "again"
+    write_report(load_spec(spec), None, again, results=out)
+    regenerated = json.loads((again / "reproduction.json").read_text())
+    # there the commits come from the runs' own start records (the fakes' c0, c1; the ledger had none)
+    assert regenerated["rows"][0]["commits"] == ["c0", "c1"]
+    strip = lambda d: [{k: v for k, v in r.items() if k != "commits"} for r in d["rows"] + d["extra"]]
+    assert strip(regenerated) == strip(data) and regenerated["cpu_hours_by_table"] == data["cpu_hours_by_table"]
     assert "| sac_paper | 1/1 | 400 | 0.250 ± 0.000 | 2 | 50.0 | 0.50 |" in md
     assert "| Table 1 `sac` (project CPU settings) | 2/3 | 400 | 0.400 ± 0.100 | 4 | 50.5 |" in md
-    table5 = md.split("on Table 5's task", 1)[1]
-    assert "| sac_paper_t5_foul_penalty | 1/1 | 1,000 | 5.500 ± 0.000 | 10.0 | 4.0 | 0.50 |" in table5
-    assert "| Table 5 `foul_penalty` (project CPU settings) | 1/1 | 1,000 | 6.500 ± 0.000 | 10.0 | 4.0 |" in table5
-    assert "| the paper's `foul_penalty` | | | 5.553 ± 0.162 | 6.0 |" in table5
 
     rc, text = cli("report", "--spec", str(spec), "--root", str(tmp_path / "nowhere"), "--out", str(out))
     assert rc == 2 and "has not started" in text

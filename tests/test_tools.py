@@ -2,6 +2,7 @@
 normalised action space, info that TorchRL's GymEnv reads, an exact table that TorchRL's
 DoubleToFloat cannot round, numpy (Stable-Baselines3-style) policies under the protocol."""
 
+import importlib.util
 import math
 import os
 import subprocess
@@ -227,6 +228,23 @@ def test_human_render_names_the_missing_dependency(monkeypatch):
     monkeypatch.setitem(sys.modules, "pygame", None)  # as if not installed
     with pytest.raises(gym.error.DependencyNotInstalled, match=r"pygame.*billiards\[render\]"):
         Billiards4BallInningEnv(render_mode="human")
+
+
+def test_human_render_mode_listed_only_with_its_renderer_and_the_checker_passes_without_it():
+    """gymnasium's checker opens one env per listed render mode: on the default install (no
+    pygame) "human" is not listed, so check_env passes; where pygame imports it is listed."""
+    code = (
+        "import sys, warnings; sys.modules['pygame'] = None\n"
+        "import importlib.util; importlib.util.find_spec = (lambda f: lambda name, *a: None if name == 'pygame' else f(name, *a))"
+        "(importlib.util.find_spec)\n"
+        "import gymnasium as gym; from gymnasium.utils.env_checker import check_env\n"
+        "from billiards.envs import GYM_ID, Billiards4BallInningEnv\n"
+        "assert Billiards4BallInningEnv.metadata['render_modes'] == ['rgb_array'], Billiards4BallInningEnv.metadata\n"
+        "warnings.simplefilter('ignore'); check_env(gym.make(GYM_ID).unwrapped); print('ok')\n"
+    )
+    assert run_python(code).strip().endswith("ok")
+    has = importlib.util.find_spec("pygame") is not None
+    assert ("human" in Billiards4BallInningEnv.metadata["render_modes"]) == has
 
 
 def test_human_render_shows_frames(monkeypatch):

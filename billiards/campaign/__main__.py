@@ -3,7 +3,8 @@
     python -m billiards.campaign run paper [--jobs 2] [--hours H | --until HH:MM] [--only table1,table2] [--dry-run]
     python -m billiards.campaign status paper [--only ...] [-v]
     python -m billiards.campaign stop paper [--now]   # the active runner drains (or stops all now) and exits
-    python -m billiards.campaign report paper [--out results]  # reproduction.json / .md and the runs' small files
+    python -m billiards.campaign report paper [--out DIR]  # reproduction.json / .md from the committed runs
+    python -m billiards.campaign report paper --root outputs/campaign/paper  # ... from a live campaign
     python -m billiards.campaign run --spec tiny.yaml --root /tmp/tiny
 
 ``paper`` is the built-in campaign (billiards/campaign/spec.py); ``--spec FILE`` reads another
@@ -17,6 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from billiards.files import display_path
 from billiards.provenance import ROOT
 
 from .ledger import STOP, STOP_NOW, Ledger, entry_dir
@@ -34,7 +36,9 @@ def _parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=help_)
         p.add_argument("campaign", nargs="?", default=None, help="built-in campaign name (paper)")
         p.add_argument("--spec", type=Path, default=None, help="a campaign definition file (YAML or JSON)")
-        p.add_argument("--root", type=Path, default=None, help="state directory (default outputs/campaign/<name>)")
+        p.add_argument("--root", type=Path, default=None,
+                       help="state directory (default outputs/campaign/<name>); report: read a live campaign there "
+                            "(default: the committed run directories under results/)")
         p.add_argument("--only", default=None, help="comma-separated tables, e.g. table1,table2")
         p.add_argument("--jobs", type=int, default=2, help="processes at a time (default 2)")
         if name == "run":
@@ -56,7 +60,8 @@ def _parser() -> argparse.ArgumentParser:
                            help="stop every process at once (training loses up to budget.checkpoint_every steps)")
         if name == "report":
             p.add_argument("--out", type=Path, default=ROOT / "results",
-                           help="where reproduction.json/.md and training/<name>/, search/<name>/ go (default results/)")
+                           help="where reproduction.json/.md and img/ go (default results/); with --root also the "
+                                "finished runs' small files, to training/<name>/ and search/<name>/")
         if name == "status":
             p.add_argument("-v", "--verbose", action="store_true", help="one line per entry")
             p.add_argument("--check-config", action="store_true",
@@ -112,11 +117,15 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "report":
             from .reproduction import write_report
 
-            if not root.is_dir():
-                raise SpecError(f"{root} does not exist: the campaign has not started")
-            Ledger(root, campaign.name)
-            for path in write_report(campaign, root, args.out.resolve()):
-                print(f"wrote {path}")
+            if args.root is None:  # the committed run directories
+                paths = write_report(campaign, None, args.out.resolve(), results=ROOT / "results")
+            else:
+                if not root.is_dir():
+                    raise SpecError(f"{root} does not exist: the campaign has not started")
+                Ledger(root, campaign.name)
+                paths = write_report(campaign, root, args.out.resolve())
+            for path in paths:
+                print(f"wrote {display_path(path)}")
             return 0
         if args.command == "stop":
             if not root.is_dir():

@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from billiards.provenance import ROOT, git_commit
+from billiards.files import recorded_command
 
 from .ledger import (LOGS, STARTS, STOP, STOP_NOW, Ledger, entry_dir, entry_done, fill, is_done, is_stale, pid_alive,
                      progress, search_resumable, utc_now)
@@ -277,7 +278,7 @@ class Runner:
         start = {"commit": self.commit, "started": utc_now(), "mode": mode, "frames": frames}
         log = (run_dir / LOGS[entry.kind]).open("a")
         log.write(f"\n===== campaign {self.campaign.name}: {entry.key}, {mode} at commit {self.commit}, {start['started']}\n"
-                  f"===== {' '.join(cmd)}\n")
+                  f"===== {' '.join(recorded_command(cmd))}\n")
         log.flush()
         proc = subprocess.Popen(cmd, cwd=ROOT, env=child_env(), stdout=log, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, start_new_session=True)
@@ -291,7 +292,7 @@ class Runner:
         rec["pid"] = proc.pid
         self.ledger.save()
         with (run_dir / STARTS).open("a") as f:
-            f.write(json.dumps(start | {"command": cmd}) + "\n")
+            f.write(json.dumps(start | {"command": recorded_command(cmd)}) + "\n")
         self.slots.append(Slot(entry, run_dir, proc.pid, proc))
         self.say(f"start  {entry.key} ({mode}{f' at {frames:,} steps' if frames else ''}), pid {proc.pid}")
 

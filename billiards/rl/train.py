@@ -42,7 +42,7 @@ from tensordict.nn import TensorDictModuleBase
 from tqdm import tqdm
 
 from billiards.device import resolve_device, set_threads
-from billiards.files import atomic_write_text
+from billiards.files import atomic_write_text, display_path
 from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.noise import noise_from_config, noise_record
 from billiards.physics.warmup import warm_up
@@ -350,7 +350,7 @@ def make_run(cfg: DictConfig, run_dir: Path, ckpt: dict | None = None) -> Run:
         state = RunState.fresh(cfg.budget)
     else:
         state = RunState.restore(ckpt, agent, rb, rack_rng(env), device)
-        log.info("resumed from %s at %d frames, %d updates", run_dir, state.frames, agent.n_updates)
+        log.info("resumed from %s at %d frames, %d updates", display_path(run_dir), state.frames, agent.n_updates)
     metric_names = agent.metric_names + (("stage",) if stages else ())
     logger = MetricLogger(cfg, run_dir, metric_names, resume_step=None if ckpt is None else state.frames,
                           wandb_id=state.wandb_id)
@@ -397,7 +397,7 @@ def session(run: Run) -> Iterator[tqdm]:
     progress bar; closes the logger at the end."""
     cfg, b = run.cfg, run.cfg.budget
     params = params_from_config(cfg.physics)
-    log.info("output: %s (%s, %s steps, physics %s) on %s", run.run_dir, cfg.algo.name, f"{b.total_steps:,}",
+    log.info("output: %s (%s, %s steps, physics %s) on %s", display_path(run.run_dir), cfg.algo.name, f"{b.total_steps:,}",
              params.describe(), run.device)
     warm_up(params, log=log.info)
     run.state.start_clock()
@@ -407,7 +407,7 @@ def session(run: Run) -> Iterator[tqdm]:
               desc=f"{cfg.algo.name} {run.run_dir.name}", smoothing=0.05) as bar:
         yield bar
     run.logger.close()
-    log.info("done: %s, summary.json and checkpoint.pt in %s", EVAL_FILE, run.run_dir)
+    log.info("done: %s, summary.json and checkpoint.pt in %s", EVAL_FILE, display_path(run.run_dir))
 
 
 def finish(run: Run, bar) -> float:

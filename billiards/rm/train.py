@@ -24,7 +24,7 @@ import torch
 from torch.nn import functional as F
 from tqdm import tqdm
 
-from billiards.files import atomic_write_text
+from billiards.files import atomic_write_text, display_path
 from billiards.provenance import git_commit
 
 from billiards.physics.config import physics_record, recorded_physics
@@ -264,7 +264,7 @@ def train_rm(
         "rows": rows,
         "train_rows": n_train,
         "heldout_rows": n_hold,
-        "data_dir": str(data_dir.resolve()),
+        "data_dir": display_path(data_dir),
         **physics_record(physics),
         "hidden": list(model.hidden),
         "epochs": epochs,

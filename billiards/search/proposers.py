@@ -19,7 +19,7 @@ from typing import Protocol, Sequence
 import numpy as np
 import torch
 
-from billiards import domain
+from billiards import domain, numerics
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 
 
@@ -88,8 +88,9 @@ class GeometricProposer:
 class EnsembleHeads:
     """The Gaussian heads of an ensemble of identical policy networks as stacked float32 arrays.
 
-    Every layer of the E policies is one ``np.matmul`` over the stacked weights, so the whole
-    ensemble's forward pass at S states costs a few NumPy calls instead of E framework calls
+    Every layer of the E policies is one compiled call over the stacked weights
+    (:func:`billiards.numerics.dense`), so the whole ensemble's forward pass at S states costs a
+    few calls instead of E framework calls
     (TensorDict, distribution and transform objects) that dwarf a 32->256->256->8 network at
     the batch sizes the search uses (S <= a few hundred). It reproduces, in float32 like the
     torch modules: the MLP (Linear/ReLU), TorchRL's ``NormalParamExtractor`` (biased softplus
@@ -98,8 +99,7 @@ class EnsembleHeads:
     """
 
     def __init__(self, weights, biases, scale_bias, scale_min, scale_lb, tanh_lim, mid, half, held):
-        self.weights, self.biases = weights, biases  # per layer: (E, in, out), (E, 1, out)
-        self.first = np.concatenate(list(weights[0]), axis=1)  # (in, E * out): layer 1 of all policies
+        self.weights, self.biases = weights, biases  # per layer: (E, in, out), (E, out)
         self.scale_bias, self.scale_min, self.scale_lb, self.tanh_lim = scale_bias, scale_min, scale_lb, tanh_lim
         self.mid, self.half, self.held = mid, half, held  # (E, 1, 1, A); held: None or (mask, values)
         self.size = weights[0].shape[0]
@@ -120,28 +120,25 @@ class EnsembleHeads:
         tanh_lim = 1.0 - float(np.finfo(np.float32).resolution)
         mid = np.stack([part["mid"] for part in parts])[:, None, None]
         half = np.stack([part["half"] for part in parts])[:, None, None]
-        return cls(stack("weights"), [b[:, None] for b in stack("biases")], p0["scale_bias"], p0["scale_min"],
+        return cls(stack("weights"), stack("biases"), p0["scale_bias"], p0["scale_min"],
                    p0["scale_lb"], tanh_lim, mid, half, p0["held"])
 
     def heads(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """obs (S, D) float32 -> loc, scale (E, S, A) float32 of every policy's Gaussian.
 
-        The first layer reads the same observation in every policy: one (S, D) x (D, E * H)
-        matmul; the others are (E, S, H) x (E, H, H') batched matmuls.
+        Every layer is :func:`billiards.numerics.dense` (float32, a fixed summation order), the
+        softplus and tanh go through the C library in float64: the same bits on every CPU,
+        whatever BLAS kernel or NumPy loops it would choose (equal to the torch modules up to
+        float32 rounding).
         """
-        E, S = self.size, obs.shape[0]
-        x = (obs @ self.first).reshape(S, E, -1).transpose(1, 0, 2) + self.biases[0]
-        for w, b in zip(self.weights[1:], self.biases[1:]):
-            np.maximum(x, 0, out=x)
-            x = np.matmul(x, w) + b
+        x = numerics.mlp(np.asarray(obs, dtype=np.float32)[None], self.weights, self.biases)
         A = x.shape[-1] // 2
-        z = x[..., A:] + np.float32(self.scale_bias)  # torch's softplus: identity above threshold 20
-        scale = np.where(z > 20, z, np.log1p(np.exp(np.minimum(z, 20)))) + np.float32(self.scale_min)
+        scale = numerics.softplus32(x[..., A:] + np.float32(self.scale_bias)) + np.float32(self.scale_min)
         return x[..., :A], np.maximum(scale, np.float32(self.scale_lb))
 
     def actions(self, pre_tanh: np.ndarray) -> np.ndarray:
         """Pre-tanh draws (E, S, n, A) -> actions in the env's bounds (E, S, n, A), float32."""
-        y = np.clip(np.tanh(pre_tanh), np.float32(-self.tanh_lim), np.float32(self.tanh_lim))
+        y = np.clip(numerics.tanh32(pre_tanh), np.float32(-self.tanh_lim), np.float32(self.tanh_lim))
         if self.held is not None:
             y = np.where(self.held[0], self.held[1], y)
         return self.mid + self.half * y
@@ -189,12 +186,12 @@ class PolicyProposer:
     Candidate j goes to policy j mod E; each policy's first candidate is its deterministic
     action (policy 0's is candidate 0), the rest are samples.
 
-    ``impl``: ``"batched"`` evaluates the ensemble with :class:`EnsembleHeads` (one NumPy
-    matmul per layer for all policies); ``"reference"`` calls each policy's torch modules;
+    ``impl``: ``"batched"`` evaluates the ensemble with :class:`EnsembleHeads` (one compiled
+    call per layer for all policies, the same bits on every CPU); ``"reference"`` calls each policy's torch modules;
     ``"auto"`` (default) is batched when the networks are of the kind it reproduces, else
     reference. Both consume the caller's generator identically (same draws, same order) and
-    give the same candidates up to float32 rounding of the network (different matmul kernels
-    sum in different orders; see ``tests/test_search.py``). ``self.impl`` is the one in use.
+    give the same candidates up to float32 rounding of the network (torch's kernels sum in
+    their own, CPU-dependent orders; see ``tests/test_search.py``). ``self.impl`` is the one in use.
     The batched proposer copies the weights when it is built: later changes to the torch
     modules do not reach it (build a new proposer).
 

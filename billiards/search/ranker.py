@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from billiards import numerics
 from billiards.files import atomic_write_bytes, load_tagged, repo_path
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, random_racks, simulate_batch
 from billiards.physics.core import RED1, RED2, WHITE, YELLOW
@@ -73,8 +74,8 @@ def shot_features(positions: np.ndarray, actions: np.ndarray, params: PhysicsPar
     def seen(ball):
         d = pos[..., ball, :] - pos[..., WHITE, :]
         dist = np.hypot(d[..., 0], d[..., 1])
-        off = _angle(theta - np.arctan2(d[..., 1], d[..., 0]))
-        u = off / np.arcsin(np.minimum(2.0 * R / dist, 0.999))
+        off = _angle(theta - numerics.atan2(d[..., 1], d[..., 0]))
+        u = off / numerics.asin(np.minimum(2.0 * R / dist, 0.999))
         return np.clip(u, -3.0, 3.0), dist, off
 
     reds = [seen(RED1), seen(RED2)]
@@ -85,13 +86,13 @@ def shot_features(positions: np.ndarray, actions: np.ndarray, params: PhysicsPar
     p_second = np.where(swap[..., None], pos[..., RED1, :], pos[..., RED2, :])
     cols = []
     for u, dist, off in (seen(YELLOW), first, second):
-        cols += [u, dist, np.cos(off), np.sin(off)]
+        cols += [u, dist, numerics.cos(off), numerics.sin(off)]
     for p in (pos[..., WHITE, :], pos[..., YELLOW, :], p_first, p_second):
         cols += [p[..., 0] / W, p[..., 1] / L]
-    cols += [np.cos(theta), np.sin(theta), actions[..., 1], actions[..., 2], actions[..., 3]]
+    cols += [numerics.cos(theta), numerics.sin(theta), actions[..., 1], actions[..., 2], actions[..., 3]]
     d = p_second - p_first
-    rel = np.arctan2(d[..., 1], d[..., 0]) - theta
-    cols += [np.cos(rel), np.sin(rel), np.hypot(d[..., 0], d[..., 1])]
+    rel = numerics.atan2(d[..., 1], d[..., 0]) - theta
+    cols += [numerics.cos(rel), numerics.sin(rel), np.hypot(d[..., 0], d[..., 1])]
     out = np.stack(cols, axis=-1).astype(np.float32)
     assert out.shape[-1] == N_FEATURES
     return out
@@ -103,7 +104,8 @@ class RankerFileError(ValueError):
 
 @dataclass
 class ShotRanker:
-    """An MLP (Linear/ReLU, one logit out) over standardised :func:`shot_features`, in NumPy.
+    """An MLP (Linear/ReLU, one logit out) over standardised :func:`shot_features`, computed by
+    :func:`billiards.numerics.mlp` (float32, the same bits on every CPU).
 
     ``score`` is the logit of the predicted probability that the shot scores under the noise
     the ranker was trained for (``meta["noise"]``); ``meta`` also records the table
@@ -130,12 +132,10 @@ class ShotRanker:
 
     def logits(self, features: np.ndarray) -> np.ndarray:
         """Logits (...,) of :func:`shot_features` rows (..., N_FEATURES)."""
-        x = (features - self.mean) / self.std
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            x = x @ w + b
-            if i + 1 < len(self.weights):
-                np.maximum(x, 0.0, out=x)
-        return x[..., 0]
+        x = (np.asarray(features, dtype=np.float32) - self.mean) / self.std
+        lead = x.shape[:-1]
+        x = numerics.mlp(x.reshape(1, -1, x.shape[-1]), [w[None] for w in self.weights], [b[None] for b in self.biases])
+        return x[0, :, 0].reshape(lead)
 
     @property
     def params(self) -> PhysicsParams:

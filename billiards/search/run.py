@@ -12,7 +12,7 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from billiards.device import resolve_device, set_threads
-from billiards.files import CONFIG_FILE, RESULTS_FILE, atomic_write_text
+from billiards.files import CONFIG_FILE, RESULTS_FILE, atomic_write_text, display_path
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.noise import noise_from_config, noise_record
@@ -80,7 +80,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         set_threads(cfg.threads)
     params = params_from_config(cfg.physics)
     noise = noise_from_config(cfg.get("noise"))
-    print(f"search: {describe(cfg, params)}\noutput: {out_dir}", flush=True)
+    print(f"search: {describe(cfg, params)}\noutput: {display_path(out_dir)}", flush=True)
     warm_up(params, log=lambda msg: print(msg, flush=True))
     device = resolve_device(cfg.get("device", "auto"))
     proposer = make_proposer(cfg.proposer, params, device=device)
@@ -124,5 +124,5 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
         raise SystemExit(130)
     print(f"{proto} {summary['search']} proposer={cfg.proposer.name}: mean {result.mean:.2f} ± {result.std:.2f}, "
           f"max {result.max:.0f}, {result.ms_per_decision:.1f} ms/shot, {result.sims_per_decision:.0f} sims/shot\n"
-          f"results: {out_dir / RESULTS_FILE}", flush=True)
+          f"results: {display_path(out_dir / RESULTS_FILE)}", flush=True)
     return result

@@ -1,0 +1,135 @@
+"""Arithmetic that gives the same bits on every x86-64 CPU: the project's small networks and the
+elementary functions outside the simulator kernel.
+
+NumPy and the BLAS libraries choose their code by the processor they run on. A float32
+``x @ w`` goes to OpenBLAS's kernel for the CPU (``OPENBLAS_CORETYPE`` picks another), which
+sums in a kernel-specific order; ``np.arcsin``, ``np.arctan2``, ``np.exp``, ``np.log1p`` and
+``np.tanh`` take NumPy's AVX-512 / AVX2 / baseline loops (``NPY_DISABLE_CPU_FEATURES`` picks
+another), which round differently from each other and from the C library. The search plays
+chaotic chains (a P3 chain of thousands of shots diverges on one flipped bit of one candidate),
+so everything between a committed model and a cited number computes here instead:
+
+* :func:`dense` / :func:`mlp`: Linear(+ReLU) layers in float32 with a fixed summation order
+  (each output sums its inputs in index order, the bias last). Compiled by numba without
+  fast-math, so nothing is reassociated or fused into FMAs: the same bits whether numba targets
+  this host or ``NUMBA_CPU_NAME=generic``. Vector lanes run across *outputs*, never within
+  one sum.
+* :func:`asin`, :func:`atan2`, :func:`exp`, :func:`log1p`, :func:`tanh`, :func:`sin`,
+  :func:`cos`: float64 ufuncs over the C library's functions (the ones the simulator kernel
+  calls), whatever NumPy's dispatch would pick. Float32 arguments are widened and the result
+  rounded back by the caller.
+
+What is still the machine's: the C library's ``libm``. glibc picks one variant of ``exp``,
+``sin``, ``atan2`` ... by CPU feature (FMA + AVX2 or not); every x86-64-v3 CPU (AVX2 + FMA:
+Intel since Haswell, 2013; AMD since Excavator, 2015, and every Zen) takes the same one.
+``benchmarks/cross_cpu.py`` measures all of this side by side (docs: README "Reproducibility").
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+# numba would hand vectorised math to Intel's SVML when the optional icc_rt package is present,
+# whose results differ from the C library's; the project never wants that (set before numba loads)
+os.environ.setdefault("NUMBA_DISABLE_INTEL_SVML", "1")
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+@numba.njit(cache=True, nogil=True)
+def _dense_kernel(x, w, b, relu, out):
+    """out[e, s] = relu?(x[e or 0, s] @ w[e] + b[e]) in float32, inputs summed in index order."""
+    E, I, O = w.shape
+    shared = x.shape[0] == 1
+    for e in range(E):
+        xe = x[0] if shared else x[e]
+        for s in range(x.shape[1]):
+            acc = out[e, s]
+            for o in range(O):
+                acc[o] = np.float32(0.0)
+            for i in range(I):
+                xi = xe[s, i]
+                wi = w[e, i]
+                for o in range(O):
+                    acc[o] = acc[o] + xi * wi[o]
+            for o in range(O):
+                v = acc[o] + b[e, o]
+                if relu and v < np.float32(0.0):
+                    v = np.float32(0.0)
+                acc[o] = v
+    return out
+
+
+def dense(x: np.ndarray, w: np.ndarray, b: np.ndarray, relu: bool = False) -> np.ndarray:
+    """A stack of E Linear layers: ``x`` (E or 1, S, I), ``w`` (E, I, O), ``b`` (E, O), all
+    cast to float32 -> (E, S, O) float32; ReLU after the bias when ``relu``. An ``x`` with a
+    leading 1 feeds every layer of the stack."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    w = np.ascontiguousarray(w, dtype=np.float32)
+    b = np.ascontiguousarray(b, dtype=np.float32)
+    if x.ndim != 3 or w.ndim != 3 or b.ndim != 2 or x.shape[0] not in (1, w.shape[0]) or x.shape[2] != w.shape[1] \
+            or b.shape != (w.shape[0], w.shape[2]):
+        raise ValueError(f"dense: shapes do not chain: x {x.shape}, w {w.shape}, b {b.shape}")
+    out = np.empty((w.shape[0], x.shape[1], w.shape[2]), dtype=np.float32)
+    return _dense_kernel(x, w, b, bool(relu), out)
+
+
+def mlp(x: np.ndarray, weights, biases) -> np.ndarray:
+    """Linear/ReLU/.../Linear (no activation after the last layer) of E stacked networks:
+    ``x`` (E or 1, S, I), ``weights[l]`` (E, in, out), ``biases[l]`` (E, out) -> (E, S, out)."""
+    last = len(weights) - 1
+    for layer, (w, b) in enumerate(zip(weights, biases)):
+        x = dense(x, w, b, relu=layer < last)
+    return x
+
+
+@numba.vectorize(["float64(float64)"], cache=True)
+def asin(x):
+    return math.asin(x)
+
+
+@numba.vectorize(["float64(float64, float64)"], cache=True)
+def atan2(y, x):
+    return math.atan2(y, x)
+
+
+@numba.vectorize(["float64(float64)"], cache=True)
+def exp(x):
+    return math.exp(x)
+
+
+@numba.vectorize(["float64(float64)"], cache=True)
+def log1p(x):
+    return math.log1p(x)
+
+
+@numba.vectorize(["float64(float64)"], cache=True)
+def tanh(x):
+    return math.tanh(x)
+
+
+@numba.vectorize(["float64(float64)"], cache=True)
+def sin(x):
+    return math.sin(x)
+
+
+@numba.vectorize(["float64(float64)"], cache=True)
+def cos(x):
+    return math.cos(x)
+
+
+def softplus32(z: np.ndarray) -> np.ndarray:
+    """torch's softplus (threshold 20: the identity above it) of a float32 array, in float32."""
+    z = np.asarray(z, dtype=np.float32)
+    soft = log1p(exp(np.minimum(z, np.float32(20.0)).astype(np.float64))).astype(np.float32)
+    return np.where(z > np.float32(20.0), z, soft)
+
+
+def tanh32(z: np.ndarray) -> np.ndarray:
+    """tanh of a float32 array, computed in float64 and rounded once to float32."""
+    return tanh(np.asarray(z, dtype=np.float64)).astype(np.float32)
+
+
+__all__ = ["asin", "atan2", "cos", "dense", "exp", "log1p", "mlp", "sin", "softplus32", "tanh", "tanh32"]

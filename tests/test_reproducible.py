@@ -1,0 +1,139 @@
+"""Reproducible anywhere: nothing committed names a folder of the machine that wrote it, the
+committed report regenerates byte for byte from the committed run directories, and the
+project's own arithmetic (networks, elementary functions) gives the same bits whatever BLAS
+kernel, NumPy loops or numba target the processor picks."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+# absolute paths that belong to one machine: home and work folders, mounted volumes, Windows
+# user folders (generic scratch examples such as /tmp/x and shebangs such as /usr/bin/env are not)
+MACHINE_PATH = re.compile("|".join([r"(?<![\w.])/" + d + "/" for d in ("work", "root", "home", "Users", "mnt", "scratch")]
+                                   + [r"[A-Z]:\\\\Users\\\\"]))
+
+
+def _tracked_text_files() -> list[Path]:
+    out = subprocess.run(["git", "ls-files", "-z"], cwd=REPO, capture_output=True, text=True)
+    if out.returncode != 0:
+        pytest.skip("not a git checkout")
+    files = []
+    for name in out.stdout.split("\0"):
+        path = REPO / name
+        if name and path.is_file() and b"\0" not in path.read_bytes()[:8192]:
+            files.append(path)
+    return files
+
+
+def test_no_tracked_text_file_names_a_machines_folder():
+    offenders = []
+    for path in _tracked_text_files():
+        for n, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+            if MACHINE_PATH.search(line):
+                offenders.append(f"{path.relative_to(REPO)}:{n}: {line.strip()[:120]}")
+    assert not offenders, "absolute paths of a machine in tracked files:\n" + "\n".join(offenders[:20])
+
+
+def test_the_path_scan_catches_what_it_looks_for():
+    assert MACHINE_PATH.search('"command": ["' + "/ro" + 'ot/.pyenv/bin/python"]')
+    assert MACHINE_PATH.search("hydra.run.dir=" + "/wo" + "rk/campaign/outputs")
+    assert not MACHINE_PATH.search("#!/usr/bin/env bash") and not MACHINE_PATH.search("--out /tmp/t")
+    assert not MACHINE_PATH.search("results/training/paper/table1/sac/seed0")
+
+
+def test_the_committed_report_regenerates_byte_for_byte(tmp_path):
+    """results/reproduction.json names its command; run with --out, it rewrites the committed
+    reproduction.json and .md from the committed run directories, to the byte."""
+    committed = json.loads((REPO / "results" / "reproduction.json").read_text())
+    command = committed["regenerate"].split()
+    assert command[:3] == ["python", "-m", "billiards.campaign"]
+    env = dict(os.environ, PYTHONPATH=str(REPO), MPLBACKEND="Agg")
+    proc = subprocess.run([sys.executable, *command[1:], "--out", str(tmp_path)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    for name in ("reproduction.json", "reproduction.md"):
+        assert (tmp_path / name).read_bytes() == (REPO / "results" / name).read_bytes(), name
+    assert sorted(p.name for p in (tmp_path / "img").iterdir()) == sorted(
+        Path(f).name for f in committed["figures"].values())
+
+
+# ----------------------------------------------------------------------------- same bits on every CPU
+
+KERNELS = {  # the settings a user's machine may differ in, each in a fresh interpreter
+    "default": {},
+    "openblas_prescott": {"OPENBLAS_CORETYPE": "Prescott"},
+    "openblas_haswell": {"OPENBLAS_CORETYPE": "Haswell"},
+    "numba_generic": {"NUMBA_CPU_NAME": "generic"},
+    "numpy_baseline": {"NPY_DISABLE_CPU_FEATURES": "AVX512_ICL X86_V4 X86_V3"},
+}
+
+_PROBE = """
+import hashlib, numpy as np
+from billiards import domain, numerics
+from billiards.physics import random_racks
+from billiards.search.proposers import load_policy_proposer
+from billiards.search.ranker import RankedProposer, ShotRanker
+rng = np.random.default_rng(0)
+pos = random_racks(rng, 64)
+h = hashlib.sha256()
+p = load_policy_proposer([f"results/policies/near_miss/seed{s}.pt" for s in range(3)])
+h.update(p.propose(pos, 24, np.random.default_rng(1)).tobytes())
+ranked = RankedProposer(ShotRanker.load("results/rankers/fastfiz/ranker.pt"), pool=300)
+h.update(ranked.propose(pos[:16], 8, np.random.default_rng(2)).tobytes())
+x = rng.uniform(-1, 1, 4096)
+for f in (numerics.asin, numerics.exp, numerics.log1p, numerics.tanh, numerics.sin, numerics.cos):
+    h.update(f(x).tobytes())
+h.update(numerics.atan2(x, x[::-1]).tobytes())
+h.update(domain.observation(pos, True).tobytes() + domain.aim_window(pos)[1].tobytes())
+print(h.hexdigest())
+"""
+
+
+def _probe(extra_env: dict) -> str:
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_CORETYPE", "NUMBA_CPU_NAME", "NPY_DISABLE_CPU_FEATURES")}
+    env.update(extra_env, PYTHONPATH=str(REPO), NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    proc = subprocess.run([sys.executable, "-c", _PROBE], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout.strip().splitlines()[-1]
+
+
+@pytest.mark.parametrize("kernel", [k for k in KERNELS if k != "default"])
+def test_networks_and_functions_give_the_same_bits_under_another_kernel(kernel):
+    """The proposer ensemble, the shot ranker, the elementary functions and the observation of
+    the same tables hash the same under another OpenBLAS kernel, numba's generic target and
+    NumPy's baseline loops as under this machine's defaults."""
+    assert _probe(KERNELS[kernel]) == _probe(KERNELS["default"])
+
+
+def test_dense_sums_in_index_order_in_float32():
+    """numerics.dense is the documented arithmetic, not merely close to it: each output sums
+    x_i * w_io in float32 in index order, then adds the bias (checked against a Python loop)."""
+    from billiards import numerics
+
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((2, 5, 37)).astype(np.float32) * 100
+    w = rng.standard_normal((2, 37, 6)).astype(np.float32)
+    b = rng.standard_normal((2, 6)).astype(np.float32)
+    out = numerics.dense(x, w, b, relu=True)
+    for e in range(2):
+        for s in range(5):
+            for o in range(6):
+                acc = np.float32(0)
+                for i in range(37):
+                    acc = np.float32(acc + np.float32(x[e, s, i] * w[e, i, o]))
+                v = np.float32(acc + b[e, o])
+                assert out[e, s, o] == (v if v > 0 else 0)
+    shared = numerics.dense(x[:1], w, b)  # one input for every layer of the stack
+    assert shared.shape == (2, 5, 6) and np.array_equal(shared[0], numerics.dense(x[:1], w[:1], b[:1])[0])
+    with pytest.raises(ValueError, match="do not chain"):
+        numerics.dense(x, w[:, :36], b)
