@@ -65,6 +65,20 @@ def test_p3_interrupted_keeps_finished_chains_and_resumes_to_the_same_result(tmp
     assert "partial" not in final["extra"] and final["values"] == lengths
 
 
+def test_a_fresh_run_never_counts_the_chains_of_an_earlier_run_in_its_directory(tmp_path, capsys):
+    """Only resume= continues a run's chains: a fresh run with another config in the same
+    directory (an explicit hydra.run.dir, a --redo) plays every chain itself."""
+    first = search_run.run(small_cfg(), tmp_path)
+    assert max(first.values) > 3  # some chain of the first run is longer than the second's cap
+    again = small_cfg()
+    again.protocol.cap = 3
+    second = search_run.run(again, tmp_path)
+    assert "fresh run: discarding 4 chains of an earlier run" in capsys.readouterr().out
+    assert max(second.values) <= 3 and len(second.values) == 4
+    ledger = [json.loads(line) for line in (tmp_path / "chains.jsonl").read_text().splitlines()]
+    assert [r["length"] for r in ledger] == second.values
+
+
 def test_p1_interrupted_writes_a_partial_result(tmp_path, monkeypatch, capsys):
     interrupt_after(monkeypatch, 5)  # two proposer calls per batched step, after the collector's first probe
     with pytest.raises(SystemExit) as exit_info:

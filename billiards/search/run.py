@@ -75,6 +75,11 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     validate(cfg)
     out_dir.mkdir(parents=True, exist_ok=True)
     if not cfg.get("resume"):
+        old = out_dir / CHAINS_FILE
+        if old.exists():  # a fresh run never counts another run's chains (only resume= continues them)
+            print(f"fresh run: discarding {len(read_chains(old))} chains of an earlier run in {display_path(out_dir)} "
+                  f"(resume=<dir> continues a stopped one)", flush=True)
+            old.unlink()
         atomic_write_text(out_dir / CONFIG_FILE, OmegaConf.to_yaml(cfg, resolve=True))
     if cfg.threads is not None:
         set_threads(cfg.threads)
