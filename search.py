@@ -19,6 +19,7 @@ Thin entry point: composes conf/search.yaml and calls billiards.search.run.
 import hydra
 from hydra.core.hydra_config import HydraConfig
 
+from billiards.app_config import guard_command_line
 import billiards.search.config  # noqa: F401  (registers the schema and resolvers before Hydra composes)
 
 
@@ -30,4 +31,5 @@ def main(cfg) -> None:
 
 
 if __name__ == "__main__":
+    guard_command_line()  # a command line that names code fails here, before Hydra builds anything
     main()

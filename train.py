@@ -13,6 +13,7 @@ over. Importing the library is deferred so that a bad command line fails within 
 import hydra
 from omegaconf import DictConfig
 
+from billiards.app_config import guard_command_line
 import billiards.rl.config  # noqa: F401  (registers the schema and resolvers before Hydra composes)
 
 
@@ -39,4 +40,5 @@ def main(cfg: DictConfig) -> float:
 
 
 if __name__ == "__main__":
+    guard_command_line()  # a command line that names code fails here, before Hydra builds anything
     main()

@@ -18,6 +18,11 @@ fingerprint (``env_fingerprint.py``), a fingerprint of the trained proposer ense
 ranker and the elementary functions on fixed inputs, and the lengths of a few Table 6 chains
 (``search.py proposer=base search=h2 protocol=p3``, the trained ensemble's chains, chaotic in
 every bit). A row equal to the default row everywhere is marked ``same``.
+
+``--training`` instead trains ``python train.py budget=smoke seed=0`` under torch's own CPU
+switches (``ATEN_CPU_CAPABILITY`` avx2 / default, ``MKL_CBWR=COMPATIBLE``: the code paths
+another processor's torch would take) and reports the first logged step whose losses or
+evaluations differ from the default run's: training is not promised bit-identical across CPUs.
 """
 
 from __future__ import annotations
@@ -98,13 +103,48 @@ def measure(extra: dict, chains: int, cap: int) -> dict:
     return row
 
 
+TRAINING = {"default": {}, "aten_avx2": {"ATEN_CPU_CAPABILITY": "avx2"}, "aten_baseline": {"ATEN_CPU_CAPABILITY": "default"},
+            "mkl_compatible": {"MKL_CBWR": "COMPATIBLE"}}
+
+
+def training_rows() -> dict:
+    """``train.py budget=smoke seed=0`` per torch setting: the metrics rows (timings dropped) and the
+    final evaluation, and the first step that differs from the default run's."""
+    import csv
+
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, extra in TRAINING.items():
+            run = Path(tmp, name)
+            _run([sys.executable, "train.py", "budget=smoke", "seed=0", "threads=1", "progress=false",
+                  "hydra/job_logging=stdout", f"hydra.run.dir={run}"], _env(extra))
+            with (run / "metrics.csv").open(newline="") as f:
+                rows = [{k: v for k, v in r.items() if k not in ("wall_time", "cpu_time", "fps", "ups")} for r in csv.DictReader(f)]
+            out[name] = {"env": extra, "rows": rows, "eval_mean": json.loads((run / "eval.json").read_text())["mean"]}
+    ref = out["default"]["rows"]
+    for r in out.values():
+        r["first_difference_at_step"] = next((int(float(a["step"])) for a, b in zip(ref, r["rows"]) if a != b), None)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=None, help="write the rows as JSON here (e.g. results/cross_cpu.json)")
     ap.add_argument("--chains", type=int, default=2, help="Table 6 P3 chains per proposer (default 2)")
     ap.add_argument("--cap", type=int, default=600, help="their cap (default 600)")
     ap.add_argument("--only", nargs="*", default=None, help=f"settings (default all: {', '.join(SETTINGS)})")
+    ap.add_argument("--training", action="store_true", help="compare smoke training runs under torch's CPU switches instead")
     args = ap.parse_args(argv)
+    if args.training:
+        rows = training_rows()
+        print(f"{'torch setting':<18} {'environment':<36} {'final eval':<11} first differing step")
+        for name, r in rows.items():
+            first = r["first_difference_at_step"]
+            print(f"{name:<18} {str(r['env']):<36} {r['eval_mean']:<11} {'identical' if first is None else first}")
+            del r["rows"]
+        if args.out is not None:
+            _write(args.out, argv, {"training": rows})
+        return 0
     names = args.only or list(SETTINGS)
     if "default" not in names:
         names = ["default", *names]
@@ -125,15 +165,17 @@ def main(argv=None) -> int:
     print(f"{len(rows)} settings in {time.perf_counter() - t0:.0f} s; "
           + ("every promised setting gives the default's bits" if not broken else f"DIFFERENT: {', '.join(broken)}"))
     if args.out is not None:
-        from billiards.files import atomic_write_text
-        from billiards.provenance import git_commit
-
-        cmd = "python benchmarks/cross_cpu.py" + "".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:]))
-        payload = {"command": cmd, "commit": git_commit(), "chains": args.chains, "cap": args.cap,
-                   "cpu": _cpu_name(), "rows": rows}
-        atomic_write_text(args.out, json.dumps(payload, indent=2) + "\n")
-        print(f"wrote {args.out}")
+        _write(args.out, argv, {"chains": args.chains, "cap": args.cap, "rows": rows})
     return 1 if broken else 0
+
+
+def _write(out: Path, argv, payload: dict) -> None:
+    from billiards.files import atomic_write_text
+    from billiards.provenance import git_commit
+
+    cmd = "python benchmarks/cross_cpu.py" + "".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:]))
+    atomic_write_text(out, json.dumps({"command": cmd, "commit": git_commit(), "cpu": _cpu_name(), **payload}, indent=2) + "\n")
+    print(f"wrote {out}")
 
 
 def _cpu_name() -> str:

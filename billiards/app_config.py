@@ -136,5 +136,54 @@ def validate_jobs(config: DictConfig, validate, errors: tuple[type[BaseException
 
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
 
-__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "job_configs", "register_app", "register_resolvers",
+# ----------------------------------------------------------------------------- configs are data
+
+# Hydra calls whatever a ``_target_`` names (its callbacks are built before any app code runs) and
+# unpickles --experimental-rerun's file; a command line, a campaign spec or a preset may select
+# the project's configs and Hydra's installed plugins by name, but never name a callable or add
+# a config directory. The flags that only print or select are allowed.
+ALLOWED_FLAGS = {"-m", "--multirun", "--cfg", "-c", "--package", "-p", "--help", "-h", "--hydra-help", "--info", "-i",
+                 "--resolve", "--version"}
+CODE_KEYS = ("_target_", "_partial_", "_args_", "_recursive_", "_convert_")
+FORBIDDEN_KEYS = ("hydra.callbacks", "hydra/callbacks", "hydra.searchpath", "hydra.job.env_set", "hydra.job.env_copy")
+
+
+def override_errors(args, what: str = "override") -> list[str]:
+    """Why each of ``args`` (command-line words after the script) may not be given: a ``_target_``
+    (or another instantiation key), a Hydra callback, a search path, a flag that adds a config
+    directory or reruns a pickled config. Empty when every word is plain data."""
+    errors = []
+    args = list(args)
+    for i, arg in enumerate(args):
+        arg = str(arg)
+        if arg.startswith("-"):
+            flag = arg.split("=", 1)[0]
+            if flag not in ALLOWED_FLAGS:
+                errors.append(f"{what} {arg!r}: the flag {flag} is not accepted here (configs come from the project's conf/; "
+                              f"allowed: {', '.join(sorted(ALLOWED_FLAGS))})")
+            continue
+        if i > 0 and str(args[i - 1]) in ("--cfg", "-c", "--package", "-p", "--info", "-i"):
+            continue  # the value of a flag
+        key = arg.split("=", 1)[0].lstrip("+~").strip()
+        parts = key.replace("/", ".").replace("@", ".").split(".")
+        if any(p in CODE_KEYS for p in parts):
+            errors.append(f"{what} {arg!r}: configs are data here; a {next(p for p in parts if p in CODE_KEYS)} "
+                          f"would make Hydra call code (choose an option by name, e.g. hydra/launcher=joblib)")
+        elif any(key == k or key.startswith(k + ".") or key.startswith(k + "/") for k in FORBIDDEN_KEYS):
+            errors.append(f"{what} {arg!r}: {key.split('=')[0]} may not be set from outside the project's conf/ "
+                          f"(it would run or load code before the config is validated)")
+    return errors
+
+
+def guard_command_line(argv=None) -> None:
+    """Exit with every reason (no traceback, nothing written) if the app's command line names
+    code; the entry points call it before Hydra sees the arguments."""
+    import sys
+
+    errors = override_errors(sys.argv[1:] if argv is None else argv)
+    if errors:
+        raise SystemExit("Error: " + "\n".join(errors))
+
+__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "guard_command_line", "override_errors",
+            "job_configs", "register_app", "register_resolvers",
            "validate_jobs"]

@@ -110,4 +110,16 @@ def set_threads(n: int) -> None:
     torch.set_num_threads(int(n))
 
 
-__all__ = ["DEVICES", "device_error", "resolve_device", "set_threads", "start_numba_threads"]
+def threads_error(n, key: str = "threads") -> str | None:
+    """Why ``n`` threads cannot be used here (None when they can): at least one, at most the cores
+    this process may run on (more would only oversubscribe them; far more fails inside the
+    thread libraries, after a run directory was written)."""
+    import os
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= cores:
+        return f"{key} must be an integer in [1, {cores}] (the cores this machine gives the process), got {n!r}"
+    return None
+
+
+__all__ = ["DEVICES", "device_error", "resolve_device", "set_threads", "start_numba_threads", "threads_error"]

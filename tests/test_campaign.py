@@ -396,6 +396,19 @@ def test_search_runs_compose_with_the_shipped_policies(tmp_path):
                 assert all((REPO / p).is_file() for p in cfg.proposer.checkpoints)
 
 
+@pytest.mark.parametrize("args,message", [
+    (["budget=smoke", "+hydra.callbacks.x._target_=torch.load", "+hydra.callbacks.x.f=evil.pt"], "configs are data here"),
+    (["budget=smoke", "hydra.run.dir=elsewhere"], "Hydra's own settings (hydra.*) are the runner's"),
+    (["--experimental-rerun"], "is not accepted here"),
+])
+def test_a_spec_file_is_data_and_may_not_name_code(tmp_path, args, message):
+    """A campaign spec's arguments pass the apps' own check before anything runs or is written."""
+    spec = tmp_path / "evil.yaml"
+    spec.write_text(yaml.safe_dump({"name": "evil", "runs": [{"table": "t", "variant": "x", "seed": 0, "args": args}]}))
+    rc, out = cli("run", "--spec", str(spec), "--root", str(tmp_path / "state"))
+    assert rc == 2 and message in out and not (tmp_path / "state").exists()
+
+
 def test_a_failing_run_is_retried_then_left_alone(tmp_path):
     """A run whose command fails (here an unknown config key) is tried MAX_FAILURES times,
     each failure recorded with its exit status; then runs leave it alone until --retry-failed."""

@@ -103,7 +103,11 @@ SEARCH_BAD = [
     (["search=puct", "search.gamma=1.5"], "search (puct): gamma must lie in [0, 1], got 1.5"),
     (["search.foul_penalty=-1"], "search (h2): foul_penalty must be a finite number >= 0, got -1.0"),
     (["proposer.power_low=0.95"], "proposer.power_low and proposer.power_high must satisfy"),
-    (["threads=0"], "threads must be >= 1"),
+    (["threads=0"], "threads must be an integer in [1, "),
+    (["threads=100000"], "threads must be an integer in [1, "),
+    (["+hydra.callbacks.evil._target_=pathlib.Path.touch", "+hydra.callbacks.evil.self=pwned"], "configs are data here"),
+    (["proposer._target_=builtins.print"], "configs are data here"),
+    (["--experimental-rerun", "config.pickle"], "the flag --experimental-rerun is not accepted here"),
     (["physics=bogus"], "Could not find 'physics/bogus'"),
     (["search=h2", "search.c_puct=5"], "Key 'c_puct' not in 'H2SearchConfig'"),  # a PUCT knob
     (["search=h2", "+search.c_puct=5"], "search.c_puct: not a key of H2SearchConfig"),
@@ -122,5 +126,6 @@ def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, overrides, m
     proc = subprocess.run([sys.executable, str(search_py), *overrides], cwd=tmp_path, capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode != 0 and message in proc.stderr, proc.stderr
+    assert not (tmp_path / "pwned").exists()
     assert "Traceback" not in proc.stderr
     assert list(tmp_path.iterdir()) == [], f"wrote {list(tmp_path.rglob('*'))}"

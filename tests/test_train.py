@@ -663,6 +663,17 @@ BAD = [
     (["physics=bogus"], "Could not find 'physics/bogus'"),
     (["physics.preset=bogus"], "physics.preset='bogus' is not a preset"),
     (["physics.u_roll=-1"], "physics.u_roll: PhysicsParams.u_roll must be a finite positive number, got -1.0"),
+    (["physics.cue_speed_max=1e200"], "PhysicsParams.cue_speed_max must be at most 50 (a physical bound), got 1e+200"),
+    (["physics.max_events=10000000000000000000"], "physics.max_events"),
+    (["threads=100000"], "threads must be an integer in [1, "),
+    # configs are data: nothing on the command line may make Hydra call code (the test's "wrote
+    # nothing" also checks that Path.touch never ran: it would create ./pwned)
+    (["+hydra.callbacks.evil._target_=pathlib.Path.touch", "+hydra.callbacks.evil.self=pwned"], "configs are data here"),
+    (["+hydra.callbacks.evil.x=1"], "hydra.callbacks.evil.x may not be set from outside the project's conf/"),
+    (["+algo._target_=builtins.print"], "configs are data here; a _target_ would make Hydra call code"),
+    (["hydra.searchpath=[file://elsewhere]"], "hydra.searchpath may not be set"),
+    (["--experimental-rerun", "config.pickle"], "the flag --experimental-rerun is not accepted here"),
+    (["--config-dir", "elsewhere"], "the flag --config-dir is not accepted here"),
     (["physics.u_rol=0.1"], "Key 'u_rol' not in 'PhysicsConfig'"),
     (["physics=international", "physics.table_width=0.2"], "'spots' opening rack does not fit a 0.2 x 2.84 m table"),
     (["shaping.gentle_kind=soft"], "shaping.gentle_kind must be leave"),

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import yaml
 
+from billiards.app_config import override_errors
+
 KINDS = ("train", "export", "search")
 PLACEHOLDER = re.compile(r"\{dir:([^{}]+)\}")
 
@@ -175,6 +177,11 @@ def load_spec(path: str | Path) -> Campaign:
             ))
         except (TypeError, ValueError) as err:
             raise SpecError(f"campaign spec {path}: runs[{i}] has a wrongly typed field ({err})") from None
+        errors = override_errors(entries[-1].args, what=f"campaign spec {path}: runs[{i}] argument")
+        errors += [f"campaign spec {path}: runs[{i}] argument {a!r}: Hydra's own settings (hydra.*) are the runner's"
+                   for a in entries[-1].args if str(a).lstrip("+~").startswith(("hydra.", "hydra/"))]
+        if errors:
+            raise SpecError("\n".join(errors))
     return Campaign(str(data.get("name", path.stem)), entries)
 
 

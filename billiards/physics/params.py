@@ -42,6 +42,17 @@ N_PARAMS = 21
 RACKS = ("korean", "spots")
 
 
+# Upper bounds of the physical parameters: generous (no real table comes near them) but finite,
+# so that a typo such as a cue speed of 1e200 m/s is refused instead of simulated.
+UPPER_BOUNDS = {
+    "table_width": 10.0, "table_length": 10.0, "ball_radius": 0.5, "ball_mass": 10.0, "g": 100.0, "cue_mass": 10.0,
+    "cue_speed_max": 50.0, "cushion_height": 1.0, "min_dist": 0.01, "u_slide": 5.0, "u_roll": 1.0, "u_spin": 10.0,
+    "f_cushion": 5.0, "cue_end_mass": 10.0, "rack_margin": 1.0, "rack_clearance": 1.0,
+}
+MAX_TIME_BOUND = 3600.0  # seconds of one shot (or inf: to rest)
+MAX_EVENTS_BOUND = 10_000_000  # events of one shot (the kernel's counter is an int64; the default is 5,000)
+
+
 @dataclasses.dataclass(frozen=True)
 class PhysicsParams:
     """Everything the simulator needs to know about the world. Immutable; build variants
@@ -84,6 +95,10 @@ class PhysicsParams:
     rack_clearance: float = 0.002  # random racks: every pair of centres at least 2R + clearance apart (m)
 
     def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):  # numbers are real numbers (not strings, booleans, complex)
+            value = getattr(self, f.name)
+            if f.type in ("float", "int", float, int) and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise ValueError(f"PhysicsParams.{f.name} must be a real number, got {value!r}")
         positive = [
             "table_width", "table_length", "ball_radius", "ball_mass", "g", "cue_mass",
             "cue_speed_max", "cushion_height", "min_dist", "u_slide", "u_roll", "u_spin",
@@ -110,8 +125,14 @@ class PhysicsParams:
             raise ValueError(f"PhysicsParams.max_time must be > 0 seconds (inf: run every shot to rest), got {self.max_time!r}")
         if self.rack not in RACKS:
             raise ValueError(f"PhysicsParams.rack must be one of {RACKS}, got {self.rack!r}")
-        if int(self.max_events) < 1:
-            raise ValueError(f"PhysicsParams.max_events must be >= 1, got {self.max_events!r}")
+        for name, high in UPPER_BOUNDS.items():
+            if not getattr(self, name) <= high:
+                raise ValueError(f"PhysicsParams.{name} must be at most {high:g} (a physical bound), got {getattr(self, name)!r}")
+        if not (self.max_time <= MAX_TIME_BOUND or math.isinf(self.max_time)):
+            raise ValueError(f"PhysicsParams.max_time must be at most {MAX_TIME_BOUND:g} s or inf, got {self.max_time!r}")
+        events = self.max_events
+        if isinstance(events, bool) or not float(events).is_integer() or not 1 <= events <= MAX_EVENTS_BOUND:
+            raise ValueError(f"PhysicsParams.max_events must be an integer in [1, {MAX_EVENTS_BOUND:,}], got {events!r}")
         # Random racks need room for four balls with the margin and clearance; the opening rack
         # is checked by canonical_rack's own layout (see billiards.physics.api).
         inner_w = self.table_width - 2 * (self.ball_radius + self.rack_margin)

@@ -32,7 +32,7 @@ from typing import Any, List, Optional
 from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 
-from billiards.device import device_error
+from billiards.device import device_error, threads_error
 from billiards.app_config import fixed_job_config as _fixed_job_config
 from billiards.app_config import BASIC_SWEEPER, register_app, validate_jobs
 from billiards.files import CHECKPOINT_FILE, repo_path
@@ -305,8 +305,7 @@ def _errors(cfg: DictConfig) -> list[str]:
     # np.random.default_rng (any integer >= 0). Checked here, not at the final evaluation.
     need(0 <= cfg.seed < 2**32, f"seed must be an integer in [0, 2**32 - 1] (a numpy seed), got {cfg.seed!r}")
     need(cfg.eval.seed >= 0, f"eval.seed must be an integer >= 0 (a numpy seed), got {cfg.eval.seed!r}")
-    positive("threads", cfg.threads)
-    errs.extend(filter(None, [device_error(cfg.device)]))
+    errs.extend(filter(None, [threads_error(cfg.threads), device_error(cfg.device)]))
     positive("paper_steps", cfg.paper_steps)
     for key in ("foul_penalty", "gentle", "near_miss"):
         positive(f"shaping.{key}", cfg.shaping[key], strict=False)

@@ -44,7 +44,7 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from billiards.app_config import BASIC_SWEEPER, register_app, validate_jobs
-from billiards.device import device_error
+from billiards.device import device_error, threads_error
 from billiards.files import CONFIG_FILE, repo_path
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
 from billiards.physics.noise import NoiseConfig, noise_errors, noise_from_config
@@ -498,8 +498,8 @@ def errors(cfg) -> list[str]:
         for key in (f.name for f in dataclasses.fields(protocol) if f.name != "name"):
             if getattr(protocol, key) < 1:
                 errs.append(f"protocol.{key} must be >= 1, got {getattr(protocol, key)}")
-    if cfg.threads is not None and cfg.threads < 1:
-        errs.append(f"threads must be >= 1, got {cfg.threads}")
+    if cfg.threads is not None and (err := threads_error(cfg.threads)):
+        errs.append(err)
     if cfg.get("resume") and not (Path(cfg.resume) / CONFIG_FILE).is_file():
         errs.append(f"resume={cfg.resume!r}: not a search run directory (no {CONFIG_FILE} there)")
     errs.extend(physics_errors(cfg.physics))
