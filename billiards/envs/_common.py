@@ -94,16 +94,29 @@ def terminated_truncated(score: np.ndarray, shot: np.ndarray, on_miss: str, max_
     return terminated, truncated
 
 
+def check_flag(name: str, value) -> bool:
+    """A boolean option as a bool, or a TypeError: ``constrain_aim="no"`` is not a boolean
+    (``bool("no")`` would be True)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
 def validate_action(action, expected_shape: tuple[int, ...]) -> np.ndarray:
     """The action as a float64 array of exactly ``expected_shape``, or a ValueError that names
     the key ``"action"`` and the expected shape. Checks shape and finiteness here; the
     simulator then checks the ranges of p, a and b (also naming ``action``)."""
     if action is None:
         raise ValueError(f'missing "action": expected a tensor of shape {expected_shape} = (theta, p, a, b) per shot')
+    if hasattr(action, "detach"):  # a torch tensor, possibly part of a graph: its values
+        action = action.detach().cpu()
     try:
-        arr = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError) as err:
+        raw = np.asarray(action)
+    except (TypeError, ValueError, RuntimeError) as err:
         raise ValueError(f'"action" must be numeric with shape {expected_shape}; got {type(action).__name__}: {err}') from None
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f'"action" must hold real numbers (shape {expected_shape}); got {type(action).__name__} of dtype {raw.dtype}')
+    arr = raw.astype(np.float64, copy=False)
     if arr.shape != tuple(expected_shape):
         raise ValueError(
             f'"action" must have shape {tuple(expected_shape)} = (theta, p, a, b) per shot; got shape {arr.shape}'

@@ -28,6 +28,7 @@ from billiards.physics.noise import NoiseModel, get_noise
 
 from ._common import (
     Shaping,
+    check_flag,
     check_inning_options,
     initial_racks,
     play_shots,
@@ -38,6 +39,9 @@ from ._common import (
 
 INFO_KEYS = ("score", "foul", "miss", "first_contact", "second_red", "hits", "closest", "cushions",
              "n_events", "shot", "positions", "theta", "raw_action", "commanded_action")
+
+
+RESET_OPTIONS = {"positions"}  # reset(options=...) keys: a typo is an error, not a random rack
 
 
 def _has_pygame() -> bool:
@@ -130,8 +134,8 @@ class Billiards4BallInningEnv(gym.Env):
         self._window = _open_window() if render_mode == "human" else None
         self._last_shot = None
         self.start, self.on_miss, self.params, self.render_mode = start, on_miss, params, render_mode
-        self.constrain_aim, self.extra_features = bool(constrain_aim), bool(extra_features)
-        self.normalize_actions = bool(normalize_actions)
+        self.constrain_aim, self.extra_features = check_flag("constrain_aim", constrain_aim), check_flag("extra_features", extra_features)
+        self.normalize_actions = check_flag("normalize_actions", normalize_actions)
         self.shaping = Shaping(foul_penalty, gentle, gentle_kind, near_miss, near_miss_sigma)
 
         low, high = domain.action_bounds(self.constrain_aim, self.normalize_actions)
@@ -141,6 +145,7 @@ class Billiards4BallInningEnv(gym.Env):
 
         self._positions = initial_racks(np.random.default_rng(0), "canonical", 1, params)[0]
         self._shot = 0
+        self._finished = False  # the inning ended (terminated or truncated): step needs a reset first
 
     # ------------------------------------------------------------------ helpers
 
@@ -171,7 +176,10 @@ class Billiards4BallInningEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        options = options or {}
+        options = {} if options is None else options
+        if not isinstance(options, dict) or set(options) - RESET_OPTIONS:
+            unknown = sorted(map(repr, set(options) - RESET_OPTIONS)) if isinstance(options, dict) else [repr(options)]
+            raise ValueError(f"reset options may only be {sorted(RESET_OPTIONS)}; got {', '.join(unknown)}")
         if options.get("positions") is not None:
             pos = np.asarray(options["positions"], dtype=np.float64)
             if pos.shape != (4, 2):
@@ -180,7 +188,7 @@ class Billiards4BallInningEnv(gym.Env):
             self._positions = pos.copy()
         else:
             self._positions = initial_racks(self.np_random, self.start, 1, self.params)[0]
-        self._shot, self._last_shot = 0, None
+        self._shot, self._last_shot, self._finished = 0, None, False
         if self.render_mode == "human":
             self.render()
         return self._obs(), self._info()
@@ -224,6 +232,8 @@ class Billiards4BallInningEnv(gym.Env):
         }
 
     def step(self, action):
+        if self._finished:
+            raise gym.error.ResetNeeded("the inning has ended (terminated or truncated): call reset() before step()")
         commanded = self._raw_action(action)
         shots = play_shots(self._positions[None], commanded, np.array([self._shot]), params=self.params,
                            noise=self.noise, rng=self.np_random, on_miss=self.on_miss, max_shots=self.max_shots)
@@ -231,8 +241,9 @@ class Billiards4BallInningEnv(gym.Env):
         self._positions = shots.result.positions[0]
         self._shot = int(shots.shot[0])
         reward = self.shaping.reward(shots)
-        return (self._obs(), float(reward[0]), bool(shots.terminated[0]), bool(shots.truncated[0]),
-                self._info(shots, commanded))
+        terminated, truncated = bool(shots.terminated[0]), bool(shots.truncated[0])
+        self._finished = terminated or truncated
+        return self._obs(), float(reward[0]), terminated, truncated, self._info(shots, commanded)
 
     def render(self):
         """``rgb_array``: an (H, W, 3) uint8 frame of the table, with the last shot's ball paths

@@ -51,7 +51,7 @@ from torchrl.envs import EnvBase
 
 from billiards.device import start_numba_threads
 from billiards.domain import ACTION_DIM, OBS_DIM, action_bounds, observation
-from billiards.physics import DEFAULT_PARAMS, PhysicsParams, check_positions
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams, check_positions, get_params
 from billiards.physics.noise import NoiseModel, get_noise
 
 from ._common import check_inning_options, initial_racks, play_shots, validate_action
@@ -145,7 +145,7 @@ class BilliardsEnv(EnvBase):
         self.max_shots = check_inning_options(start, on_miss, max_shots)
         # numba's pool now, not on the first parallel batch, whose start would reset torch's thread count
         start_numba_threads()
-        self.start, self.on_miss, self.params = start, on_miss, params
+        self.start, self.on_miss, self.params = start, on_miss, get_params(params)  # a preset's name too
         self._make_specs()
         self._set_seed(seed)
 
@@ -205,7 +205,15 @@ class BilliardsEnv(EnvBase):
         shot = tensordict.get("shot", None)
         if positions is None or shot is None:
             raise KeyError('BilliardsEnv.step needs "positions" and "shot" in the input: call env.reset() first')
-        shots = play_shots(positions, action, shot.detach().numpy().reshape(B), params=self.params, noise=self.noise,
+        shot = shot.detach().cpu()
+        if shot.dtype.is_floating_point or shot.dtype == torch.bool or shot.is_complex():
+            raise ValueError(f'"shot" must be an integer tensor (shots played in the inning), got {shot.dtype}')
+        shot = shot.numpy().reshape(B)
+        if ((shot < 0) | (shot >= self.max_shots)).any():
+            bad = np.flatnonzero((shot < 0) | (shot >= self.max_shots))[:8].tolist()
+            raise ValueError(f'"shot" must lie in [0, max_shots - 1 = {self.max_shots - 1}] (an inning that has not '
+                             f'ended); innings {bad} have {shot[bad].tolist()}: call env.reset() (or reset those innings)')
+        shots = play_shots(positions, action, shot, params=self.params, noise=self.noise,
                            rng=self.noise_rng, on_miss=self.on_miss, max_shots=self.max_shots)
         result = shots.result
         noisy = {} if self.noise.is_exact else {"played_action": shots.played}

@@ -33,7 +33,7 @@ from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params
 from billiards.physics.config import warn_physics_mismatch
 
-from ._common import Shaping, resolve_paradigm, unnormalize_checked, validate_action
+from ._common import Shaping, check_flag, resolve_paradigm, unnormalize_checked, validate_action
 from .torchrl_env import BilliardsEnv, exact_positions
 
 
@@ -314,6 +314,8 @@ def make_env(
     start, on_miss = resolve_paradigm(paradigm, start, on_miss)
     shaping = Shaping(foul_penalty, gentle, gentle_kind, near_miss, near_miss_sigma)  # checked before anything is built
     domain.check_coefficient("rm", rm)
+    constrain_aim, normalize_actions = check_flag("constrain_aim", constrain_aim), check_flag("normalize_actions", normalize_actions)
+    extra_features = check_flag("extra_features", extra_features)
     params = get_params(params)
     base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=max_shots, params=params, seed=seed, noise=noise)
     transforms: list[Transform] = []

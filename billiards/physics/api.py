@@ -27,13 +27,14 @@ impulse model can only answer with ever more collisions) is stopped where it is 
 
 from __future__ import annotations
 
+import math
 from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
 
 from . import core
-from .params import DEFAULT_PARAMS, PhysicsParams
+from .params import DEFAULT_PARAMS, PhysicsParams, get_params
 from .rules import carom_outcome
 
 PARALLEL_MIN_BATCH = 64  # smaller batches run on the calling thread (same kernel, same bits)
@@ -133,11 +134,15 @@ class BatchResult(NamedTuple):
 
 
 def _as_float_array(x, name: str) -> np.ndarray:
+    """``x`` as float64, or a ValueError naming ``name`` unless it holds real numbers (integers or
+    floats: not strings, booleans, complex numbers or objects)."""
     try:
-        arr = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as err:
+        raw = np.asarray(x)
+    except (TypeError, ValueError, RuntimeError) as err:
         raise ValueError(f"{name} must be numeric, got {type(x).__name__}: {err}") from None
-    return arr
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must hold real numbers, got {type(x).__name__} of dtype {raw.dtype}")
+    return raw.astype(np.float64, copy=False)
 
 
 def check_actions(actions: np.ndarray, name: str = "action") -> None:
@@ -159,6 +164,7 @@ def check_actions(actions: np.ndarray, name: str = "action") -> None:
 def check_positions(positions: np.ndarray, params: PhysicsParams = DEFAULT_PARAMS, name: str = "positions") -> None:
     """Raise ValueError unless positions is one rack (4, 2) or N racks (N, 4, 2) of finite,
     on-table, non-overlapping balls."""
+    params = get_params(params)  # a preset's name is accepted wherever parameters are
     positions = _as_float_array(positions, name)
     if positions.shape == (4, 2):
         positions = positions[None]
@@ -193,6 +199,7 @@ def action_to_cue(action, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
     a and b come out as contact-point offsets in fractions of R (pooltool's convention).
     Accepts (4,) or (N, 4) and returns the same shape. Validates as described in the module.
     """
+    params = get_params(params)  # a preset's name is accepted wherever parameters are
     arr = _as_float_array(action, "action")
     single = arr.ndim == 1
     actions = np.ascontiguousarray(arr.reshape(1, -1) if single else arr)
@@ -218,11 +225,13 @@ def canonical_rack(params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
 
     A layout that does not fit its table is refused when the PhysicsParams is built.
     """
+    params = get_params(params)  # a preset's name is accepted wherever parameters are
     return params.opening_rack()
 
 
 def random_rack(rng: np.random.Generator, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
     """A uniform random rack, (4, 2) (see :func:`random_racks`)."""
+    params = get_params(params)  # a preset's name is accepted wherever parameters are
     return random_racks(rng, 1, params)[0]
 
 
@@ -236,6 +245,7 @@ def random_racks(rng: np.random.Generator, n: int, params: PhysicsParams = DEFAU
     (the paper's sampling on ``korean_medium``: m = 5 mm, clearance 2 mm; 0 and 0 on
     ``international``). Raises ValueError if some rack is still not placed after
     ``RACK_ATTEMPTS`` rounds (a table barely larger than four balls)."""
+    params = get_params(params)  # a preset's name is accepted wherever parameters are
     R, m = params.ball_radius, params.rack_margin
     lo = np.array([R + m, R + m])
     hi = np.array([params.table_width - R - m, params.table_length - R - m])
@@ -284,6 +294,7 @@ def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> 
     ordered event log with every ball's state after each event (what
     :func:`billiards.physics.trajectory` needs to draw the paths).
     """
+    params = get_params(params)  # a preset's name is accepted wherever parameters are
     pos = _as_float_array(positions, "positions")
     act = _as_float_array(action, "action")
     if pos.shape != (4, 2):
@@ -304,6 +315,7 @@ def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -
     The thread count is numba's (``numba.set_num_threads`` or ``NUMBA_NUM_THREADS``); batches
     smaller than ``PARALLEL_MIN_BATCH`` run on the calling thread.
     """
+    params = get_params(params)  # a preset's name is accepted wherever parameters are
     pos, act = _prepare_batch(positions, actions, params)
     n = pos.shape[0]
     out_pos = np.empty((n, 4, 2))
@@ -338,6 +350,9 @@ def trajectory(result: ShotResult, dt: float = 1.0 / 60.0, params: PhysicsParams
     Returns (times (T,), xy (T, 4, 2)): a uniform grid of step dt plus every event time, each
     position evolved with the closed forms from the last event before it.
     """
+    params = get_params(params)  # a preset's name is accepted wherever parameters are
+    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+        raise ValueError(f"trajectory needs a finite time step dt > 0, got {dt!r}")
     grid = np.arange(0.0, result.duration, dt)
     times = np.unique(np.concatenate([grid, result.event_time, [result.duration]]))
     seg = np.searchsorted(result.event_time, times, side="right") - 1
