@@ -112,10 +112,93 @@ def atomic_write_text(path, text: str) -> Path:
     return Path(path)
 
 
+SEAL_KEY = "sha256"  # the checksum entry of a sealed (tagged) file
+
+
+def payload_digest(payload) -> str:
+    """SHA-256 over a payload's content in a canonical order: every key (sorted), tensor (dtype,
+    shape, bytes), array and plain value, except the top-level :data:`SEAL_KEY` itself. The same
+    content gives the same digest however ``torch.save`` lays it out."""
+    import hashlib
+    import json
+
+    import numpy as np
+    import torch
+
+    h = hashlib.sha256()
+
+    def feed(x) -> None:
+        if isinstance(x, dict):
+            h.update(b"d%d" % len(x))
+            for k in sorted(x, key=str):
+                feed(str(k))
+                feed(x[k])
+        elif isinstance(x, (list, tuple)):
+            h.update(b"l%d" % len(x))
+            for v in x:
+                feed(v)
+        elif torch.is_tensor(x):
+            t = x.detach().cpu().contiguous()
+            h.update(f"t{t.dtype}{tuple(t.shape)}".encode())
+            h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes() if t.numel() else b"")
+        elif isinstance(x, np.ndarray):
+            a = np.ascontiguousarray(x)
+            h.update(f"a{a.dtype}{a.shape}".encode() + a.tobytes())
+        else:
+            h.update(("v" + json.dumps(x, sort_keys=True, default=repr)).encode())
+
+    feed({k: v for k, v in payload.items() if k != SEAL_KEY})
+    return h.hexdigest()
+
+
+def _non_finite(payload, prefix: str = "") -> str | None:
+    """The first entry of ``payload`` holding a NaN or an infinity (floating tensors and arrays)."""
+    import numpy as np
+    import torch
+
+    items = payload.items() if isinstance(payload, dict) else enumerate(payload) if isinstance(payload, (list, tuple)) else ()
+    for k, v in items:
+        name = f"{prefix}{k}"
+        if torch.is_tensor(v) and v.is_floating_point() and v.numel() and not bool(torch.isfinite(v).all()):
+            return name
+        if isinstance(v, np.ndarray) and v.dtype.kind == "f" and not np.isfinite(v).all():
+            return name
+        if isinstance(v, (dict, list, tuple)) and (bad := _non_finite(v, f"{name}.")):
+            return bad
+    return None
+
+
+def save_tagged(path, payload: dict) -> Path:
+    """Write a tagged payload (``"format"`` set by the caller) with its checksum
+    (:func:`payload_digest`), atomically; :func:`load_tagged` checks both."""
+    import io
+
+    import torch
+
+    buf = io.BytesIO()
+    torch.save({**payload, SEAL_KEY: payload_digest(payload)}, buf)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
 def load_tagged(path, tag: str, error: type[Exception], what: str) -> dict:
-    """``torch.load`` (tensors and plain containers only) of a dict whose ``"format"`` is
-    ``tag``; raises ``error`` naming the path and ``what`` was expected if the file is missing,
-    empty, unreadable or of another format."""
+    """``torch.load`` (tensors and plain containers only: nothing in the file is executed) of a
+    dict whose ``"format"`` is ``tag``, sealed by :func:`save_tagged`; raises ``error`` naming
+    the path and ``what`` was expected if the file is missing, empty, unreadable, of another
+    format, without its checksum or not matching it (a flipped bit), or holds a NaN or an
+    infinity. The loaders check the shapes their layout declares."""
+    payload = _load_tagged_unchecked(path, tag, error, what)
+    if SEAL_KEY not in payload:
+        raise error(f"{what} file {path} carries no checksum (written before files were sealed): "
+                    f"python -m billiards.files seal {path} checks its contents and seals it")
+    if payload[SEAL_KEY] != payload_digest(payload):
+        raise error(f"{what} file {path} is damaged: its contents do not match its sha256 checksum")
+    if (bad := _non_finite(payload)) is not None:
+        raise error(f"{what} file {path} holds non-finite values (NaN or inf) in {bad}")
+    return payload
+
+
+def _load_tagged_unchecked(path, tag: str, error: type[Exception], what: str) -> dict:
     import torch
 
     path = Path(path)
@@ -130,3 +213,43 @@ def load_tagged(path, tag: str, error: type[Exception], what: str) -> dict:
     if not isinstance(payload, dict) or payload.get("format") != tag:
         raise error(f"{path} is not a {what} file (expected format tag {tag!r})")
     return payload
+
+
+def seal(path) -> str:
+    """Add the checksum to a tagged file written before files were sealed, after checking that
+    it loads as tensors and plain values and holds only finite numbers; returns the digest."""
+    import torch
+
+    class SealError(ValueError):
+        pass
+
+    payload = torch.load(Path(path), map_location="cpu", weights_only=True)
+    if not isinstance(payload, dict) or not isinstance(payload.get("format"), str):
+        raise SealError(f"{path} is not a tagged file (no format entry)")
+    if (bad := _non_finite(payload)) is not None:
+        raise SealError(f"{path} holds non-finite values (NaN or inf) in {bad}: not sealed")
+    payload.pop(SEAL_KEY, None)
+    save_tagged(path, payload)
+    return payload_digest(payload)
+
+
+def main(argv=None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m billiards.files", description="Seal tagged files (policies, rankers, "
+                                 "reward models) written before checksums: check their contents, add the checksum.")
+    sub = ap.add_subparsers(dest="command", required=True)
+    sp = sub.add_parser("seal", help="seal each file in place")
+    sp.add_argument("paths", nargs="+", type=Path)
+    args = ap.parse_args(argv)
+    for p in args.paths:
+        try:
+            print(f"{p}: sealed, sha256 {seal(p)[:16]}...")
+        except (OSError, ValueError, RuntimeError) as err:
+            print(f"Error: {p}: {err}")
+            return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

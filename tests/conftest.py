@@ -32,8 +32,9 @@ def international_policy(tmp_path) -> Path:
     if it had been trained on the international table: a policy from another table."""
     import torch
 
+    from billiards.files import SEAL_KEY, save_tagged
+
     state = torch.load(SHIPPED_BASE, map_location="cpu", weights_only=True)
+    state.pop(SEAL_KEY)
     state["config"]["physics"] = {"preset": "international"}
-    path = tmp_path / "made_on_international.pt"
-    torch.save(state, path)
-    return path
+    return save_tagged(tmp_path / "made_on_international.pt", state)

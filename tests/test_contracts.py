@@ -109,3 +109,106 @@ def test_trajectory_needs_a_positive_time_step(dt):
     result = simulate_shot(canonical_rack(), SHOT)
     with pytest.raises(ValueError, match="finite time step dt > 0"):
         trajectory(result, dt=dt)
+
+
+# ----------------------------------------------------------------------------- sealed files
+
+SHIPPED = {
+    "policy": "results/policies/base/seed0.pt",
+    "ranker": "results/rankers/fastfiz/ranker.pt",
+    "reward model": "results/rm/model.pt",
+}
+
+
+def _loader(kind):
+    from billiards.rl.checkpoint import CheckpointError
+    from billiards.rl.policy import load_policy
+    from billiards.rm.model import RewardModelError, load_model
+    from billiards.search.ranker import RankerFileError, ShotRanker
+
+    return {"policy": (load_policy, CheckpointError), "ranker": (ShotRanker.load, RankerFileError),
+            "reward model": (load_model, RewardModelError)}[kind]
+
+
+def _largest_tensor(payload):
+    tensors = []
+
+    def walk(x):
+        if torch.is_tensor(x):
+            tensors.append(x)
+        elif isinstance(x, dict):
+            for v in x.values():
+                walk(v)
+        elif isinstance(x, (list, tuple)):
+            for v in x:
+                walk(v)
+    walk(payload)
+    return max(tensors, key=lambda t: t.numel())
+
+
+@pytest.mark.parametrize("kind", sorted(SHIPPED))
+def test_every_shipped_model_file_is_sealed_and_a_changed_weight_is_refused(tmp_path, kind):
+    """A shipped file loads; the same payload with one weight changed by one ulp (saved without
+    a new checksum) is refused as damaged; a flipped bit in the file's bytes is refused (by the
+    checksum or as a corrupt file); NaN weights under a valid checksum are refused."""
+    from billiards.files import ROOT, SEAL_KEY, save_tagged
+
+    load, error = _loader(kind)
+    src = ROOT / SHIPPED[kind]
+    load(src)
+    payload = torch.load(src, map_location="cpu", weights_only=True)
+    assert len(payload[SEAL_KEY]) == 64
+    weight = _largest_tensor(payload)
+    flat = weight.view(-1)
+    flat[7] = torch.nextafter(flat[7], torch.tensor(float("inf"), dtype=flat.dtype))
+    torch.save(payload, tmp_path / "ulp.pt")
+    with pytest.raises(error, match="damaged: its contents do not match its sha256 checksum"):
+        load(tmp_path / "ulp.pt")
+
+    data = bytearray(src.read_bytes())
+    original = _largest_tensor(torch.load(src, map_location="cpu", weights_only=True))
+    at = bytes(data).find(original.view(-1)[:16].numpy().tobytes())
+    assert at > 0
+    data[at + 5] ^= 0x10
+    (tmp_path / "bit.pt").write_bytes(bytes(data))
+    with pytest.raises(error):
+        load(tmp_path / "bit.pt")
+
+    flat.fill_(float("nan"))
+    payload.pop(SEAL_KEY)
+    save_tagged(tmp_path / "nan.pt", payload)
+    with pytest.raises(error, match="non-finite values"):
+        load(tmp_path / "nan.pt")
+
+
+def test_a_file_written_before_seals_is_refused_until_sealed(tmp_path):
+    from billiards.files import ROOT, SEAL_KEY, main
+    from billiards.search.ranker import RankerFileError, ShotRanker
+
+    payload = torch.load(ROOT / SHIPPED["ranker"], map_location="cpu", weights_only=True)
+    payload.pop(SEAL_KEY)
+    torch.save(payload, tmp_path / "old.pt")
+    with pytest.raises(RankerFileError, match="carries no checksum.*python -m billiards.files seal"):
+        ShotRanker.load(tmp_path / "old.pt")
+    assert main(["seal", str(tmp_path / "old.pt")]) == 0
+    assert ShotRanker.load(tmp_path / "old.pt").weights[0].shape == ShotRanker.load(ROOT / SHIPPED["ranker"]).weights[0].shape
+
+
+@pytest.mark.parametrize("app,kind,overrides", [
+    ("search.py", "ranker", ["noise=fastfiz", "proposer=ranked", "proposer.ranker={f}"]),
+    ("search.py", "policy", ["proposer=policy", "proposer.checkpoints=[{f}]"]),
+    ("train.py", "reward model", ["shaping=rm", "shaping.rm_model={f}"]),
+])
+def test_a_damaged_file_named_by_config_is_refused_before_anything_is_written(tmp_path, app, kind, overrides):
+    import subprocess
+    import sys
+
+    from billiards.files import ROOT
+
+    data = bytearray((ROOT / SHIPPED[kind]).read_bytes())
+    damaged = tmp_path / "damaged.pt"
+    damaged.write_bytes(bytes(data[: len(data) // 2]))  # truncated
+    proc = subprocess.run([sys.executable, str(ROOT / app), *(o.format(f=damaged) for o in overrides)], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0 and "damaged.pt" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.pt"]

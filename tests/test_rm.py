@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 import torch
 
+from billiards.files import SEAL_KEY, save_tagged
+
 from billiards.physics import DEFAULT_PARAMS, PRESETS, canonical_rack, simulate_batch
 from billiards.rm import (
     N_FEATURES,
@@ -133,7 +135,7 @@ def test_load_model_rejects_bad_files(tmp_path):
             (tmp_path / name).write_bytes(content)
     torch.save({"something": 1}, tmp_path / "other.pt")
     payload = torch.load(good, weights_only=True)
-    torch.save({**payload, "hidden": [16]}, tmp_path / "mismatch.pt")
+    save_tagged(tmp_path / "mismatch.pt", {**{k: v for k, v in payload.items() if k != SEAL_KEY}, "hidden": [16]})
     for name in [*cases, "other.pt", "mismatch.pt"]:
         with pytest.raises(RewardModelError, match=name):
             load_model(tmp_path / name)

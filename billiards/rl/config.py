@@ -320,6 +320,13 @@ def _errors(cfg: DictConfig) -> list[str]:
         need(path.is_file() and path.stat().st_size > 0,
              f"shaping.rm_model={cfg.shaping.rm_model!r}: no reward model there; train one with "
              f"`python -m billiards.rm generate` and `python -m billiards.rm train` (see the README)")
+        if path.is_file() and path.stat().st_size > 0:  # loaded and checked now, before any directory is written
+            from billiards.rm.model import RewardModelError, load_model
+
+            try:
+                load_model(path)
+            except RewardModelError as err:
+                need(False, f"shaping.rm_model={cfg.shaping.rm_model!r}: {err}")
     errs.extend(_curriculum_errors(cfg))
     errs.extend(_logger_errors(cfg))
 

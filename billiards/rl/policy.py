@@ -16,10 +16,9 @@ import argparse
 import json
 from pathlib import Path
 
-import torch
 from omegaconf import OmegaConf
 
-from billiards.files import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE, atomic_open
+from billiards.files import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE, display_path, save_tagged
 from billiards.physics import PRESETS, PhysicsParams
 from billiards.physics.config import LEGACY_PHYSICS, params_from_config
 
@@ -85,12 +84,9 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
         "actor": {k: v.clone() for k, v in agent.eval_actor.state_dict().items()},
         "eval": read(EVAL_FILE),
         "summary": read(SUMMARY_FILE),
-        "source": str(run_dir),
+        "source": display_path(run_dir),
     }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_open(out, "wb") as f:
-        torch.save(payload, f)
-    return out
+    return save_tagged(out, payload)
 
 
 def policy_physics(cfg) -> PhysicsParams:

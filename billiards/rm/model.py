@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from billiards.files import atomic_open
+from billiards.files import save_tagged
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import physics_record, recorded_physics
 
@@ -130,9 +130,7 @@ def save_model(path, model: RewardModel, meta: dict | None = None) -> Path:
         # the table its inputs are scaled to (metadata given by the caller may restate it)
         "meta": json.loads(json.dumps({**physics_record(model.params), **(meta or {})}, default=_plain)),
     }
-    with atomic_open(path, "wb") as f:
-        torch.save(payload, f)
-    return path
+    return save_tagged(path, payload)
 
 
 def load_model(path) -> RewardModel:

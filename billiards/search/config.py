@@ -278,6 +278,27 @@ TRAIN_COMMAND = ("python train.py table=table5 paper_steps=1000000 budget=paper 
                  "python -m billiards.rl.policy export <the three run dirs> --out {out}")
 
 
+def _policy_file_errors(proposer) -> list[str]:
+    """Each of a policy proposer's files loaded and checked (format, checksum, finite weights) now,
+    before any directory is written: exported policy files by their seal, run dirs and checkpoint
+    files by the checkpoint's own checksum."""
+    from billiards.files import CHECKPOINT_FILE
+    from billiards.rl.checkpoint import CheckpointError, load_checkpoint
+    from billiards.rl.policy import _load_policy_file
+
+    errs = []
+    for given, p in zip(proposer.checkpoints, proposer.paths()):
+        p = Path(p)
+        try:
+            if p.is_file() and p.name != CHECKPOINT_FILE:
+                _load_policy_file(p)
+            else:
+                load_checkpoint(p.parent if p.name == CHECKPOINT_FILE else p)
+        except CheckpointError as err:
+            errs.append(f"proposer {proposer.name!r}: {given}: {err}")
+    return errs
+
+
 def shipped_proposer(name: str) -> PolicyProposerConfig:
     """``proposer=<name>``: the shipped ensemble ``results/policies/<name>/``."""
     out = f"results/policies/{name}"
@@ -488,12 +509,21 @@ def errors(cfg) -> list[str]:
         if missing:
             how = f" (trained with: {proposer.command})" if proposer.command else ""
             errs.append(f"proposer {proposer.name!r}: no checkpoint at {', '.join(missing)}{how}")
+        else:
+            errs.extend(_policy_file_errors(proposer))
     if isinstance(proposer, RankedProposerConfig):
         if proposer.pool < 1:
             errs.append(f"proposer.pool must be >= 1, got {proposer.pool}")
         if not Path(proposer.path()).is_file():
             how = f" (trained with: {proposer.command})" if proposer.command else ""
             errs.append(f"proposer {proposer.name!r}: no ranker file at {proposer.ranker}{how}")
+        else:  # loaded and checked now, before any directory is written
+            from .ranker import RankerFileError, ShotRanker
+
+            try:
+                ShotRanker.load(proposer.path())
+            except RankerFileError as err:
+                errs.append(f"proposer {proposer.name!r}: {err}")
     if protocol is not None:
         for key in (f.name for f in dataclasses.fields(protocol) if f.name != "name"):
             if getattr(protocol, key) < 1:

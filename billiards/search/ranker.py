@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from billiards import numerics
-from billiards.files import atomic_write_bytes, load_tagged, repo_path
+from billiards.files import load_tagged, repo_path, save_tagged
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, random_racks, simulate_batch
 from billiards.physics.core import RED1, RED2, WHITE, YELLOW
 from billiards.physics.noise import NOISE_PRESETS, NoiseModel
@@ -146,15 +146,12 @@ class ShotRanker:
         return NoiseModel(**self.meta["noise"])
 
     def save(self, path) -> Path:
-        import io
 
         import torch
 
         t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
-        buf = io.BytesIO()
-        torch.save({"format": FORMAT, "weights": [t(w) for w in self.weights], "biases": [t(b) for b in self.biases],
-                    "mean": t(self.mean), "std": t(self.std), "meta": json.dumps(self.meta)}, buf)
-        return atomic_write_bytes(path, buf.getvalue())
+        return save_tagged(path, {"format": FORMAT, "weights": [t(w) for w in self.weights], "biases": [t(b) for b in self.biases],
+                                  "mean": t(self.mean), "std": t(self.std), "meta": json.dumps(self.meta)})
 
     @classmethod
     def load(cls, path) -> "ShotRanker":
