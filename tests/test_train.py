@@ -820,3 +820,31 @@ def test_a_run_on_a_device_collects_with_the_agents_own_policy(tmp_path):
         wrapped = OnDevice(run.agent.eval_policy, run.device)(obs.clone())
         direct = run.agent.eval_policy(obs.clone())
     assert wrapped["action"].device == torch.device("cpu") and torch.equal(wrapped["action"], direct["action"])
+
+
+def test_a_checkpoint_with_a_valid_checksum_but_impossible_contents_is_refused(tmp_path):
+    """A checksum proves a file is what was written, not that it makes sense: impossible counters
+    and a malformed random-generator state are refused on resume with the checkpoint's error (no
+    traceback), and the run's files are left as they were."""
+    from billiards.rl.checkpoint import load_checkpoint, save_checkpoint
+
+    run_dir = tmp_path / "run"
+    train_killed_after_first_checkpoint(tmp_path, "budget=smoke", f"hydra.run.dir={run_dir}")
+    good = load_checkpoint(run_dir)
+    metrics = (run_dir / "metrics.csv").read_bytes()
+    cases = {
+        "negative frames": (lambda c: c["counters"].update(frames=-5), "frames=-5"),
+        "enormous frames": (lambda c: c["counters"].update(frames=10**15), "frames=1000000000000000"),
+        "NaN next checkpoint": (lambda c: c["counters"].update(next_ckpt=float("nan")), "next_ckpt=nan"),
+        "negative CPU time": (lambda c: c["counters"].update(cpu_seconds=-1.0), "cpu_seconds=-1.0"),
+        "malformed rng": (lambda c: c["rng"].update(env={"bit_generator": "PCG64", "state": "garbage"}),
+                          "random-generator state is malformed"),
+    }
+    for name, (change, message) in cases.items():
+        ckpt = {k: v for k, v in good.items()}
+        ckpt["counters"], ckpt["rng"] = dict(good["counters"]), dict(good["rng"])
+        change(ckpt)
+        save_checkpoint(run_dir, ckpt)
+        proc = train(tmp_path, f"resume={run_dir}", "progress=false")
+        assert proc.returncode != 0 and message in proc.stderr and "Traceback" not in proc.stderr, (name, proc.stderr[-1500:])
+        assert (run_dir / "metrics.csv").read_bytes() == metrics, name

@@ -209,7 +209,7 @@ class RunState:
             agent.load_state_dict_extra(ckpt["agent_extra"])
         except (RuntimeError, KeyError, ValueError) as err:
             raise CheckpointError(f"cannot resume: the checkpoint's networks do not fit this config ({err})") from None
-        c = ckpt["counters"]
+        c = check_counters(ckpt)
         state = cls(frames=int(c["frames"]), owed=float(c["owed"]), train_seconds=float(c["train_seconds"]),
                     cpu_seconds=float(c["cpu_seconds"]), next_log=c["next_log"], next_eval=c["next_eval"],
                     next_ckpt=c["next_ckpt"], eval_history=list(ckpt.get("eval_history") or []),
@@ -222,8 +222,45 @@ class RunState:
             rb.writer.load_state_dict(buffer["writer"])
         elif rb is not None:
             log.warning("resume: the checkpoint has no replay buffer (checkpoint.save_buffer=false); refilling from scratch")
-        set_rng_state(ckpt["rng"], env_rng, device)
+        try:
+            set_rng_state(ckpt["rng"], env_rng, device)
+        except (TypeError, ValueError, KeyError, IndexError, RuntimeError, OverflowError) as err:
+            raise CheckpointError(f"cannot resume: the checkpoint's random-generator state is malformed "
+                                  f"({type(err).__name__}: {err}); it is corrupt, start a new run") from None
         return state
+
+
+def check_counters(ckpt: dict[str, Any]) -> dict[str, Any]:
+    """The checkpoint's counters, or a CheckpointError if one is impossible: frames an integer in
+    [0, budget.total_steps + 10^6] (the run's own budget, and a batch's overshoot), times and owed
+    updates finite and >= 0, the next log / evaluation / checkpoint steps numbers >= 0 (inf: never),
+    the histories lists. A checksum proves a file is what was written, not that it made sense."""
+    c = ckpt.get("counters")
+    if not isinstance(c, dict):
+        raise CheckpointError("cannot resume: the checkpoint's counters are not a mapping; it is corrupt, start a new run")
+    try:
+        total = int(ckpt["config"]["budget"]["total_steps"])
+    except (KeyError, TypeError, ValueError):
+        total = 0
+    bad = []
+    frames = c.get("frames")
+    if isinstance(frames, bool) or not isinstance(frames, int) or not 0 <= frames <= total + 10**6:
+        bad.append(f"frames={frames!r} (an integer in [0, {total + 10**6:,}])")
+    for key in ("owed", "train_seconds", "cpu_seconds"):
+        v = c.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+            bad.append(f"{key}={v!r} (a finite number >= 0)")
+    for key in ("next_log", "next_eval", "next_ckpt"):
+        v = c.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or v < 0:
+            bad.append(f"{key}={v!r} (a step >= 0 or inf)")
+    for key in ("eval_history", "stage_log"):
+        if not isinstance(ckpt.get(key) or [], list):
+            bad.append(f"{key} (a list)")
+    if bad:
+        raise CheckpointError(f"cannot resume: the checkpoint holds impossible counters: {', '.join(bad)}; "
+                              f"it is corrupt, start a new run")
+    return c
 
 
 # ----------------------------------------------------------------------------- the file
