@@ -10,7 +10,14 @@ Shots come in families, each run with ``simulate_batch`` (the public, validated 
   diagonal contacts, gaps and overlaps within ``POSITION_TOL``);
 * ``rails``: balls exactly on, or within ``POSITION_TOL`` of, the cushions' nose lines and
   corners, often touching each other along a rail;
-* ``chained``: innings: every shot starts from the previous shot's rest positions.
+* ``chained``: innings: every shot starts from the previous shot's rest positions;
+* ``frozen``: every ball touching another (clusters of four frozen together, chains, pairs on
+  a rail), each gap drawn from 0 to 1e-6 m (0, log-uniform 1e-15 ... 1e-6, 1e-6);
+* ``corners``: balls jammed into the corners (on both nose lines, a gap of 0 to 1e-6 m), the
+  others frozen to them;
+
+and the last two play adversarial actions: power exactly 0 or 1 (or uniform), tip offsets on
+the unit circle (or uniform), aims at a ball's centre, grazing it, or along an axis.
 
 Every family mixes natural actions with extreme ones: power 1, tip offsets on the unit
 circle, aims along the axes (straight into or along a rail), at a ball's centre, and grazes
@@ -47,7 +54,9 @@ from billiards.physics import (  # noqa: E402
     DEFAULT_PRESET, POSITION_TOL, PRESETS, PhysicsParams, check_positions, random_racks, simulate_batch,
 )
 
-FAMILIES = ("natural", "contacts", "rails", "chained")
+FAMILIES = ("natural", "contacts", "rails", "chained")  # (benchmarks/kernel_fingerprint.py plays these too)
+ADVERSARIAL = ("frozen", "corners")
+ALL_FAMILIES = FAMILIES + ADVERSARIAL
 KINDS = ("off_table", "overlap", "non_finite", "truncated", "refused_next")
 
 
@@ -130,7 +139,63 @@ def _build(rng: np.random.Generator, n: int, params: PhysicsParams, p_rail: floa
     return out
 
 
+def _gap(rng: np.random.Generator, shape) -> np.ndarray:
+    """Gaps from 0 to 1e-6 m: exactly 0, exactly 1e-6, or log-uniform in between."""
+    choice = rng.integers(0, 4, shape)
+    return np.where(choice == 0, 0.0, np.where(choice == 1, 1e-6, 10.0 ** rng.uniform(-15, -6, shape)))
+
+
+def _frozen(rng: np.random.Generator, n: int, params: PhysicsParams, corner_share: float) -> np.ndarray:
+    """n valid racks of balls frozen together: ball 0 in a corner (``corner_share`` of the balls
+    after it too, each in a corner of its own) or anywhere, every other ball touching an
+    earlier one at a gap of 0 to 1e-6 m (axis-aligned, diagonal or any direction)."""
+    R, W, L = params.ball_radius, params.table_width, params.table_length
+    out = np.empty((n, 4, 2))
+    todo = np.arange(n)
+    while todo.size:
+        m = todo.size
+        rack = np.empty((m, 4, 2))
+        cx, cy = np.where(rng.random(m) < 0.5, R, W - R), np.where(rng.random(m) < 0.5, R, L - R)
+        inward = lambda c, lo, hi: np.where(c == lo, c + _gap(rng, m), c - _gap(rng, m))
+        anywhere = np.column_stack([rng.uniform(R, W - R, m), rng.uniform(R, L - R, m)])
+        first_corner = rng.random(m) < max(corner_share, 0.5)
+        rack[:, 0] = np.where(first_corner[:, None], np.column_stack([inward(cx, R, W - R), inward(cy, R, L - R)]), anywhere)
+        for k in range(1, 4):
+            base = rack[np.arange(m), rng.integers(0, k, m)]
+            ang = _angles(rng, m)
+            dist = 2 * R + _gap(rng, m)
+            step = rng.integers(0, 4, m)
+            axis = rng.random(m) < 0.4
+            dx = np.where(axis, np.array([1.0, -1.0, 0.0, 0.0])[step] * dist, dist * np.cos(ang))
+            dy = np.where(axis, np.array([0.0, 0.0, 1.0, -1.0])[step] * dist, dist * np.sin(ang))
+            rack[:, k] = base + np.column_stack([dx, dy])
+            corner = rng.random(m) < corner_share
+            kx, ky = np.where(rng.random(m) < 0.5, R, W - R), np.where(rng.random(m) < 0.5, R, L - R)
+            rack[corner, k] = np.column_stack([inward(kx, R, W - R), inward(ky, R, L - R)])[corner]
+        ok = _valid(rack, params)
+        out[todo[ok]] = rack[ok]
+        todo = todo[~ok]
+    return out
+
+
+def adversarial_actions(rng: np.random.Generator, racks: np.ndarray, params: PhysicsParams) -> np.ndarray:
+    """:func:`make_actions`' aims, with power exactly 0 or 1 (or uniform) and tip offsets on the
+    unit circle (or uniform)."""
+    acts = make_actions(rng, racks, params)
+    n = acts.shape[0]
+    u = rng.random(n)
+    acts[:, 1] = np.where(u < 0.3, 0.0, np.where(u < 0.6, 1.0, acts[:, 1]))
+    ang = rng.uniform(0, 2 * np.pi, n)
+    rim = rng.random(n) < 0.6
+    acts[rim, 2], acts[rim, 3] = np.clip(np.cos(ang[rim]), -1, 1), np.clip(np.sin(ang[rim]), -1, 1)
+    return acts
+
+
 def make_racks(rng: np.random.Generator, family: str, n: int, params: PhysicsParams) -> np.ndarray:
+    if family == "frozen":
+        return _frozen(rng, n, params, corner_share=0.1)
+    if family == "corners":
+        return _frozen(rng, n, params, corner_share=0.6)
     if family == "natural":
         return random_racks(rng, n, params)
     if family == "contacts":
@@ -207,7 +272,7 @@ class Tally:
 
     def __init__(self, params: PhysicsParams):
         self.params = params
-        self.counts = {f: dict(shots=0, timed_out=0, **{k: 0 for k in KINDS}) for f in FAMILIES}
+        self.counts = {f: dict(shots=0, timed_out=0, **{k: 0 for k in KINDS}) for f in ALL_FAMILIES}
         self.worst_off, self.worst_overlap = -np.inf, -np.inf
         self.examples: list[dict] = []
 
@@ -236,9 +301,9 @@ def run(shots: int, seed: int, params: PhysicsParams, batch: int, chain: int) ->
     """Fuzz `shots` shots split evenly over the families; return the tally and the seconds."""
     rng = np.random.default_rng(seed)
     tally = Tally(params)
-    per = np.diff(np.linspace(0, shots, len(FAMILIES) + 1).astype(int))
+    per = np.diff(np.linspace(0, shots, len(ALL_FAMILIES) + 1).astype(int))
     t0 = time.perf_counter()
-    for family, total in zip(FAMILIES, per):
+    for family, total in zip(ALL_FAMILIES, per):
         done = 0
         while done < total:
             if family == "chained":
@@ -257,7 +322,8 @@ def run(shots: int, seed: int, params: PhysicsParams, batch: int, chain: int) ->
             else:
                 m = min(batch, total - done)
                 racks = make_racks(rng, family, m, params)
-                acts = make_actions(rng, racks, params) if family != "natural" else uniform_actions(rng, m)
+                acts = (uniform_actions(rng, m) if family == "natural" else adversarial_actions(rng, racks, params)
+                        if family in ADVERSARIAL else make_actions(rng, racks, params))
                 check_positions(racks, params)  # the generators only build accepted states
                 tally.add(family, racks, acts, simulate_batch(racks, acts, params))
                 done += m
