@@ -848,3 +848,34 @@ def test_a_checkpoint_with_a_valid_checksum_but_impossible_contents_is_refused(t
         proc = train(tmp_path, f"resume={run_dir}", "progress=false")
         assert proc.returncode != 0 and message in proc.stderr and "Traceback" not in proc.stderr, (name, proc.stderr[-1500:])
         assert (run_dir / "metrics.csv").read_bytes() == metrics, name
+
+
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_a_signal_mid_run_checkpoints_that_step_and_exits_cleanly(tmp_path, signame):
+    """Ctrl-C (SIGINT) or a scheduler's SIGTERM while training: the run finishes its batch, writes
+    a checkpoint at that step, says how to continue and exits with 128 + the signal, no
+    traceback; resume= then finishes it."""
+    import signal
+    import time
+
+    from billiards.rl.checkpoint import load_checkpoint
+
+    run_dir = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, TRAIN, "budget=smoke", "budget.total_steps=8192", "budget.log_every=256",
+                             "budget.checkpoint_every=4096", "progress=false", f"hydra.run.dir={run_dir}"],
+                            cwd=tmp_path, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 180
+    while time.time() < deadline and not ((run_dir / "metrics.csv").is_file()
+                                          and len((run_dir / "metrics.csv").read_text().splitlines()) > 3):
+        time.sleep(0.2)
+    proc.send_signal(getattr(signal, signame))
+    out, err = proc.communicate(timeout=180)
+    said = out + err
+    assert proc.returncode == 128 + getattr(signal, signame), said[-3000:]
+    assert f"resume={run_dir}" in said and "Traceback" not in said, said[-3000:]
+    frames = load_checkpoint(run_dir)["counters"]["frames"]
+    assert 0 < frames < 4096 and f"stopped by {signame} at {frames} frames: checkpoint written" in said
+    assert not (run_dir / "eval.json").exists()
+    resumed = ok(train(tmp_path, f"resume={run_dir}", timeout=600))
+    assert f"at {frames} frames" in resumed.stdout + resumed.stderr
+    assert json.loads((run_dir / "summary.json").read_text())["frames"] >= 8192

@@ -365,6 +365,61 @@ def make_run(cfg: DictConfig, run_dir: Path, ckpt: dict | None = None) -> Run:
 # ----------------------------------------------------------------------------- the cadence
 
 
+class StopRequests:
+    """SIGINT (Ctrl-C), SIGTERM and SIGUSR1 (a scheduler's preemption notice: SLURM, submitit)
+    while a run trains: the handler only records the signal; the loop checks after each batch,
+    writes a checkpoint at that step and exits with 128 + the signal's number, so nothing finished
+    is lost and ``resume=<run dir>`` continues. A second Ctrl-C stops at once (KeyboardInterrupt),
+    losing at most what came after the last checkpoint. Installed only in the main thread."""
+
+    SIGNALS = ("SIGINT", "SIGTERM", "SIGUSR1")
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def _handle(self, signum, frame) -> None:
+        import signal
+
+        if self.signum is not None and signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        self.signum = signum
+        log.warning("%s received: stopping after this batch with a checkpoint (Ctrl-C again stops at once)",
+                    signal.Signals(signum).name)
+
+    def __enter__(self) -> "StopRequests":
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            for name in self.SIGNALS:
+                if hasattr(signal, name):
+                    num = getattr(signal, name)
+                    self._previous[num] = signal.signal(num, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        import signal
+
+        for num, handler in self._previous.items():
+            signal.signal(num, handler)
+        self._previous.clear()
+
+    def stop_if_requested(self, run: "Run") -> None:
+        """After a batch: if a signal came, checkpoint at this step and exit 128 + its number."""
+        if self.signum is None:
+            return
+        import signal
+
+        if run.window.frames:
+            run.log_window()
+        run.checkpoint()
+        name = signal.Signals(self.signum).name
+        log.warning("stopped by %s at %d frames: checkpoint written; continue with: python train.py resume=%s",
+                    name, run.state.frames, display_path(run.run_dir))
+        raise SystemExit(128 + self.signum)
+
+
 def _next_multiple(frames: int, every: int) -> int:
     return (frames // every + 1) * every
 
@@ -473,7 +528,7 @@ def train_off_policy(run: Run) -> float:
     """SAC and TD3 to the budget; returns the final mean points per inning."""
     cfg, agent, rb, state = run.cfg, run.agent, run.rb, run.state
     a, b = cfg.algo, cfg.budget
-    with session(run) as bar:
+    with session(run) as bar, StopRequests() as stop:
         agent.set_warmup(state.frames < b.init_random_steps)
         with collecting(run, agent.explore, a.frames_per_batch or cfg.env.num_envs) as batches:
             for data in batches:
@@ -488,6 +543,7 @@ def train_off_policy(run: Run) -> float:
                 run.update_stage()
                 bar.update(n)
                 periodic(run, bar)
+                stop.stop_if_requested(run)
                 if run.cpu_spent():
                     break
         return finish(run, bar)
@@ -497,7 +553,7 @@ def train_ppo(run: Run) -> float:
     """PPO to the budget; returns the final mean points per inning."""
     cfg, agent, state = run.cfg, run.agent, run.state
     a = cfg.algo
-    with session(run) as bar:
+    with session(run) as bar, StopRequests() as stop:
         with collecting(run, agent.explore, a.frames_per_batch) as batches:
             for data in batches:
                 n = data.numel()
@@ -510,6 +566,7 @@ def train_ppo(run: Run) -> float:
                         run.window.metrics = agent.update(flat[perm[i:i + a.minibatch_size]])
                 bar.update(n)
                 periodic(run, bar)
+                stop.stop_if_requested(run)
                 if run.cpu_spent():
                     break
         return finish(run, bar)
