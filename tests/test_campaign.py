@@ -657,3 +657,18 @@ def test_report_draws_each_tables_learning_curves_from_its_finished_runs(tmp_pat
     md = (out / "reproduction.md").read_text()
     assert "](img/reproduction_table1.png)" in md
     assert md.index("](img/reproduction_extra_table1.png)") > md.index("## Extra: the authors' SAC settings (`algo=sac_paper`) on Table 1")
+
+
+@pytest.mark.parametrize("ledger", ['["not", "a", "ledger"]', '{"campaign": "mini", "runs": []}',
+                                    '{"campaign": "mini", "runs": {"t/x/seed0": {"starts": 3}}}',
+                                    '{"campaign": "mini", "runs": {"t/x/seed0": "done"}}'])
+def test_a_ledger_of_the_wrong_shape_is_refused_clearly(tmp_path, ledger):
+    spec = tmp_path / "mini.yaml"
+    spec.write_text(yaml.safe_dump({"name": "mini", "runs": [{"table": "t", "variant": "x", "seed": 0, "steps": 10,
+                                                          "args": ["budget=smoke"]}]}))
+    root = tmp_path / "state"
+    root.mkdir()
+    (root / LEDGER).write_text(ledger)
+    for extra in (["status"], ["run", "--dry-run"]):
+        rc, out = cli(extra[0], "--spec", str(spec), "--root", str(root), *extra[1:])
+        assert rc == 2 and "is not a campaign ledger" in out and "Traceback" not in out, out

@@ -405,7 +405,7 @@ def test_racks_are_valid_and_seeded():
         ([0.0, 1.5, 0.0, 0.0], r"power p = 1.5 is outside \[0, 1\]"),
         ([0.0, 0.5, -1.2, 0.0], r"tip offset a = -1.2 is outside \[-1, 1\]"),
         ([0.0, 0.5], r"shape \(4,\)"),
-        ("fast", "numeric"),
+        ("fast", "real numbers"),
     ],
 )
 def test_bad_actions_raise(action, match):

@@ -129,3 +129,21 @@ def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, overrides, m
     assert not (tmp_path / "pwned").exists()
     assert "Traceback" not in proc.stderr
     assert list(tmp_path.iterdir()) == [], f"wrote {list(tmp_path.rglob('*'))}"
+
+
+def test_a_malformed_chain_ledger_is_refused_clearly_on_resume(tmp_path):
+    """A chains.jsonl line that is no chain record (other than a torn last line) stops a resume
+    with the file and the line named, no traceback; a torn last line is still ignored."""
+    from billiards.search.protocols import read_chains
+
+    stopped = tmp_path / "run"
+    search_run.run(small_cfg(), stopped)
+    ledger = stopped / "chains.jsonl"
+    lines = ledger.read_text().splitlines()
+    ledger.write_text("\n".join(lines[:2]) + '\n{"seed": 9, "len')  # torn: ignored
+    assert sorted(read_chains(ledger)) == [0, 1]
+    ledger.write_text('{"seed": "zero", "length": 3}\n' + "\n".join(lines[1:]) + "\n")
+    cfg = small_cfg()
+    cfg.resume = str(stopped)
+    with pytest.raises(SystemExit, match=r"cannot resume: .*chains.jsonl: line 1 is not a P3 chain record"):
+        search_run.run(cfg, stopped)

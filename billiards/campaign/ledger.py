@@ -37,6 +37,22 @@ def utc_now() -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
 
 
+def _ledger_problem(data) -> str | None:
+    """What is wrong with a ledger's shape (None when it is a ledger)."""
+    if not isinstance(data, dict) or not isinstance(data.get("runs"), dict):
+        return "expected a mapping with 'campaign' and a mapping 'runs'"
+    types = {"args": (list, type(None)), "starts": list, "commits": list, "pid": (int, type(None)), "failures": int}
+    for key, rec in data["runs"].items():
+        if not isinstance(rec, dict):
+            return f"runs[{key!r}] is a {type(rec).__name__}, not a mapping"
+        for field, kind in types.items():
+            if field in rec and not isinstance(rec[field], kind) or isinstance(rec.get(field), bool):
+                return f"runs[{key!r}].{field} is {rec[field]!r}"
+        if not all(isinstance(s, dict) for s in rec.get("starts", [])):
+            return f"runs[{key!r}].starts holds something other than mappings"
+    return None
+
+
 class Ledger:
     """``campaign.json``: a dict ``{"campaign", "runs": {key: record}}``."""
 
@@ -50,6 +66,9 @@ class Ledger:
             except ValueError as err:
                 raise SpecError(f"{self.path} is corrupt ({err}); move it aside: the run dirs hold the results, "
                                 f"only the start history would be lost") from None
+            if problem := _ledger_problem(data):
+                raise SpecError(f"{self.path} is not a campaign ledger ({problem}); move it aside: the run dirs hold "
+                                f"the results, only the start history would be lost") from None
             if data.get("campaign") != name:
                 raise SpecError(f"{self.path} belongs to campaign {data.get('campaign')!r}, not {name!r}; "
                                 f"use another --root")

@@ -140,16 +140,26 @@ CHAINS_FILE = "chains.jsonl"  # one finished P3 chain per line, written as each 
 
 
 def read_chains(path: str | Path | None) -> dict[int, dict]:
-    """The finished chains of a P3 ledger, by seed (a line cut short by a kill is ignored)."""
+    """The finished chains of a P3 ledger, by seed. The last line may be cut short by a kill and
+    is then ignored; any other line that is not a chain record (an integer seed and length >= 0)
+    is an error naming the file and the line."""
     if path is None or not Path(path).is_file():
         return {}
     done = {}
-    for line in Path(path).read_text().splitlines():
+    lines = Path(path).read_text().splitlines()
+    for n, line in enumerate(lines, 1):
         try:
             rec = json.loads(line)
-            done[int(rec["seed"])] = rec
-        except (ValueError, KeyError, TypeError):
-            continue  # the torn last line of a killed run
+            ok = isinstance(rec, dict) and all(isinstance(rec.get(k), int) and not isinstance(rec.get(k), bool)
+                                               and rec[k] >= 0 for k in ("seed", "length"))
+        except ValueError:
+            ok = False
+        if not ok:
+            if n == len(lines):
+                continue  # the torn last line of a killed run
+            raise ValueError(f"{path}: line {n} is not a P3 chain record (an integer seed and length >= 0): {line[:80]!r}; "
+                             f"move the file aside to play every chain again")
+        done[rec["seed"]] = rec
     return done
 
 

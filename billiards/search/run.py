@@ -77,7 +77,8 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     if not cfg.get("resume"):
         old = out_dir / CHAINS_FILE
         if old.exists():  # a fresh run never counts another run's chains (only resume= continues them)
-            print(f"fresh run: discarding {len(read_chains(old))} chains of an earlier run in {display_path(out_dir)} "
+            kept = sum(1 for line in old.read_text(errors="replace").splitlines() if line.strip())
+            print(f"fresh run: discarding {kept} chains of an earlier run in {display_path(out_dir)} "
                   f"(resume=<dir> continues a stopped one)", flush=True)
             old.unlink()
         atomic_write_text(out_dir / CONFIG_FILE, OmegaConf.to_yaml(cfg, resolve=True))
@@ -102,7 +103,11 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult:
     else:
         seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
         if cfg.get("resume"):
-            print(f"resume: {len(read_chains(ledger))} of {cfg.protocol.seeds} chains already finished", flush=True)
+            try:
+                finished = read_chains(ledger)
+            except ValueError as err:
+                raise SystemExit(f"Error: cannot resume: {err}") from None
+            print(f"resume: {len(finished)} of {cfg.protocol.seeds} chains already finished", flush=True)
         picture = out_dir / "longest_chain.png" if cfg.picture else None
         try:
             result = run_p3(actor, seeds, cfg.protocol.cap, params=params, progress=cfg.progress, picture=picture,
