@@ -314,6 +314,8 @@ class Runner:
             outcome = "finished"
         elif slot.draining or self.stop_now:
             outcome = "stopped"
+        elif rc in tuple(128 + s for s in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)) and entry.kind == "train":
+            outcome = "stopped"  # a signal from outside: the run checkpointed that step and exited (not a failure)
         elif slot.proc is None:
             outcome = "ended (adopted, exit status unknown)"
         else:
