@@ -137,3 +137,22 @@ def test_dense_sums_in_index_order_in_float32():
     assert shared.shape == (2, 5, 6) and np.array_equal(shared[0], numerics.dense(x[:1], w[:1], b[:1])[0])
     with pytest.raises(ValueError, match="do not chain"):
         numerics.dense(x, w[:, :36], b)
+
+
+def test_starting_a_process_on_a_loaded_machine_is_retried(monkeypatch):
+    """The suite's patient Popen (tests/conftest.py): a fork refused for a moment (EAGAIN) is
+    tried again with a back-off instead of failing the test that started it."""
+    import conftest
+
+    real, calls = conftest._popen_init, []
+
+    def flaky(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) <= 2:
+            raise BlockingIOError(11, "Resource temporarily unavailable")
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(conftest, "_popen_init", flaky)
+    monkeypatch.setattr(conftest.time, "sleep", lambda s: None)
+    out = subprocess.run([sys.executable, "-c", "print('started')"], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "started" and len(calls) == 3
