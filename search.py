@@ -5,13 +5,10 @@
     python search.py protocol=p1 protocol.n_innings=10 protocol.shots=10              # a quick look
     python search.py resume=<run dir>                  # continue a stopped P3 from its next chain
 
-How long: P3 on defaults plays 10 chains of up to 10,000 shots. A decision at 400 simulations
-on one core here costs about 2.6 ms for h2 with the geometric proposer, 3.2 ms with a trained
-ensemble, 9.6 ms for PUCT with the geometric proposer (results/bench_search_korean_medium.json),
-so a default P3 takes at most about 4.5 min (every chain reaching the cap; usually far less)
-and a PUCT P3 at most about 16 min. The run prints what it will do and where before it starts,
-and an upper bound on the time left after its first chain. Ctrl-C keeps every finished chain
-(results.json marked partial).
+How long: P3 on defaults plays 10 chains of up to 10,000 shots; what a decision costs at 400
+simulations is measured in results/bench_search_korean_medium_1m.json (docs/search.md). The run
+prints what it will do and where before it starts, and an upper bound on the time left after
+its first chain. Ctrl-C keeps every finished chain (results.json marked partial).
 
 Thin entry point: composes conf/search.yaml and calls billiards.search.run.
 """
