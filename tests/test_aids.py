@@ -59,6 +59,7 @@ def test_held_values_map_onto_the_documented_env_action():
     assert env_action[1:].tolist() == pytest.approx([0.25, -0.5, -0.5])
 
 
+@pytest.mark.slow
 def test_staged_curriculum_switches_at_the_configured_steps_and_keeps_the_weights(tmp_path):
     cfg = compose_cfg("curriculum=staged", "budget=smoke", "budget.eval_every=0", "budget.checkpoint_every=0",
                       "curriculum.switch_at=[0.25,0.5]", "progress=false", "logger=none")
@@ -141,6 +142,7 @@ def test_rm_bonus_loads_a_model_file(tmp_path):
     np.testing.assert_allclose(bonus.model.prob(racks, actions), model.prob(racks, actions))
 
 
+@pytest.mark.slow
 def test_training_with_rm_shaping_evaluates_the_true_score(tmp_path):
     torch.manual_seed(0)
     model_path = save_model(tmp_path / "rm.pt", RewardModel(hidden=(8,)))
@@ -168,6 +170,7 @@ def test_training_with_rm_shaping_evaluates_the_true_score(tmp_path):
     assert again.points == saved.points and again.mean == saved.mean
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("variant,aim,shaping,curriculum", [
     ("plain", False, "none", "none"), ("staged", False, "none", "staged"), ("rm", False, "rm", "none"),
     ("aim", True, "none", "none"), ("rm_aim", True, "rm", "none"),

@@ -140,6 +140,7 @@ LAYERS = [  # lowest first; a new top-level module or subpackage takes its place
 ]
 
 
+@pytest.mark.slow
 def test_every_import_goes_down_the_layers():
     layer = {unit: i for i, units in enumerate(LAYERS) for unit in units}
     graph = package_graph()
@@ -160,6 +161,7 @@ FORBIDDEN = [  # (importer, imported, why)
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("importer,imported,why", FORBIDDEN, ids=[f"{a}->{b}" for a, b, _ in FORBIDDEN])
 def test_forbidden_edges(importer, imported, why):
     where = package_graph()[importer].get(imported)
@@ -186,6 +188,7 @@ def test_the_walk_finds_lazy_type_checking_and_literal_imports(tmp_path, monkeyp
     assert find_cycle(package_graph()) is None
 
 
+@pytest.mark.slow
 def test_a_reward_model_loads_without_the_trainer_or_hydra(tmp_path):
     """What a process imports to load a reward model (the env's rm bonus does): no billiards.rl,
     no Hydra, no OmegaConf."""

@@ -74,6 +74,7 @@ def _compose_all(overrides_lists):
         return [compose("config", overrides=list(o)) for o in overrides_lists]
 
 
+@pytest.mark.slow
 def test_paper_training_runs_compose_and_validate():
     """Every training run's overrides compose through the real Hydra config and pass the
     trainer's validation, with the table, seed, budget, table physics and variant intended."""
@@ -266,6 +267,7 @@ def test_a_run_with_long_checkpoint_intervals_drains_one_interval_before_the_dea
     assert not late.lead_reached(watched)
 
 
+@pytest.mark.slow
 def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     spec, root = _tiny_spec(tmp_path / "tiny.yaml"), tmp_path / "state"
     common = ("--spec", str(spec), "--root", str(root), "--only", "t1,t2")
@@ -369,6 +371,7 @@ def test_tiny_campaign_drains_resumes_skips_and_counts(tmp_path):
     assert [s["outcome"] for s in rec["starts"]] == ["stopped", "finished", "finished"]
 
 
+@pytest.mark.slow
 def test_search_runs_compose_with_the_shipped_policies(tmp_path):
     """Table 6's search.py overrides compose through conf/search.yaml and validate; a policy
     proposer plays the three committed policy files of its shipped ensemble."""
@@ -409,6 +412,7 @@ def test_a_spec_file_is_data_and_may_not_name_code(tmp_path, args, message):
     assert rc == 2 and message in out and not (tmp_path / "state").exists()
 
 
+@pytest.mark.slow
 def test_a_failing_run_is_retried_then_left_alone(tmp_path):
     """A run whose command fails (here an unknown config key) is tried MAX_FAILURES times,
     each failure recorded with its exit status; then runs leave it alone until --retry-failed."""
@@ -429,6 +433,7 @@ def test_a_failing_run_is_retried_then_left_alone(tmp_path):
     assert rc == 3 and "start " not in out
 
 
+@pytest.mark.slow
 def test_a_run_left_by_a_killed_runner_is_adopted_not_started_twice(tmp_path):
     """The ledger names a live process running the entry (its runner was killed, it was not):
     status counts it as running; a new runner waits for it instead of starting a duplicate."""

@@ -39,6 +39,7 @@ def group_options(group: str) -> list[str]:
 # ----------------------------------------------------------------------------- per-option schemas
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("overrides,key,schema", [
     (["search=h2", "search.c_puct=5"], "c_puct", "H2SearchConfig"),
     (["search=puct", "search.k1=50"], "k1", "PUCTSearchConfig"),
@@ -99,6 +100,7 @@ def test_option_groups_list_only_real_options():
 SHAPING_OF = {"base": "foul_penalty", "gentle": "gentle", "near_miss": "near_miss", "both": "both"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(SHAPING_OF))
 def test_a_shipped_proposer_by_name_is_the_campaigns_table5_ensemble(name):
     import shlex
@@ -169,6 +171,7 @@ def shipped_search_results() -> list[Path]:
     return sorted((REPO / "results" / "search").rglob("*.json"))
 
 
+@pytest.mark.slow
 def test_every_shipped_search_result_config_loads(tmp_path):
     """results/search/*.json hold configs of the former union form (every group's node with
     every option's keys), some from before the physics presets: each loads as a run's saved
@@ -238,6 +241,7 @@ def test_both_apps_register_side_by_side():
     assert OmegaConf.create({"a": None, "b": "${billiards.or:${a},x}"}).b == "x"
 
 
+@pytest.mark.slow
 def test_registration_is_the_same_idiom_in_a_fresh_process():
     """A fresh process that imports only billiards.search.config can compose search.py's config
     (and only billiards.rl.config, train.py's): nothing else has to be called."""
@@ -250,6 +254,7 @@ def test_registration_is_the_same_idiom_in_a_fresh_process():
         assert proc.returncode == 0 and "SEED 0" in proc.stdout, proc.stderr[-2000:]
 
 
+@pytest.mark.slow
 def test_a_search_multirun_over_proposers_runs_and_a_bad_job_stops_it_first(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     search = [sys.executable, str(REPO / "search.py"), "-m"]

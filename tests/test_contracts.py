@@ -194,6 +194,7 @@ def test_a_file_written_before_seals_is_refused_until_sealed(tmp_path):
     assert ShotRanker.load(tmp_path / "old.pt").weights[0].shape == ShotRanker.load(ROOT / SHIPPED["ranker"]).weights[0].shape
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("app,kind,overrides", [
     ("search.py", "ranker", ["noise=fastfiz", "proposer=ranked", "proposer.ranker={f}"]),
     ("search.py", "policy", ["proposer=policy", "proposer.checkpoints=[{f}]"]),

@@ -56,6 +56,7 @@ def _search(tmp_path, *overrides: str, timeout: float = 300):
                           text=True, timeout=timeout)
 
 
+@pytest.mark.slow
 def test_search_app_device_cpu_end_to_end(tmp_path):
     """``python search.py device=cpu`` with a trained ensemble plays through the device path and
     records the device; its decisions equal the default's (``auto``, the CPU here)."""
@@ -74,6 +75,7 @@ def test_search_app_device_cpu_end_to_end(tmp_path):
         assert results["cpu"]["values"] == results["auto"]["values"]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a GPU")
 @pytest.mark.parametrize("device", ["cuda", "cuda:1", "gpu"])
 def test_search_app_refuses_a_device_it_cannot_use_and_writes_nothing(tmp_path, device):

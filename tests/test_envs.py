@@ -214,6 +214,7 @@ def gym_and_torchrl(config: dict, normalized: bool, seed: int):
             make_env(1, seed=seed, normalize_actions=normalized, **trl_config))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("normalized", [True, False], ids=["normalized", "raw"])
 @pytest.mark.parametrize("name", list(CROSS_CONFIGS))
 def test_gym_and_torchrl_envs_play_the_same_innings(name, normalized):

@@ -107,6 +107,7 @@ def search_space() -> dict:
     return OmegaConf.to_container(preset.params)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
 def test_optuna_search_space_is_valid_for_every_algorithm(algo):
     """Every bound of every parameter of the preset's search space is a valid override of the
@@ -179,6 +180,7 @@ def test_optuna_sweep_with_an_invalid_fixed_setting_fails_before_the_study(tmp_p
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_fixed_part_check_leaves_swept_keys_to_the_trials():
     """ValidateConfig's check for non-basic sweepers: an error on a key the sweeper varies is
     not raised up front (a trial may pick a valid value); any other error is."""
@@ -197,6 +199,7 @@ def test_fixed_part_check_leaves_swept_keys_to_the_trials():
 # ----------------------------------------------------------------------------- tensorboard
 
 
+@pytest.mark.slow
 def test_tensorboard_backend_composes_and_is_validated(monkeypatch):
     cfg = compose_cfg("logger=tensorboard", "budget=smoke")
     assert cfg.logger.backend == LoggerBackend.tensorboard and cfg.logger.csv
@@ -231,6 +234,7 @@ def test_tensorboard_resume_purges_the_killed_process_events(tmp_path):
     assert [r.split(",")[0] for r in rows[1:]] == ["100", "200", "300"]
 
 
+@pytest.mark.slow
 @needs("tensorboard")
 def test_tensorboard_smoke_run_writes_event_files(tmp_path):
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator

@@ -103,6 +103,7 @@ def compose(*overrides):
         return hydra_compose(config_name="search", overrides=list(overrides))
 
 
+@pytest.mark.slow
 def test_search_app_default_is_plain_h2_without_noise_and_robust_with_it():
     from omegaconf import OmegaConf
 
@@ -135,6 +136,7 @@ BAD = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("overrides,message", BAD, ids=[" ".join(o) for o, _ in BAD])
 def test_bad_noise_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
     proc = subprocess.run([sys.executable, str(ROOT / "search.py"), *overrides], cwd=tmp_path, capture_output=True,
@@ -220,6 +222,7 @@ def test_the_same_seed_replays_the_same_noisy_inning_and_chain():
 # ----------------------------------------------------------------------------- every simulation counted
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cfg", [
     RobustConfig(budget=400, k1=100, samples=4, schedule="uniform", screen=False),
     RobustConfig(budget=400, k1=50, samples=6, schedule="uniform", screen=False, m1=5, k2=20),
@@ -357,6 +360,7 @@ def test_forgiving_is_a_stored_geometric_proposer_option():
     assert "forgiving" in proposer_options() and "forgiving" not in SHIPPED_PROPOSERS
 
 
+@pytest.mark.slow
 def test_the_noise_runs_saved_union_configs_load_in_the_per_option_dialect():
     """results/noise/ was written with one union node per group (robust knobs and u_*/spin_* in every node)."""
     from billiards.search.config import errors, saved_config

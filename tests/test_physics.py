@@ -320,6 +320,7 @@ print(after.alloc - before.alloc, after.free - before.free, after.mi_alloc - bef
 """
 
 
+@pytest.mark.slow
 def test_the_kernel_frees_every_array_it_allocates():
     """The event loop's helpers run without numba's reference counting (see core's
     docstring); every array a shot allocates (state, caches, outcome vectors, an event log
@@ -617,6 +618,7 @@ def adversarial_shots(rng, n, params):
     return racks, acts
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset, max_english", [("international", 0.6), ("international", 1.0), ("korean_medium", 1.0)])
 def test_adversarial_racks_and_chains_end_inside_the_tolerance(preset, max_english):
     params = dataclasses.replace(PRESETS[preset], max_english=max_english)

@@ -220,6 +220,7 @@ def test_physics_reaches_the_envs_the_verifier_and_the_rm_data(tmp_path):
         generate(tmp_path / "rm", n=64, seed=0, chunk=32, progress=False)  # the default table: refused
 
 
+@pytest.mark.slow
 def test_search_app_plays_the_chosen_table(tmp_path):
     proc = subprocess.run(
         [sys.executable, "search.py", "physics=international", "protocol=p1", "protocol.n_innings=2", "protocol.shots=2",

@@ -135,6 +135,7 @@ def test_fit_learns_to_rank_a_learnable_target():
     assert np.corrcoef(rank(ranker.logits(X)), rank(y))[0, 1] > 0.95  # Spearman: the ranker orders as the target does
 
 
+@pytest.mark.slow
 def test_training_command_writes_a_ranker_the_search_app_plays(tmp_path):
     out = tmp_path / "r.pt"
     proc = subprocess.run([sys.executable, "-m", "billiards.search.ranker", "--out", str(out), "--racks", "40",
@@ -157,6 +158,7 @@ def test_training_command_writes_a_ranker_the_search_app_plays(tmp_path):
     assert results["config"]["proposer"]["kind"] == "ranked"
 
 
+@pytest.mark.slow
 def test_a_missing_ranker_fails_fast_and_writes_nothing(tmp_path):
     proc = subprocess.run([sys.executable, str(ROOT / "search.py"), "noise=fastfiz", "proposer=ranked",
                            "proposer.ranker=nowhere/r.pt"], cwd=tmp_path, capture_output=True, text=True, timeout=120)

@@ -41,6 +41,7 @@ def test_table_rgb_array_and_gym_render():
     assert not np.array_equal(frame, image)  # a random rack, not the canonical one
 
 
+@pytest.mark.slow
 def test_play_and_render_inning_gif(tmp_path):
     shots = pictures.play_inning(nearest_red_policy(), seed=1, max_shots=2)
     assert len(shots) == 2
@@ -83,6 +84,7 @@ def test_render_draws_a_trained_policys_shots_on_its_own_table(tmp_path, capsys,
         pictures.main(["shot", "--out", str(out), "--policy", "no/such/run"])
 
 
+@pytest.mark.slow
 def test_the_former_command_line_points_to_the_new_one():
     """``python -m billiards.render`` only draws now; it says where the command line went."""
     import subprocess

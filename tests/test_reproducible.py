@@ -35,6 +35,7 @@ def _tracked_text_files() -> list[Path]:
     return files
 
 
+@pytest.mark.slow
 def test_no_tracked_text_file_names_a_machines_folder():
     offenders = []
     for path in _tracked_text_files():
@@ -107,6 +108,7 @@ def _probe(extra_env: dict) -> str:
     return proc.stdout.strip().splitlines()[-1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kernel", [k for k in KERNELS if k != "default"])
 def test_networks_and_functions_give_the_same_bits_under_another_kernel(kernel):
     """The proposer ensemble, the shot ranker, the elementary functions and the observation of

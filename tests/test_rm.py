@@ -289,6 +289,7 @@ def test_log_loss_and_calibration_table():
 # ----------------------------------------------------------------------------- training
 
 
+@pytest.mark.slow
 def test_tiny_training_beats_the_base_rate(tmp_path):
     data = tmp_path / "data"
     generate(data, n=24_000, seed=0, chunk=4096, progress=False, threads=1)

@@ -148,6 +148,7 @@ def test_compiled_puct_makes_the_reference_decisions(cfg, prior):
     np.testing.assert_array_equal(verifier_reward(check), new.r1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("S", [1, 3, 70])
 def test_puct_rounds_simulated_inside_the_tree_equal_simulate_batchs(monkeypatch, S):
     """The compiled rounds simulate their own shots (kernel, carom rule, verifier reward); routed
@@ -260,6 +261,7 @@ def run_search(*args, cwd=ROOT):
     return subprocess.run([sys.executable, "search.py", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_search_entry_point_writes_results(tmp_path):
     out = tmp_path / "run"
     proc = run_search("protocol=p3", "protocol.seeds=2", "protocol.cap=4", "search.k1=40", "search.m1=4",
@@ -276,6 +278,7 @@ def test_search_entry_point_writes_results(tmp_path):
     assert "| geometric | — \\| — | — \\| — | " in text and f"{data['mean']:.1f} ({data['max']:.0f}, cap 4, 2 chains)" in text
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("override, message", [
     ("search.kind=bfs", "search.kind must be one of h2, puct"),
     ("search.k1=175", "not a non-negative multiple of m1"),
@@ -290,6 +293,7 @@ def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, override, me
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_policy_proposer_from_a_training_run(tmp_path):
     """A trained run (here a smoke run) becomes a proposer: candidate 0 is the policy's
     deterministic action through the aim constraint, sampling follows the caller's rng only."""
@@ -341,6 +345,7 @@ def test_policy_proposer_from_a_training_run(tmp_path):
 SHIPPED = sorted(SHIPPED_PROPOSERS)
 
 
+@pytest.mark.slow
 def test_shipped_proposers_work_out_of_the_box(tmp_path):
     """`python search.py proposer=<name>` runs from a fresh checkout: the exported policies
     of every conf/proposer/<name>.yaml are in the repository and load as one ensemble."""
@@ -362,6 +367,7 @@ def test_shipped_proposers_work_out_of_the_box(tmp_path):
         assert json.loads((out / "results.json").read_text())["proposer"] == SHIPPED[0]
 
 
+@pytest.mark.slow
 def test_a_missing_proposer_checkpoint_fails_fast(tmp_path):
     out = tmp_path / "never"
     proc = run_search("proposer=policy", "proposer.checkpoints=[results/policies/none/seed0.pt]",

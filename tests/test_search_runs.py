@@ -116,6 +116,7 @@ SEARCH_BAD = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("overrides,message", SEARCH_BAD, ids=[" ".join(o) for o, _ in SEARCH_BAD])
 def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
     import subprocess

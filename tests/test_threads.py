@@ -9,6 +9,7 @@ so that a reset is visible on a one-core machine too.
 
 from __future__ import annotations
 
+import pytest
 import json
 import os
 import subprocess
@@ -50,12 +51,14 @@ def _run(which: str) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_set_threads_gives_torch_and_the_simulator_the_count_asked_for():
     """After ``set_threads(1)`` and a parallel-sized batch, torch and numba both use one thread
     (before the fix torch was left at NUMBA_NUM_THREADS: set_threads set torch first)."""
     assert _run("set_threads") == {"torch": 1, "numba": 1}
 
 
+@pytest.mark.slow
 def test_the_torchrl_env_keeps_the_torch_thread_count_a_user_chose():
     """A researcher's ``torch.set_num_threads(1)`` survives making and stepping a TorchRL env
     whose steps are parallel batches. (The gymnasium env steps single shots, which never start

@@ -38,6 +38,7 @@ def run_python(code: str) -> str:
 # ----------------------------------------------------------------------------- gymnasium path
 
 
+@pytest.mark.slow
 def test_gym_path_imports_neither_torch_nor_torchrl_and_keeps_the_start_method():
     out = run_python("""
         import multiprocessing as mp, sys
@@ -230,6 +231,7 @@ def test_human_render_names_the_missing_dependency(monkeypatch):
         Billiards4BallInningEnv(render_mode="human")
 
 
+@pytest.mark.slow
 def test_human_render_mode_listed_only_with_its_renderer_and_the_checker_passes_without_it():
     """gymnasium's checker opens one env per listed render mode: on the default install (no
     pygame) "human" is not listed, so check_env passes; where pygame imports it is listed."""

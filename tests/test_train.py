@@ -65,6 +65,7 @@ def check_finished(run_dir: Path, frames: int, innings: int = 10) -> EvalResult:
     return result
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
 def test_smoke_run_writes_eval_json(tmp_path, algo):
     run_dir = tmp_path / "run"
@@ -112,6 +113,7 @@ def check_learning_curves(run_dir: Path, tmp_path: Path) -> None:
         report_main([str(run_dir), "--cpu-budget", "5"])
 
 
+@pytest.mark.slow
 def test_joblib_multirun_and_report(tmp_path):
     sweep = tmp_path / "sweep"
     proc = ok(train(
@@ -149,6 +151,7 @@ def test_joblib_multirun_and_report(tmp_path):
     assert row in again.stdout
 
 
+@pytest.mark.slow
 def test_cpu_hour_preset_stops_at_its_cpu_budget(tmp_path):
     """experiment=cpu_hour composes (aim + features SAC, lr 1e-3, gamma 0.9, averaged actor) and
     budget.cpu_minutes ends training long before budget.total_steps, then evaluates."""
@@ -282,6 +285,7 @@ def test_report_skips_broken_run_dirs_with_a_warning_naming_them(tmp_path, capsy
     assert all(f"runs/{name}: {reasons[name]}" in err for name in ("no_config", "bad_yaml", "no_algo")), err
 
 
+@pytest.mark.slow
 def test_report_loads_without_torch_or_the_simulator(tmp_path):
     """`billiards.report` (and the search tables it reads) is file work: it must not pay for
     importing torch, TorchRL or numba, so it stays instant on a loaded cluster node."""
@@ -325,6 +329,7 @@ def train_killed_after_first_checkpoint(tmp_path: Path, *overrides: str) -> subp
                           cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=240)
 
 
+@pytest.mark.slow
 def test_killed_run_resumes_and_finishes(tmp_path):
     run_dir = tmp_path / "run"
     proc = train_killed_after_first_checkpoint(tmp_path, "budget=smoke", f"hydra.run.dir={run_dir}")
@@ -379,6 +384,7 @@ def resumed(cfg, run_dir: Path):
     return make_run(*load_run_config(OmegaConf.merge(cfg, {"resume": str(run_dir)}), run_dir.parent / "unused"))
 
 
+@pytest.mark.slow
 def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_stay_put(tmp_path, monkeypatch, caplog):
     """In process, on a short SAC run: (1) what a resume restores from a checkpoint -- networks,
     optimizers, replay buffer, counters, every RNG -- is bit-identical to the state saved;
@@ -581,6 +587,7 @@ def test_resume_takes_a_cpu_limit_only_when_given(caplog):
     assert kept.budget.cpu_minutes == 60 and plain.budget.cpu_minutes == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["sac", "td3"])
 def test_averaged_actor_is_what_a_run_evaluates_checkpoints_and_exports(tmp_path, algo):
     """algo.actor_ema > 0: after every actor step the average moves by exactly
@@ -686,6 +693,7 @@ BAD = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("overrides,message", BAD, ids=[" ".join(o) for o, _ in BAD])
 def test_bad_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
     t0 = time.perf_counter()
@@ -704,6 +712,7 @@ def _has_cuda() -> bool:
     return torch.cuda.is_available()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(_has_cuda(), reason="this machine has a CUDA GPU")
 @pytest.mark.parametrize("device", ["cuda", "cuda:3"])
 def test_cuda_without_a_gpu_fails_fast_and_writes_nothing(tmp_path, device):
@@ -822,6 +831,7 @@ def test_a_run_on_a_device_collects_with_the_agents_own_policy(tmp_path):
     assert wrapped["action"].device == torch.device("cpu") and torch.equal(wrapped["action"], direct["action"])
 
 
+@pytest.mark.slow
 def test_a_checkpoint_with_a_valid_checksum_but_impossible_contents_is_refused(tmp_path):
     """A checksum proves a file is what was written, not that it makes sense: impossible counters
     and a malformed random-generator state are refused on resume with the checkpoint's error (no
@@ -850,6 +860,7 @@ def test_a_checkpoint_with_a_valid_checksum_but_impossible_contents_is_refused(t
         assert (run_dir / "metrics.csv").read_bytes() == metrics, name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
 def test_a_signal_mid_run_checkpoints_that_step_and_exits_cleanly(tmp_path, signame):
     """Ctrl-C (SIGINT) or a scheduler's SIGTERM while training: the run finishes its batch, writes
