@@ -54,7 +54,42 @@ def _job_tag() -> str:
     return "" if num is None else f"[job {num}] "
 
 
-RESOLVERS = {"billiards.or": _or, "billiards.output_subdir": _output_subdir, "billiards.job_tag": _job_tag}
+ROOTS: dict[str, type] = {}  # root schema name -> its dataclass (register_app fills it; --help reads it)
+
+
+def _help_groups(*groups: str) -> str:
+    """``--help``: each of the app's option groups with its options, one line per group."""
+    from hydra.core.global_hydra import GlobalHydra
+
+    loader = GlobalHydra.instance().config_loader()
+    return "\n".join(f"{g}: {', '.join(loader.get_group_options(g))}" for g in groups)
+
+
+def _help_choices(root_name: str) -> str:
+    """``--help``: every key of the app's schema that takes one of a fixed set of words (an
+    enum), with the words, e.g. ``env.paradigm: canonical_reset, ...``."""
+    import dataclasses
+    import enum
+    import typing
+
+    lines: list[str] = []
+
+    def walk(schema: type, prefix: str) -> None:
+        hints = typing.get_type_hints(schema)
+        for f in dataclasses.fields(schema):
+            kind = hints.get(f.name)
+            for candidate in (kind, *typing.get_args(kind)):
+                if isinstance(candidate, type) and issubclass(candidate, enum.Enum):
+                    lines.append(f"{prefix}{f.name}: {', '.join(str(e.value) for e in candidate)}")
+                elif isinstance(candidate, type) and dataclasses.is_dataclass(candidate):
+                    walk(candidate, f"{prefix}{f.name}.")
+
+    walk(ROOTS[root_name], "")
+    return "\n".join(lines) or "(none)"
+
+
+RESOLVERS = {"billiards.or": _or, "billiards.output_subdir": _output_subdir, "billiards.job_tag": _job_tag,
+             "billiards.help_groups": _help_groups, "billiards.help_choices": _help_choices}
 
 
 def register_resolvers() -> None:
@@ -70,6 +105,7 @@ def register_app(root_name: str, root: type, groups: dict[str, type | dict[str, 
     ConfigStore (for option nodes the app stores itself)."""
     cs = ConfigStore.instance()
     cs.store(name=root_name, node=root)
+    ROOTS[root_name] = root
     for group, schemas in groups.items():
         if isinstance(schemas, dict):
             for option, node in schemas.items():

@@ -303,3 +303,20 @@ def test_repo_path_is_the_one_rule(tmp_path, monkeypatch):
     assert train_config.resolve_rm_model("results/rm/model.pt") == ROOT / "results/rm/model.pt"
     cfg = search_config.option("proposer", {"kind": "policy", "name": "p", "checkpoints": ["mine.pt", "results/x.pt"]})
     assert cfg.paths() == ["mine.pt", str(ROOT / "results/x.pt")]
+
+
+@pytest.mark.slow
+def test_each_apps_help_lists_its_own_groups_and_fixed_choices():
+    import subprocess
+    import sys
+
+    def help_of(app):
+        out = subprocess.run([sys.executable, str(REPO / app), "--help"], capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return out.stdout
+
+    train, search = help_of("train.py"), help_of("search.py")
+    assert "algo: ppo, ppo_paper, sac, sac_paper, td3, td3_paper" in train and "shaping: " in train
+    assert "env.paradigm: canonical_reset, canonical_continue, random_reset, random_continue" in train
+    assert "\nprotocol:" not in train and "\nproposer:" not in train and "schema" not in train.split("== Config")[0]
+    assert "proposer: " in search and "protocol: p1, p3" in search and "\nalgo:" not in search.split("== Config")[0]
