@@ -172,6 +172,48 @@ def validate_jobs(config: DictConfig, validate, errors: tuple[type[BaseException
 
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
 
+# ----------------------------------------------------------------------------- numbers in range
+
+INT_BOUND = 2**31 - 1  # the largest count any kernel, array or generator here is sized by
+
+
+def numeric_bound_errors(cfg, skip: tuple[str, ...] = ("physics", "noise", "hydra")) -> list[str]:
+    """Every integer of the composed config within +-(2^31 - 1) and every float finite (the
+    physics and noise nodes have their own, tighter bounds; ``skip``): a count of 10^19 or a
+    NaN step is refused while validating, not inside a kernel."""
+    import math
+
+    errors: list[str] = []
+
+    def walk(node, path: str) -> None:
+        if isinstance(node, DictConfig):
+            items = ((str(k), node._get_node(k)) for k in node.keys())
+        elif OmegaConf.is_list(node):
+            items = ((str(i), node._get_node(i)) for i in range(len(node)))
+        else:
+            return
+        for key, child in items:
+            name = f"{path}.{key}" if path else key
+            if not path and key in skip:
+                continue
+            if OmegaConf.is_config(child):
+                walk(child, name)
+                continue
+            try:
+                value = child._value() if hasattr(child, "_value") else child
+            except Exception:  # an unresolvable interpolation: the schema's check reports it
+                continue
+            if isinstance(value, bool) or value is None or isinstance(value, str):
+                continue
+            if isinstance(value, int) and not -INT_BOUND <= value <= INT_BOUND:
+                errors.append(f"{name}={value}: integers here must lie within +-{INT_BOUND:,}")
+            elif isinstance(value, float) and not math.isfinite(value):
+                errors.append(f"{name}={value}: must be a finite number")
+
+    walk(cfg, "")
+    return errors
+
+
 # ----------------------------------------------------------------------------- configs are data
 
 # Hydra calls whatever a ``_target_`` names (its callbacks are built before any app code runs) and
@@ -220,6 +262,6 @@ def guard_command_line(argv=None) -> None:
     if errors:
         raise SystemExit("Error: " + "\n".join(errors))
 
-__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "guard_command_line", "override_errors",
-            "job_configs", "register_app", "register_resolvers",
+__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "guard_command_line", "numeric_bound_errors",
+           "override_errors",  "job_configs", "register_app", "register_resolvers",
            "validate_jobs"]

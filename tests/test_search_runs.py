@@ -105,6 +105,7 @@ SEARCH_BAD = [
     (["proposer.power_low=0.95"], "proposer.power_low and proposer.power_high must satisfy"),
     (["threads=0"], "threads must be an integer in [1, "),
     (["threads=100000"], "threads must be an integer in [1, "),
+    (["search.budget=10000000000000"], "search.budget=10000000000000: integers here must lie within +-2,147,483,647"),
     (["+hydra.callbacks.evil._target_=pathlib.Path.touch", "+hydra.callbacks.evil.self=pwned"], "configs are data here"),
     (["proposer._target_=builtins.print"], "configs are data here"),
     (["--experimental-rerun", "config.pickle"], "the flag --experimental-rerun is not accepted here"),

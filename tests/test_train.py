@@ -673,6 +673,7 @@ BAD = [
     (["physics.cue_speed_max=1e200"], "PhysicsParams.cue_speed_max must be at most 50 (a physical bound), got 1e+200"),
     (["physics.max_events=10000000000000000000"], "physics.max_events"),
     (["threads=100000"], "threads must be an integer in [1, "),
+    (["budget.total_steps=10000000000000"], "budget.total_steps=10000000000000: integers here must lie within +-2,147,483,647"),
     # configs are data: nothing on the command line may make Hydra call code (the test's "wrote
     # nothing" also checks that Path.touch never ran: it would create ./pwned)
     (["+hydra.callbacks.evil._target_=pathlib.Path.touch", "+hydra.callbacks.evil.self=pwned"], "configs are data here"),

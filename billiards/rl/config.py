@@ -34,7 +34,7 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.device import device_error, threads_error
 from billiards.app_config import fixed_job_config as _fixed_job_config
-from billiards.app_config import BASIC_SWEEPER, register_app, validate_jobs
+from billiards.app_config import BASIC_SWEEPER, numeric_bound_errors, register_app, validate_jobs
 from billiards.files import CHECKPOINT_FILE, repo_path
 from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
@@ -279,7 +279,7 @@ def appended_keys(cfg: DictConfig) -> list[str]:
 
 
 def _errors(cfg: DictConfig) -> list[str]:
-    errs: list[str] = []
+    errs: list[str] = numeric_bound_errors(cfg)
 
     def need(ok: bool, msg: str) -> None:
         if not ok:

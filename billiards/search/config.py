@@ -43,7 +43,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from billiards.app_config import BASIC_SWEEPER, register_app, validate_jobs
+from billiards.app_config import BASIC_SWEEPER, numeric_bound_errors, register_app, validate_jobs
 from billiards.device import device_error, threads_error
 from billiards.files import CONFIG_FILE, repo_path
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
@@ -459,7 +459,7 @@ def saved_config(run_dir: str | Path) -> DictConfig:
 
 def errors(cfg) -> list[str]:
     """Every problem of a composed search config that a type cannot express, each naming its key."""
-    errs: list[str] = []
+    errs: list[str] = numeric_bound_errors(cfg) if isinstance(cfg, DictConfig) else []
     extra = [k for k in _extra_keys(cfg, SearchAppConfig, "") if k != "hydra"]  # hydra: the callback's view
     if extra:
         errs.append(f"{', '.join(extra)}: not a key of SearchAppConfig")
