@@ -50,6 +50,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 from _shots import git_commit, write_json  # noqa: E402
 
+from billiards import numerics  # noqa: E402  (the C library's functions: the same inputs on every CPU)
 from billiards.physics import (  # noqa: E402
     DEFAULT_PRESET, POSITION_TOL, PRESETS, PhysicsParams, check_positions, random_racks, simulate_batch,
 )
@@ -124,8 +125,8 @@ def _build(rng: np.random.Generator, n: int, params: PhysicsParams, p_rail: floa
                 base = rack[idx, rng.integers(0, k, idx.size)]
                 ang = _angles(rng, idx.size)
                 dist = 2 * R + _near(rng, idx.size)
-                rack[idx, k, 0] = base[:, 0] + dist * np.cos(ang)
-                rack[idx, k, 1] = base[:, 1] + dist * np.sin(ang)
+                rack[idx, k, 0] = base[:, 0] + dist * numerics.cos(ang)
+                rack[idx, k, 1] = base[:, 1] + dist * numerics.sin(ang)
                 # exact axis steps (no cos/sin rounding) for a third of them
                 axis = rng.random(idx.size) < 0.33
                 step = rng.integers(0, 4, idx.size)
@@ -166,8 +167,8 @@ def _frozen(rng: np.random.Generator, n: int, params: PhysicsParams, corner_shar
             dist = 2 * R + _gap(rng, m)
             step = rng.integers(0, 4, m)
             axis = rng.random(m) < 0.4
-            dx = np.where(axis, np.array([1.0, -1.0, 0.0, 0.0])[step] * dist, dist * np.cos(ang))
-            dy = np.where(axis, np.array([0.0, 0.0, 1.0, -1.0])[step] * dist, dist * np.sin(ang))
+            dx = np.where(axis, np.array([1.0, -1.0, 0.0, 0.0])[step] * dist, dist * numerics.cos(ang))
+            dy = np.where(axis, np.array([0.0, 0.0, 1.0, -1.0])[step] * dist, dist * numerics.sin(ang))
             rack[:, k] = base + np.column_stack([dx, dy])
             corner = rng.random(m) < corner_share
             kx, ky = np.where(rng.random(m) < 0.5, R, W - R), np.where(rng.random(m) < 0.5, R, L - R)
@@ -187,7 +188,7 @@ def adversarial_actions(rng: np.random.Generator, racks: np.ndarray, params: Phy
     acts[:, 1] = np.where(u < 0.3, 0.0, np.where(u < 0.6, 1.0, acts[:, 1]))
     ang = rng.uniform(0, 2 * np.pi, n)
     rim = rng.random(n) < 0.6
-    acts[rim, 2], acts[rim, 3] = np.clip(np.cos(ang[rim]), -1, 1), np.clip(np.sin(ang[rim]), -1, 1)
+    acts[rim, 2], acts[rim, 3] = np.clip(numerics.cos(ang[rim]), -1, 1), np.clip(numerics.sin(ang[rim]), -1, 1)
     return acts
 
 
@@ -220,16 +221,16 @@ def make_actions(rng: np.random.Generator, racks: np.ndarray, params: PhysicsPar
     theta = np.where(aim == 1, axis, theta)
     target = racks[np.arange(n), rng.integers(1, 4, n)]
     d = target - racks[:, 0]
-    centre = np.arctan2(d[:, 1], d[:, 0])
+    centre = numerics.atan2(d[:, 1], d[:, 0])
     dist = np.maximum(np.linalg.norm(d, axis=1), 2 * R)
-    cut = np.arcsin(np.clip(2 * R / dist * (1 - rng.choice([0.0, 1e-15, 1e-12, 1e-9, 1e-6, -1e-9], n)), -1, 1))
+    cut = numerics.asin(np.clip(2 * R / dist * (1 - rng.choice([0.0, 1e-15, 1e-12, 1e-9, 1e-6, -1e-9], n)), -1, 1))
     graze = centre + rng.choice([-1.0, 1.0], n) * cut
     theta = np.where(aim == 2, centre, np.where(aim == 3, graze, theta))
     power = np.where(rng.random(n) < 0.4, 1.0, rng.uniform(0, 1, n))
     tip = rng.random(n)
     ang = rng.uniform(0, 2 * np.pi, n)
-    a = np.where(tip < 0.4, np.cos(ang), rng.uniform(-1, 1, n))
-    b = np.where(tip < 0.4, np.sin(ang), rng.uniform(-1, 1, n))
+    a = np.where(tip < 0.4, numerics.cos(ang), rng.uniform(-1, 1, n))
+    b = np.where(tip < 0.4, numerics.sin(ang), rng.uniform(-1, 1, n))
     axis_tip = tip > 0.9  # pure side spin or pure draw/follow at the rim
     a = np.where(axis_tip, np.round(a), a)
     b = np.where(axis_tip, np.where(np.round(a) == 0, np.sign(b), 0.0), b)
