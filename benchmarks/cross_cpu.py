@@ -92,7 +92,7 @@ def measure(extra: dict, chains: int, cap: int) -> dict:
     env = _env(extra)
     py = sys.executable
     row = {"kernel": _total(_run([py, "benchmarks/kernel_fingerprint.py", "--shots", "5000"], env))[:16],
-           "env": _total(_run([py, "benchmarks/env_fingerprint.py", "--steps", "200"], env))[:16],
+           "envs": _total(_run([py, "benchmarks/env_fingerprint.py", "--steps", "200"], env))[:16],
            "networks": _run([py, "-c", PROBE], env).strip().splitlines()[-1][:16]}
     with tempfile.TemporaryDirectory() as tmp:
         for proposer in ("base", "near_miss"):
@@ -120,7 +120,7 @@ def training_rows() -> dict:
                   "hydra/job_logging=stdout", f"hydra.run.dir={run}"], _env(extra))
             with (run / "metrics.csv").open(newline="") as f:
                 rows = [{k: v for k, v in r.items() if k not in ("wall_time", "cpu_time", "fps", "ups")} for r in csv.DictReader(f)]
-            out[name] = {"env": extra, "rows": rows, "eval_mean": json.loads((run / "eval.json").read_text())["mean"]}
+            out[name] = {"settings": extra, "rows": rows, "eval_mean": json.loads((run / "eval.json").read_text())["mean"]}
     ref = out["default"]["rows"]
     for r in out.values():
         r["first_difference_at_step"] = next((int(float(a["step"])) for a, b in zip(ref, r["rows"]) if a != b), None)
@@ -140,7 +140,7 @@ def main(argv=None) -> int:
         print(f"{'torch setting':<18} {'environment':<36} {'final eval':<11} first differing step")
         for name, r in rows.items():
             first = r["first_difference_at_step"]
-            print(f"{name:<18} {str(r['env']):<36} {r['eval_mean']:<11} {'identical' if first is None else first}")
+            print(f"{name:<18} {str(r['settings']):<36} {r['eval_mean']:<11} {'identical' if first is None else first}")
             del r["rows"]
         if args.out is not None:
             _write(args.out, argv, {"training": rows})
@@ -151,15 +151,15 @@ def main(argv=None) -> int:
     rows, t0 = {}, time.perf_counter()
     for name in names:
         extra, promised = SETTINGS[name]
-        rows[name] = {"env": extra, "promised": promised, **measure(extra, args.chains, args.cap)}
+        rows[name] = {"settings": extra, "promised": promised, **measure(extra, args.chains, args.cap)}
     ref = rows["default"]
-    keys = ("kernel", "env", "networks", "chains_base", "chains_near_miss")
+    keys = ("kernel", "envs", "networks", "chains_base", "chains_near_miss")
     print(f"{'setting':<22} {'simulator':<17} {'envs':<17} {'networks':<17} {'chains base':<14} {'chains near_miss':<17} verdict")
     for name, r in rows.items():
         r["same"] = all(r[k] == ref[k] for k in keys)
         verdict = "reference" if name == "default" else ("same" if r["same"] else "DIFFERENT")
         verdict += "" if r["promised"] else " (outside the promise)"
-        print(f"{name:<22} {r['kernel']:<17} {r['env']:<17} {r['networks']:<17} {str(r['chains_base']):<14} "
+        print(f"{name:<22} {r['kernel']:<17} {r['envs']:<17} {r['networks']:<17} {str(r['chains_base']):<14} "
               f"{str(r['chains_near_miss']):<17} {verdict}")
     broken = [n for n, r in rows.items() if r["promised"] and not r["same"]]
     print(f"{len(rows)} settings in {time.perf_counter() - t0:.0f} s; "
