@@ -5,6 +5,7 @@ kernel, NumPy loops or numba target the processor picks."""
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -70,51 +71,40 @@ def test_the_committed_report_regenerates_byte_for_byte(tmp_path):
 
 # ----------------------------------------------------------------------------- same bits on every CPU
 
-KERNELS = {  # the settings a user's machine may differ in, each in a fresh interpreter
-    "default": {},
-    "openblas_prescott": {"OPENBLAS_CORETYPE": "Prescott"},
-    "openblas_haswell": {"OPENBLAS_CORETYPE": "Haswell"},
-    "numba_generic": {"NUMBA_CPU_NAME": "generic"},
-    "numpy_baseline": {"NPY_DISABLE_CPU_FEATURES": "AVX512_ICL X86_V4 X86_V3"},
-}
+def _cross_cpu():
+    """benchmarks/cross_cpu.py: its settings and its probe of the networks and functions (one
+    definition, the script's)."""
+    import importlib.util
 
-_PROBE = """
-import hashlib, numpy as np
-from billiards import domain, numerics
-from billiards.physics import random_racks
-from billiards.search.proposers import load_policy_proposer
-from billiards.search.ranker import RankedProposer, ShotRanker
-rng = np.random.default_rng(0)
-pos = random_racks(rng, 64)
-h = hashlib.sha256()
-p = load_policy_proposer([f"results/policies/near_miss/seed{s}.pt" for s in range(3)])
-h.update(p.propose(pos, 24, np.random.default_rng(1)).tobytes())
-ranked = RankedProposer(ShotRanker.load("results/rankers/fastfiz/ranker.pt"), pool=300)
-h.update(ranked.propose(pos[:16], 8, np.random.default_rng(2)).tobytes())
-x = rng.uniform(-1, 1, 4096)
-for f in (numerics.asin, numerics.exp, numerics.log1p, numerics.tanh, numerics.sin, numerics.cos):
-    h.update(f(x).tobytes())
-h.update(numerics.atan2(x, x[::-1]).tobytes())
-h.update(domain.observation(pos, True).tobytes() + domain.aim_window(pos)[1].tobytes())
-print(h.hexdigest())
-"""
+    spec = importlib.util.spec_from_file_location("cross_cpu", REPO / "benchmarks" / "cross_cpu.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+CROSS_CPU = _cross_cpu()
+KERNELS = {name: env for name, (env, promised) in CROSS_CPU.SETTINGS.items() if promised}
+
+
+@functools.lru_cache(maxsize=None)
+def _probe_of(setting: str) -> str:
+    return _probe(KERNELS[setting])
 
 
 def _probe(extra_env: dict) -> str:
-    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_CORETYPE", "NUMBA_CPU_NAME", "NPY_DISABLE_CPU_FEATURES")}
-    env.update(extra_env, PYTHONPATH=str(REPO), NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    proc = subprocess.run([sys.executable, "-c", _PROBE], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    proc = subprocess.run([sys.executable, "-c", CROSS_CPU.PROBE], cwd=REPO, env=CROSS_CPU._env(extra_env),
+                          capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return proc.stdout.strip().splitlines()[-1]
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kernel", [k for k in KERNELS if k != "default"])
+@pytest.mark.parametrize("kernel", ["openblas_prescott", "openblas_haswell", "numba_generic", "numpy_no_avx2"])
 def test_networks_and_functions_give_the_same_bits_under_another_kernel(kernel):
     """The proposer ensemble, the shot ranker, the elementary functions and the observation of
     the same tables hash the same under another OpenBLAS kernel, numba's generic target and
     NumPy's baseline loops as under this machine's defaults."""
-    assert _probe(KERNELS[kernel]) == _probe(KERNELS["default"])
+    assert _probe_of(kernel) == _probe_of("default")
 
 
 def test_dense_sums_in_index_order_in_float32():
