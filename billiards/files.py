@@ -168,6 +168,27 @@ def _non_finite(payload, prefix: str = "") -> str | None:
     return None
 
 
+def record_digest(record: dict) -> str:
+    """SHA-256 of a JSON record (its keys sorted), without its own :data:`SEAL_KEY` entry: the
+    checksum each line of an append-only ledger and each whole JSON ledger carries."""
+    import hashlib
+    import json
+
+    body = {k: v for k, v in record.items() if k != SEAL_KEY}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def sealed_record(record: dict) -> dict:
+    """The record with its checksum (:func:`record_digest`) under :data:`SEAL_KEY`."""
+    return {**{k: v for k, v in record.items() if k != SEAL_KEY}, SEAL_KEY: record_digest(record)}
+
+
+def record_intact(record: dict) -> bool:
+    """True unless the record carries a checksum that its content does not match (records
+    written before ledgers were sealed carry none and pass on their shape alone)."""
+    return SEAL_KEY not in record or record[SEAL_KEY] == record_digest(record)
+
+
 def save_tagged(path, payload: dict) -> Path:
     """Write a tagged payload (``"format"`` set by the caller) with its checksum
     (:func:`payload_digest`), atomically; :func:`load_tagged` checks both."""

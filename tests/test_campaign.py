@@ -668,6 +668,8 @@ def test_report_draws_each_tables_learning_curves_from_its_finished_runs(tmp_pat
                                     '{"campaign": "mini", "runs": {"t/x/seed0": {"starts": 3}}}',
                                     '{"campaign": "mini", "runs": {"t/x/seed0": "done"}}'])
 def test_a_ledger_of_the_wrong_shape_is_refused_clearly(tmp_path, ledger):
+    """A campaign.json of the wrong shape, or one whose content no longer matches its checksum,
+    is refused with the file named, no traceback."""
     spec = tmp_path / "mini.yaml"
     spec.write_text(yaml.safe_dump({"name": "mini", "runs": [{"table": "t", "variant": "x", "seed": 0, "steps": 10,
                                                           "args": ["budget=smoke"]}]}))
@@ -677,3 +679,17 @@ def test_a_ledger_of_the_wrong_shape_is_refused_clearly(tmp_path, ledger):
     for extra in (["status"], ["run", "--dry-run"]):
         rc, out = cli(extra[0], "--spec", str(spec), "--root", str(root), *extra[1:])
         assert rc == 2 and "is not a campaign ledger" in out and "Traceback" not in out, out
+
+
+def test_a_ledger_edited_after_it_was_sealed_is_refused(tmp_path):
+    from billiards.campaign.ledger import Ledger
+    from billiards.campaign.spec import SpecError
+
+    Ledger(tmp_path, "mini").save()
+    data = json.loads((tmp_path / LEDGER).read_text())
+    assert len(data["sha256"]) == 64
+    Ledger(tmp_path, "mini")  # intact: loads
+    data["runs"]["t/x/seed0"] = {"args": None, "starts": [], "commits": [], "pid": None, "failures": 0}
+    (tmp_path / LEDGER).write_text(json.dumps(data))
+    with pytest.raises(SpecError, match="is damaged: its contents do not match its sha256 checksum"):
+        Ledger(tmp_path, "mini")

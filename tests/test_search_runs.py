@@ -147,5 +147,11 @@ def test_a_malformed_chain_ledger_is_refused_clearly_on_resume(tmp_path):
     ledger.write_text('{"seed": "zero", "length": 3}\n' + "\n".join(lines[1:]) + "\n")
     cfg = small_cfg()
     cfg.resume = str(stopped)
-    with pytest.raises(SystemExit, match=r"cannot resume: .*chains.jsonl: line 1 is not a P3 chain record"):
+    with pytest.raises(SystemExit, match=r"cannot resume: .*chains.jsonl: line 1 is not an intact P3 chain record"):
+        search_run.run(cfg, stopped)
+    # each line carries a checksum: a chain whose length was changed by hand is refused too
+    edited = json.loads(lines[0])
+    edited["length"] += 1
+    ledger.write_text(json.dumps(edited) + "\n" + "\n".join(lines[1:]) + "\n")
+    with pytest.raises(SystemExit, match=r"line 1 is not an intact P3 chain record"):
         search_run.run(cfg, stopped)

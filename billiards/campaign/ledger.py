@@ -24,6 +24,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from billiards.files import SEAL_KEY, record_intact, sealed_record
 from .spec import PLACEHOLDER, Campaign, Entry, SpecError
 
 LEDGER = "campaign.json"
@@ -66,12 +67,16 @@ class Ledger:
             except ValueError as err:
                 raise SpecError(f"{self.path} is corrupt ({err}); move it aside: the run dirs hold the results, "
                                 f"only the start history would be lost") from None
+            if isinstance(data, dict) and not record_intact(data):
+                raise SpecError(f"{self.path} is damaged: its contents do not match its sha256 checksum; move it aside: "
+                                f"the run dirs hold the results, only the start history would be lost")
             if problem := _ledger_problem(data):
                 raise SpecError(f"{self.path} is not a campaign ledger ({problem}); move it aside: the run dirs hold "
                                 f"the results, only the start history would be lost") from None
             if data.get("campaign") != name:
                 raise SpecError(f"{self.path} belongs to campaign {data.get('campaign')!r}, not {name!r}; "
                                 f"use another --root")
+            data.pop(SEAL_KEY, None)
             self.data = data
 
     def record(self, key: str) -> dict:
@@ -84,7 +89,7 @@ class Ledger:
         self.root.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(self.path.name + ".tmp")
         with tmp.open("w") as f:
-            json.dump(self.data, f, indent=1)
+            json.dump(sealed_record(self.data), f, indent=1)
             f.write("\n")
             f.flush()
             os.fsync(f.fileno())

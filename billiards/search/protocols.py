@@ -26,6 +26,7 @@ from tqdm.auto import tqdm
 
 from billiards.envs import BilliardsEnv
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+from billiards.files import record_intact, sealed_record
 from billiards.physics.noise import get_noise
 
 from .actors import SearchActor, make_search_collector
@@ -151,13 +152,14 @@ def read_chains(path: str | Path | None) -> dict[int, dict]:
         try:
             rec = json.loads(line)
             ok = isinstance(rec, dict) and all(isinstance(rec.get(k), int) and not isinstance(rec.get(k), bool)
-                                               and rec[k] >= 0 for k in ("seed", "length"))
+                                               and rec[k] >= 0 for k in ("seed", "length")) and record_intact(rec)
         except ValueError:
             ok = False
         if not ok:
             if n == len(lines):
                 continue  # the torn last line of a killed run
-            raise ValueError(f"{path}: line {n} is not a P3 chain record (an integer seed and length >= 0): {line[:80]!r}; "
+            raise ValueError(f"{path}: line {n} is not an intact P3 chain record (an integer seed and length >= 0, its "
+                             f"checksum matching): {line[:80]!r}; "
                              f"move the file aside to play every chain again")
         done[rec["seed"]] = rec
     return done
@@ -165,7 +167,7 @@ def read_chains(path: str | Path | None) -> dict[int, dict]:
 
 def _append_line(path: Path, record: dict) -> None:
     with open(path, "a") as f:
-        f.write(json.dumps(record) + "\n")
+        f.write(json.dumps(sealed_record(record)) + "\n")
         f.flush()
         os.fsync(f.fileno())
 
