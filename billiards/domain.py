@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from billiards import numerics
@@ -155,9 +156,8 @@ def nearest_red(positions: np.ndarray) -> np.ndarray:
 
     positions (..., 4, 2) -> (...,) int64.
     """
-    positions = np.asarray(positions, dtype=np.float64)
-    d = np.linalg.norm(positions[..., [RED1, RED2], :] - positions[..., WHITE:WHITE + 1, :], axis=-1)
-    return np.where(d[..., 1] < d[..., 0], RED2, RED1).astype(np.int64)
+    pos = _rows(positions)
+    return _nearest_red_rows(pos).reshape(np.shape(positions)[:-2])
 
 
 def _take_ball(positions: np.ndarray, index: np.ndarray) -> np.ndarray:
@@ -187,13 +187,13 @@ def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius,
 
     Returns ``(theta_target, half_width)``, each (...,) float64, theta_target in (-pi, pi].
     """
-    positions = np.asarray(positions, dtype=np.float64)
-    red = nearest_red(positions) if red is None else np.asarray(red, dtype=np.int64)
-    delta = _take_ball(positions, red) - positions[..., WHITE, :]
-    d = np.hypot(delta[..., 0], delta[..., 1])
-    theta_target = numerics.atan2(delta[..., 1], delta[..., 0])  # the C library's, not NumPy's CPU-dependent loops
-    half_width = numerics.asin(np.minimum(2.0 * R / d, math.sin(max_half_width)))
-    return theta_target, half_width
+    pos = _rows(positions)
+    lead = np.shape(positions)[:-2]
+    reds = (_nearest_red_rows(pos) if red is None
+            else np.ascontiguousarray(np.broadcast_to(np.asarray(red, dtype=np.int64), lead)).reshape(-1))
+    # one compiled pass (the C library's atan2 and asin, not NumPy's CPU-dependent loops)
+    theta_target, half_width = _aim_window_rows(pos, reds, 2.0 * R, math.sin(max_half_width))
+    return theta_target.reshape(lead)[()], half_width.reshape(lead)[()]  # one table: two float64 scalars
 
 
 def constrained_theta(positions: np.ndarray, u: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius) -> np.ndarray:
@@ -247,18 +247,60 @@ def carom_features(positions: np.ndarray) -> np.ndarray:
     towards the white. Returns (..., 4) float64 = (d1, d2, sin_phi, cos_phi). Balls never
     overlap, so |u1|, |u2| >= 2R > 0.
     """
-    positions = np.asarray(positions, dtype=np.float64)
-    near = nearest_red(positions)
-    white = positions[..., WHITE, :]
-    n = _take_ball(positions, near)
-    o = _take_ball(positions, RED1 + RED2 - near)
-    u1, u2 = n - white, o - n
-    d1 = np.hypot(u1[..., 0], u1[..., 1])
-    d2 = np.linalg.norm(o - white, axis=-1)
-    norm = d1 * np.hypot(u2[..., 0], u2[..., 1])
-    sin_phi = (u1[..., 0] * u2[..., 1] - u1[..., 1] * u2[..., 0]) / norm
-    cos_phi = (u1[..., 0] * u2[..., 0] + u1[..., 1] * u2[..., 1]) / norm
-    return np.stack([d1, d2, sin_phi, cos_phi], axis=-1)
+    pos = _rows(positions)
+    return _carom_features_rows(pos).reshape(np.shape(positions)[:-2] + (N_CAROM_FEATURES,))
+
+
+# The three functions above as compiled passes over (N, 4, 2) rows: the same IEEE operations in
+# the same order as their NumPy formulas (|v| = sqrt(vx*vx + vy*vy) where NumPy's norm sums two
+# squares, hypot where it calls hypot), so the same bits, without a dozen temporary arrays.
+
+
+def _rows(positions) -> np.ndarray:
+    pos = np.asarray(positions, dtype=np.float64)
+    if pos.shape[-2:] != (N_BALLS, 2):
+        raise ValueError(f"positions must have shape (..., {N_BALLS}, 2); got {pos.shape}")
+    return np.ascontiguousarray(pos.reshape(-1, N_BALLS, 2))
+
+
+@numba.njit(cache=True, nogil=True)
+def _nearest_red_rows(pos):
+    out = np.empty(pos.shape[0], dtype=np.int64)
+    for i in range(pos.shape[0]):
+        ax, ay = pos[i, RED1, 0] - pos[i, WHITE, 0], pos[i, RED1, 1] - pos[i, WHITE, 1]
+        bx, by = pos[i, RED2, 0] - pos[i, WHITE, 0], pos[i, RED2, 1] - pos[i, WHITE, 1]
+        out[i] = RED2 if math.sqrt(bx * bx + by * by) < math.sqrt(ax * ax + ay * ay) else RED1
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _aim_window_rows(pos, reds, two_r, cap):
+    n = pos.shape[0]
+    theta, half = np.empty(n), np.empty(n)
+    for i in range(n):
+        dx, dy = pos[i, reds[i], 0] - pos[i, WHITE, 0], pos[i, reds[i], 1] - pos[i, WHITE, 1]
+        theta[i] = math.atan2(dy, dx)
+        half[i] = math.asin(min(two_r / math.hypot(dx, dy), cap))
+    return theta, half
+
+
+@numba.njit(cache=True, nogil=True)
+def _carom_features_rows(pos):
+    near = _nearest_red_rows(pos)
+    out = np.empty((pos.shape[0], 4))
+    for i in range(pos.shape[0]):
+        k, m = near[i], RED1 + RED2 - near[i]
+        wx, wy = pos[i, WHITE, 0], pos[i, WHITE, 1]
+        u1x, u1y = pos[i, k, 0] - wx, pos[i, k, 1] - wy
+        u2x, u2y = pos[i, m, 0] - pos[i, k, 0], pos[i, m, 1] - pos[i, k, 1]
+        ox, oy = pos[i, m, 0] - wx, pos[i, m, 1] - wy
+        d1 = math.hypot(u1x, u1y)
+        norm = d1 * math.hypot(u2x, u2y)
+        out[i, 0] = d1
+        out[i, 1] = math.sqrt(ox * ox + oy * oy)
+        out[i, 2] = (u1x * u2y - u1y * u2x) / norm
+        out[i, 3] = (u1x * u2x + u1y * u2y) / norm
+    return out
 
 
 # ----------------------------------------------------------------------------- reward shaping

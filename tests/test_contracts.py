@@ -213,3 +213,25 @@ def test_a_damaged_file_named_by_config_is_refused_before_anything_is_written(tm
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode != 0 and "damaged.pt" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.pt"]
+
+
+def test_exact_positions_reuses_a_table_only_for_the_same_unchanged_tensors():
+    """The per-step reuse of the exact table (billiards.envs.torchrl_env.exact_positions) never
+    serves a stale table: an in-place change of "positions" or of its bits, or another tensor,
+    gives a fresh one; the shared table is read-only."""
+    from billiards.envs.torchrl_env import exact_positions
+
+    env = BilliardsEnv(3, seed=0)
+    td = env.reset()
+    first = exact_positions(td)
+    assert exact_positions(td) is first and not first.flags.writeable
+    with pytest.raises(ValueError):
+        first[0, 0, 0] = 0.0
+    before = first.copy()
+    td["positions"][0, 0, 0] += 0.01  # in place: the tensor's version moves on
+    td["positions_bits"][0] = td["positions"][0].view(torch.int64)
+    moved = exact_positions(td)
+    assert moved is not first and moved[0, 0, 0] == before[0, 0, 0] + 0.01
+    other = td.clone()  # equal values, other tensors
+    again = exact_positions(other)
+    assert again is not moved and np.array_equal(again, moved)

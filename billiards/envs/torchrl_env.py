@@ -43,6 +43,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import weakref
+
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -60,6 +62,9 @@ BITS_KEY = "positions_bits"
 INFO_KEYS = ("score", "foul", "miss", "first_contact", "second_red", "hits", "closest", "n_events")
 
 
+_EXACT_CACHE: list = []  # the last tables exact_positions built: [(positions tensor ref, version, bits ref, version, table)]
+
+
 def exact_positions(tensordict: TensorDictBase) -> np.ndarray | None:
     """The exact float64 table (..., 4, 2) of a tensordict, or None without ``"positions"``.
 
@@ -72,10 +77,27 @@ def exact_positions(tensordict: TensorDictBase) -> np.ndarray | None:
     pos_t = tensordict.get("positions", None)
     if pos_t is None:
         return None
+    bits_t = tensordict.get(BITS_KEY, None)
+    # one step asks for the same table several times (the env, the aim constraint, the features,
+    # each shaping term): the table of the very same tensors at the same versions is reused (the
+    # tensors are held by weak reference: a new tensor never matches a dead one's entry)
+    for ref, version, bits_ref, bits_version, table in _EXACT_CACHE:
+        if (ref() is pos_t and pos_t._version == version
+                and (bits_t is None and bits_ref is None
+                     or bits_ref is not None and bits_ref() is bits_t and bits_t._version == bits_version)):
+            return table
+    table = _exact_positions(pos_t, bits_t)
+    table.setflags(write=False)  # shared by the callers of this step: read-only
+    entry = (weakref.ref(pos_t), pos_t._version, None if bits_t is None else weakref.ref(bits_t),
+             None if bits_t is None else bits_t._version, table)
+    _EXACT_CACHE[:] = [entry, *_EXACT_CACHE[:1]]
+    return table
+
+
+def _exact_positions(pos_t: torch.Tensor, bits) -> np.ndarray:
     pos_t = pos_t.detach().cpu()
     pos = pos_t.to(torch.float64).numpy()
     use_exact = np.zeros(pos.shape[:-2], dtype=bool)
-    bits = tensordict.get(BITS_KEY, None)
     if bits is not None and bits.shape == pos_t.shape and bits.dtype == torch.int64:
         exact = np.ascontiguousarray(bits.detach().cpu().numpy()).view(np.float64)
         low = pos_t.dtype if pos_t.dtype.is_floating_point and pos_t.dtype != torch.float64 else torch.float32
