@@ -262,6 +262,6 @@ def guard_command_line(argv=None) -> None:
     if errors:
         raise SystemExit("Error: " + "\n".join(errors))
 
-__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "guard_command_line", "numeric_bound_errors",
-           "override_errors",  "job_configs", "register_app", "register_resolvers",
-           "validate_jobs"]
+
+__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "guard_command_line", "job_configs", "numeric_bound_errors",
+           "override_errors", "register_app", "register_resolvers", "validate_jobs"]

@@ -241,14 +241,11 @@ def seal(path) -> str:
     it loads as tensors and plain values and holds only finite numbers; returns the digest."""
     import torch
 
-    class SealError(ValueError):
-        pass
-
     payload = torch.load(Path(path), map_location="cpu", weights_only=True)
     if not isinstance(payload, dict) or not isinstance(payload.get("format"), str):
-        raise SealError(f"{path} is not a tagged file (no format entry)")
+        raise ValueError(f"{path} is not a tagged file (no format entry)")
     if (bad := _non_finite(payload)) is not None:
-        raise SealError(f"{path} holds non-finite values (NaN or inf) in {bad}: not sealed")
+        raise ValueError(f"{path} holds non-finite values (NaN or inf) in {bad}: not sealed")
     payload.pop(SEAL_KEY, None)
     save_tagged(path, payload)
     return payload_digest(payload)

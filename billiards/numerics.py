@@ -28,14 +28,9 @@ Intel since Haswell, 2013; AMD since Excavator, 2015, and every Zen) takes the s
 from __future__ import annotations
 
 import math
-import os
 
-# numba would hand vectorised math to Intel's SVML when the optional icc_rt package is present,
-# whose results differ from the C library's; the project never wants that (set before numba loads)
-os.environ.setdefault("NUMBA_DISABLE_INTEL_SVML", "1")
-
-import numba  # noqa: E402
-import numpy as np  # noqa: E402
+import numba  # Intel's SVML stays off: billiards/__init__ sets NUMBA_DISABLE_INTEL_SVML before numba loads
+import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)

@@ -231,8 +231,9 @@ class BilliardsEnv(EnvBase):
         if shot.dtype.is_floating_point or shot.dtype == torch.bool or shot.is_complex():
             raise ValueError(f'"shot" must be an integer tensor (shots played in the inning), got {shot.dtype}')
         shot = shot.numpy().reshape(B)
-        if ((shot < 0) | (shot >= self.max_shots)).any():
-            bad = np.flatnonzero((shot < 0) | (shot >= self.max_shots))[:8].tolist()
+        ended = (shot < 0) | (shot >= self.max_shots)
+        if ended.any():
+            bad = np.flatnonzero(ended)[:8].tolist()
             raise ValueError(f'"shot" must lie in [0, max_shots - 1 = {self.max_shots - 1}] (an inning that has not '
                              f'ended); innings {bad} have {shot[bad].tolist()}: call env.reset() (or reset those innings)')
         shots = play_shots(positions, action, shot, params=self.params, noise=self.noise,

@@ -27,6 +27,7 @@ import json
 import logging
 import math
 import random
+import signal
 import sys
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -379,8 +380,6 @@ class StopRequests:
         self._previous: dict[int, Any] = {}
 
     def _handle(self, signum, frame) -> None:
-        import signal
-
         if self.signum is not None and signum == signal.SIGINT:
             raise KeyboardInterrupt
         self.signum = signum
@@ -388,7 +387,6 @@ class StopRequests:
                     signal.Signals(signum).name)
 
     def __enter__(self) -> "StopRequests":
-        import signal
         import threading
 
         if threading.current_thread() is threading.main_thread():
@@ -399,8 +397,6 @@ class StopRequests:
         return self
 
     def __exit__(self, *exc) -> None:
-        import signal
-
         for num, handler in self._previous.items():
             signal.signal(num, handler)
         self._previous.clear()
@@ -409,8 +405,6 @@ class StopRequests:
         """After a batch: if a signal came, checkpoint at this step and exit 128 + its number."""
         if self.signum is None:
             return
-        import signal
-
         if run.window.frames:
             run.log_window()
         run.checkpoint()
