@@ -34,14 +34,20 @@ from billiards.physics.noise import NoiseConfig
 SCHEMA_GROUP = "schema"  # where option schemas live (outside the option groups)
 
 
+# ``resume=auto``: continue the job's own run directory if an earlier attempt left one there
+# (a finished run does nothing), else start fresh in it: what a re-launched multirun job wants
+# (each stage of the reproduction, a job a cluster preempted and requeued)
+RESUME_AUTO = "auto"
+
+
 def _or(value: Any, default: str) -> str:
-    """``${billiards.or:${resume},outputs/...}``: the value unless it is null or empty."""
-    return str(value) if value else default
+    """``${billiards.or:${resume},outputs/...}``: the value unless it is null, empty or ``auto``."""
+    return str(value) if value and value != RESUME_AUTO else default
 
 
 def _output_subdir(resume: Optional[str]) -> str:
     """hydra.output_subdir: a resume keeps the original ``.hydra`` and records its own beside it."""
-    return ".hydra_resume" if resume else ".hydra"
+    return ".hydra_resume" if resume and resume != RESUME_AUTO else ".hydra"
 
 
 def _job_tag() -> str:
@@ -263,5 +269,5 @@ def guard_command_line(argv=None) -> None:
         raise SystemExit("Error: " + "\n".join(errors))
 
 
-__all__ = ["BASIC_SWEEPER", "SCHEMA_GROUP", "fixed_job_config", "guard_command_line", "job_configs", "numeric_bound_errors",
+__all__ = ["BASIC_SWEEPER", "RESUME_AUTO", "SCHEMA_GROUP", "fixed_job_config", "guard_command_line", "job_configs", "numeric_bound_errors",
            "override_errors", "register_app", "register_resolvers", "validate_jobs"]

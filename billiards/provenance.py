@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
+import sys
+import time
+from pathlib import Path
 
-from billiards.files import ROOT
+from billiards.files import ROOT, recorded_command
 
-__all__ = ["ROOT", "git_commit"]
+__all__ = ["ROOT", "STARTS_FILE", "git_commit", "record_start"]
+
+STARTS_FILE = "starts.jsonl"  # one line per start of a run in its directory: the commit it ran under
 
 
 def git_commit() -> str:
@@ -22,3 +28,17 @@ def git_commit() -> str:
     commit = run("git", "rev-parse", "--short", "HEAD") or "unknown"
     dirty = commit != "unknown" and bool(run("git", "status", "--porcelain", "--untracked-files=no", "--", "billiards"))
     return commit + ("+dirty" if dirty else "")
+
+
+def record_start(run_dir, mode: str, frames: int = 0, command: list[str] | None = None) -> dict:
+    """Append a start record to ``<run_dir>/starts.jsonl``: the commit, the UTC time, ``mode``
+    (fresh, resume), the frames done before it and the command (default: this process's command
+    line; an app under a launcher passes its own, ``python train.py <overrides>``), recorded
+    repo-relative. A run resumed under other code thus lists every commit it ran under."""
+    record = {"commit": git_commit(), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+              "mode": mode, "frames": int(frames), "command": recorded_command(command or ["python", *sys.argv])}
+    path = Path(run_dir) / STARTS_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a") as f:
+        f.write(json.dumps(record) + "\n")
+    return record

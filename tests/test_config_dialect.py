@@ -85,7 +85,7 @@ def test_option_groups_list_only_real_options():
     # for_noise_<noise>: the default search per execution noise (h2 without noise, robust with it)
     assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "h2", "puct",
                                        "robust"]
-    assert group_options("protocol") == ["p1", "p3"]
+    assert group_options("protocol") == ["p1", "p3", "p3_paper"]
     assert group_options("proposer") == ["base", "both", "forgiving", "gentle", "geometric", "near_miss", "policy",
                                          "ranked"]
     assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none"]
@@ -105,7 +105,7 @@ SHAPING_OF = {"base": "foul_penalty", "gentle": "gentle", "near_miss": "near_mis
 def test_a_shipped_proposer_by_name_is_the_campaigns_table5_ensemble(name):
     import shlex
 
-    from billiards.campaign.spec import paper_campaign
+    from billiards.tables import paper_tables
 
     cfg = compose_search(f"proposer={name}")
     node = OmegaConf.to_container(cfg.proposer)
@@ -114,13 +114,13 @@ def test_a_shipped_proposer_by_name_is_the_campaigns_table5_ensemble(name):
     train, export = node["command"].split(" && ")
     assert export == f"python -m billiards.rl.policy export <the three run dirs> --out results/policies/{name}"
     words = shlex.split(train)
-    assert words[:2] == ["python", "train.py"] and words[-2:] == ["seed=0,1,2", "-m"]
-    entries = paper_campaign().by_key()
-    for s in range(3):  # the command trains exactly the campaign's runs that the files were exported from
-        entry = entries[f"table5/{SHAPING_OF[name]}/seed{s}"]
-        assert sorted(entry.args) == sorted([*words[2:-2], f"seed={s}"])
-    for cell in ("h2_p1", "h2_p3", "puct_p1", "puct_p3"):  # ... and Table 6 searches these files by name
-        assert f"proposer={name}" in entries[f"table6/{name}/{cell}"].args
+    # the command is the Table 5 stage's sweep for this row, the three seeds of its files
+    table5 = paper_tables()["table5"]
+    assert words == ["python", "train.py", "-m", "experiment=table5", f"variant=table5/{SHAPING_OF[name]}", "seed=0,1,2"]
+    assert f"table5/{SHAPING_OF[name]}" in table5.sweep["variant"] and table5.seeds == [0, 1, 2]
+    # ... and Table 6 searches these files by name
+    assert name in paper_tables()["table6"].sweep["proposer"]
+    assert paper_tables()["table6"].rows[name].trained_from == f"table5/{SHAPING_OF[name]}"
     search_config.validate(cfg)  # the shipped files are there
 
 

@@ -117,7 +117,7 @@ def check_learning_curves(run_dir: Path, tmp_path: Path) -> None:
 def test_joblib_multirun_and_report(tmp_path):
     sweep = tmp_path / "sweep"
     proc = ok(train(
-        tmp_path, "-m", "hydra/launcher=local_parallel", "seed=0,1", "env=aim_features", "table=table4",
+        tmp_path, "-m", "hydra/launcher=local_parallel", "seed=0,1", "env=aim_features", "table=table4", "row=aim_features",
         "budget=smoke", "budget.total_steps=1024", "budget.eval_every=0", "budget.checkpoint_every=0",
         f"hydra.sweep.dir={sweep}",
     ))
@@ -138,7 +138,8 @@ def test_joblib_multirun_and_report(tmp_path):
                              capture_output=True, text=True, timeout=180))
     # Table 4 layout with the paper's figures beside ours
     row = next(line for line in proc.stdout.splitlines() if line.startswith("| + extra feat."))
-    assert "| 2 |" in row and "6.460 ± 0.123" in row
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[1] == "2" and cells[6] == paper_figure("table4", "aim_features"), cells
     assert "No runs yet for: plain SAC, + aim constraint." in proc.stdout
     # --copy-to keeps the small files only, and the report reads the copies the same way
     copies = tmp_path / "copies"
@@ -149,6 +150,14 @@ def test_joblib_multirun_and_report(tmp_path):
     again = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(copies)], cwd=tmp_path, env=ENV,
                               capture_output=True, text=True, timeout=180))
     assert row in again.stdout
+
+
+def paper_figure(table: str, row: str) -> str:
+    """The paper's mean ± std of a table row as the report prints it."""
+    from billiards.tables import paper_tables
+
+    figures = paper_tables()[table].rows[row].figures
+    return f"{figures['mean']:.3f} ± {figures['std']:.3f}"
 
 
 @pytest.mark.slow
@@ -181,13 +190,15 @@ def test_report_never_merges_runs_with_different_settings(tmp_path):
     """Runs of one table row that differ in a setting (here algo.lr, or the budget) get one row
     each, named by the setting and still beside the paper's figure; seeds do not split a row,
     and runs of one configuration stopped at different steps (a CPU budget) share it."""
-    from billiards.report import main as report_main
+    from billiards.report.markdown import row_summary, steps_label, table_groups
+    from billiards.report.runs import find_curves, find_runs, group_curves
+    from billiards.tables import paper_tables
 
     def fake_run(name: str, seed: int, lr: float, mean: float, steps: int, budget: int = 2_000_000) -> None:
         d = tmp_path / "runs" / name
         d.mkdir(parents=True)
         (d / "summary.json").write_text(json.dumps({"frames": steps}))
-        config = {"table": "table4", "seed": seed, "budget": {"total_steps": budget, "cpu_minutes": 60.0},
+        config = {"table": "table4", "row": "aim_features", "seed": seed, "budget": {"total_steps": budget, "cpu_minutes": 60.0},
                   "algo": {"name": "sac", "lr": lr, "hidden_sizes": [256, 256]},
                   "env": {"paradigm": "random_continue", "constrain_aim": True, "extra_features": True},
                   "shaping": {"name": "none"}}
@@ -201,21 +212,23 @@ def test_report_never_merges_runs_with_different_settings(tmp_path):
     fake_run("a1", 1, 3e-4, 4.0, 200_000)
     fake_run("a2", 2, 3e-4, 3.0, 1_234_567)  # e.g. stopped by a CPU budget: steps shown as a range
     fake_run("b0", 0, 1e-3, 5.0, 100_000)
-    out = tmp_path / "report.md"
-    report_main([str(tmp_path / "runs"), "--out", str(out)])
-    rows = [line for line in out.read_text().splitlines() if line.startswith("| + extra feat.")]
-    assert len(rows) == 2, rows
-    assert rows[0].startswith("| + extra feat. (algo.lr=0.0003) | 3 | 100k–1.23M |") and "3.000 ± 0.816 | 6.460 ± 0.123" in rows[0]
-    assert rows[1].startswith("| + extra feat. (algo.lr=0.001) | 1 | 100k |") and "5.000 ± 0.000 | 6.460 ± 0.123" in rows[1]
-    report_main([str(tmp_path / "runs"), "--curves", "--out", str(out)])
-    titles = [line for line in out.read_text().splitlines() if line.startswith("### ")]
-    assert titles == ["### table4: + extra feat. (algo.lr=0.0003) (seeds 0, 1, 2)", "### table4: + extra feat. (algo.lr=0.001) (seeds 0)"]
+    groups = table_groups(find_runs([tmp_path / "runs"])[0])["table4"]
+    rows = {v: row_summary("table4", v, runs) for v, runs in groups.items()}
+    assert sorted(rows) == ["aim_features (algo.lr=0.0003)", "aim_features (algo.lr=0.001)"]
+    slow, fast = rows["aim_features (algo.lr=0.0003)"], rows["aim_features (algo.lr=0.001)"]
+    assert slow["label"] == "+ extra feat. (algo.lr=0.0003)" and slow["seeds"] == [0, 1, 2]
+    assert slow["frames"] == [100_000, 200_000, 1_234_567] and steps_label(slow["frames"]) == "100k–1.23M"
+    assert (slow["mean"], round(slow["std"], 3)) == (3.0, 0.816) and (fast["mean"], fast["n"]) == (5.0, 1)
+    assert slow["paper"] == fast["paper"] == paper_tables()["table4"].rows["aim_features"].figures
+    curves = group_curves(find_curves([tmp_path / "runs"]))
+    assert sorted(curves) == [("table4", "aim_features (algo.lr=0.0003)"), ("table4", "aim_features (algo.lr=0.001)")]
 
 
 def test_report_rows_are_configurations_and_count_distinct_seeds(tmp_path):
     """One seed at two budgets gives two rows; a second run of the same seed and configuration
     is a repeat, not another seed; runs of different physics never share a row."""
-    from billiards.report import report
+    from billiards.report.markdown import row_summary, table_groups
+    from billiards.report.runs import find_runs
 
     def fake_run(name, seed, steps, mean, physics=None):
         d = tmp_path / name
@@ -234,23 +247,25 @@ def test_report_rows_are_configurations_and_count_distinct_seeds(tmp_path):
     fake_run("s0_100k_again", 0, 100_000, 0.6, "korean_medium")
     fake_run("s1_100k", 1, 100_000, 0.5, "korean_medium")
     fake_run("s1_100k_old", 1, 100_000, 0.9)  # before the presets: the international table
-    rows = [line for line in report([tmp_path]).splitlines() if line.startswith("| sac")]
+    rows = {v: row_summary(None, v, runs) for v, runs in table_groups(find_runs([tmp_path])[0])[None].items()}
     assert len(rows) == 4, rows
-    by_label = {r.split(" | ")[0]: r for r in rows}
-    two_k = next(r for label, r in by_label.items() if "budget.total_steps=2000" in label)
-    assert " | 1 | 2k |" in two_k and two_k.rstrip(" |").endswith("korean_medium")
-    hundred = [r for label, r in by_label.items() if "budget.total_steps=100000" in label and "physics.preset=korean" in label]
-    first = next(r for r in hundred if "repeat" not in r)
-    assert " | 2 | 100k |" in first and "0.450 ± 0.050" in first  # seeds 0 and 1, each once
-    assert any("(repeat 2)" in r and " | 1 | 100k |" in r and "0.600" in r for r in hundred)
-    old = next(r for label, r in by_label.items() if "physics.preset=international" in label)
-    assert " | 1 | 100k |" in old and old.rstrip(" |").endswith("international")
+    two_k = next(r for label, r in rows.items() if "budget.total_steps=2000" in label)
+    assert (two_k["n"], two_k["frames"], two_k["physics"]) == (1, [2000], ["korean_medium"])
+    hundred = {label: r for label, r in rows.items() if "budget.total_steps=100000" in label and "physics.preset=korean" in label}
+    first = next(r for label, r in hundred.items() if "repeat" not in label)
+    assert first["seeds"] == [0, 1] and (round(first["mean"], 3), round(first["std"], 3)) == (0.45, 0.05)  # each seed once
+    again = next(r for label, r in hundred.items() if label.endswith("(repeat 2)"))
+    assert (again["seeds"], again["mean"]) == ([0], 0.6)
+    old = next(r for label, r in rows.items() if "physics.preset=international" in label)
+    assert (old["n"], old["physics"]) == (1, ["international"])
 
 
 def test_report_skips_broken_run_dirs_with_a_warning_naming_them(tmp_path, capsys):
     """A run dir without config.yaml, with unparsable YAML or JSON, or with a config lacking
     what its row needs is skipped with a warning naming it; the other runs are reported."""
     from billiards.report import main as report_main
+    from billiards.report.markdown import table_groups
+    from billiards.report.runs import find_curves, find_runs
 
     config = {"seed": 0, "budget": {"total_steps": 1000}, "algo": {"name": "sac"},
               "env": {"paradigm": "random_continue"}, "shaping": {"name": "none"}}
@@ -271,7 +286,9 @@ def test_report_skips_broken_run_dirs_with_a_warning_naming_them(tmp_path, capsy
     report_main([str(tmp_path / "runs"), "--out", str(out)])
     err = capsys.readouterr().err
     text = out.read_text()
-    assert "| sac, random_continue, plain, shaping=none | 1 | 1k |" in text and "2.500 ± 0.000" in text
+    groups = table_groups(find_runs([tmp_path / "runs"])[0])
+    assert list(groups) == [None] and list(groups[None]) == ["sac, random_continue, plain, shaping=none"]
+    assert [r.path.name for r in groups[None]["sac, random_continue, plain, shaping=none"]] == ["good"]
     reasons = {"no_config": "no config.yaml", "bad_yaml": "config.yaml is not valid YAML",
                "bad_json": "eval.json is not valid JSON", "no_algo": "config.yaml lacks what the report reads (KeyError: 'algo')"}
     for name, reason in reasons.items():
@@ -280,7 +297,7 @@ def test_report_skips_broken_run_dirs_with_a_warning_naming_them(tmp_path, capsy
         assert f"runs/{name}: {reason}" in text  # listed in the report too
     report_main([str(tmp_path / "runs"), "--curves", "--out", str(out)])
     err = capsys.readouterr().err
-    assert "### sac, random_continue, plain, shaping=none (seeds 0)" in out.read_text()
+    assert [c.path.name for c in find_curves([tmp_path / "runs"])] == ["good"]
     assert "runs/bad_json: eval_history.jsonl has a line that is not JSON" in err
     assert all(f"runs/{name}: {reasons[name]}" in err for name in ("no_config", "bad_yaml", "no_algo")), err
 
@@ -666,7 +683,7 @@ BAD = [
     (["curriculum=staged", "curriculum.switch_at=[0.5]"], "curriculum.switch_at needs one fraction per stage boundary (2)"),
     (["curriculum=staged", "algo=ppo"], "curriculum=staged needs an off-policy algorithm"),
     (["shaping=rm", "shaping.rm_model=nowhere.pt"], "shaping.rm_model='nowhere.pt': no reward model there"),
-    (["-m", "experiment=table3", "variant=staged", "curriculum.switch_at=[0.7,0.2]"], "curriculum.switch_at must increase"),
+    (["-m", "experiment=table3", "variant=table3/staged", "curriculum.switch_at=[0.7,0.2]"], "curriculum.switch_at must increase"),
     (["physics=bogus"], "Could not find 'physics/bogus'"),
     (["physics.preset=bogus"], "physics.preset='bogus' is not a preset"),
     (["physics.u_roll=-1"], "physics.u_roll: PhysicsParams.u_roll must be a finite positive number, got -1.0"),

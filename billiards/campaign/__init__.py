@@ -1,15 +1,16 @@
-"""The paper's reproduction campaign as one restartable job: ``python -m billiards.campaign``.
+"""The paper's reproduction on Hydra's launchers: ``python -m billiards.campaign``.
 
-* :mod:`.spec` -- every run of every table, declared once (:func:`paper_campaign`), or a small
-  campaign read from a file (``--spec FILE``);
-* :mod:`.ledger` -- the state on disk under ``outputs/campaign/<name>/``;
-* :mod:`.runner` -- runs the unfinished entries N at a time, resumes, drains before a deadline;
-* :mod:`.status` -- done / running / left, CPU-hours spent and left.
+Each paper table (:mod:`billiards.tables`, ``conf/experiment/<table>.yaml``) is one *stage*: one
+Hydra multirun of ``train.py`` or ``search.py`` over its rows and seeds, into
+``<root>/<table>/`` (:mod:`.stages`). Any Hydra launcher runs it: joblib or submitit_local on
+one machine, submitit_slurm or Ray on a cluster. Every job runs with ``resume=auto``: launched
+again, a finished run does nothing and a stopped one continues from its checkpoint, so a stage is
+resumed by running it again. ``status`` and ``report`` read the run directories
+(:mod:`.status`, :mod:`billiards.report.reproduction`); there is no other state.
 
-This package imports neither torch nor the simulator: it starts ``train.py``, ``search.py``
-and ``python -m billiards.rl.policy export`` as processes.
+This package imports neither torch nor the simulator.
 """
 
-from .spec import Campaign, Entry, SpecError, campaign_named, load_spec, paper_campaign
+from .stages import Stage, StageError, paper_stages
 
-__all__ = ["Campaign", "Entry", "SpecError", "campaign_named", "load_spec", "paper_campaign"]
+__all__ = ["Stage", "StageError", "paper_stages"]

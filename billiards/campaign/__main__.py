@@ -1,155 +1,96 @@
-"""Command line of the campaign runner.
+"""Command line of the paper's reproduction.
 
-    python -m billiards.campaign run paper [--jobs 2] [--hours H | --until HH:MM] [--only table1,table2] [--dry-run]
-    python -m billiards.campaign status paper [--only ...] [-v]
-    python -m billiards.campaign stop paper [--now]   # the active runner drains (or stops all now) and exits
-    python -m billiards.campaign report paper [--out DIR]  # reproduction.json / .md from the committed runs
-    python -m billiards.campaign report paper --root outputs/campaign/paper  # ... from a live campaign
-    python -m billiards.campaign run --spec tiny.yaml --root /tmp/tiny
+    python -m billiards.campaign commands [--only table4] [--launcher L] [--budget B]   # print each stage's command
+    python -m billiards.campaign run [--only table1,table2] [--launcher L] [--budget B] [OVERRIDES]
+    python -m billiards.campaign status [-v]
+    python -m billiards.campaign report paper [--root outputs/campaign/paper] [--out DIR]
 
-``paper`` is the built-in campaign (billiards/campaign/spec.py); ``--spec FILE`` reads another
-from YAML or JSON. The state lives under ``--root`` (default ``outputs/campaign/<name>`` in the
-repository).
+``run`` runs the stages one after the other, each as one Hydra multirun (``--launcher``:
+submitit_local, local_parallel (joblib), slurm (submitit), ray_tasks, or Hydra's basic one);
+run again, it continues where it stopped (``resume=auto``). Hydra overrides go to every
+stage (``hydra.launcher.n_jobs=2``, ``hydra.launcher.partition=cpu``). The state is the run
+directories under ``--root`` (default ``outputs/campaign/paper``). ``report`` without
+``--root`` regenerates results/reproduction.json / .md from the committed run directories.
 """
 
 from __future__ import annotations
 
 import argparse
+import shlex
+import subprocess
 import sys
 from pathlib import Path
 
-from billiards.files import display_path
-from billiards.provenance import ROOT
+from billiards.files import ROOT, display_path
 
-from .ledger import STOP, STOP_NOW, Ledger, entry_dir
-from .runner import Runner, command, parse_deadline
-from .spec import SpecError, campaign_named, load_spec
-from .status import entry_states, status_text
+from .stages import BUDGETS, LAUNCHERS, StageError, check_options, paper_stages
+
+NAME = "paper"
 
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m billiards.campaign", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
-    for name, help_ in (("run", "run the unfinished entries"), ("status", "done / running / left, CPU-hours"),
-                        ("stop", "ask the active runner to drain and exit"),
-                        ("report", "write reproduction.json / .md and copy the finished runs' small files")):
+    for name, help_ in (("commands", "print each stage's multirun command"), ("run", "run the stages"),
+                        ("status", "done / started / not started per stage, CPU-hours"),
+                        ("report", "write reproduction.json / .md and the figures")):
         p = sub.add_parser(name, help=help_)
-        p.add_argument("campaign", nargs="?", default=None, help="built-in campaign name (paper)")
-        p.add_argument("--spec", type=Path, default=None, help="a campaign definition file (YAML or JSON)")
+        if name == "report":
+            p.add_argument("campaign", nargs="?", default=NAME, choices=[NAME], help="the campaign (paper)")
         p.add_argument("--root", type=Path, default=None,
-                       help="state directory (default outputs/campaign/<name>); report: read a live campaign there "
+                       help="where the stages write (default outputs/campaign/paper); report: read a campaign there "
                             "(default: the committed run directories under results/)")
-        p.add_argument("--only", default=None, help="comma-separated tables, e.g. table1,table2")
-        p.add_argument("--jobs", type=int, default=2, help="processes at a time (default 2)")
-        if name == "run":
-            p.add_argument("--hours", type=float, default=None, help="stop within H hours from now")
-            p.add_argument("--until", default=None, help="stop by HH:MM (this machine's local time)")
-            p.add_argument("--grace-minutes", type=float, default=5.0,
-                           help="drain this long before the deadline: start nothing new and stop each training run "
-                                "right after its next checkpoint; longer than one checkpoint interval (about 1.5 min "
-                                "of one core for algo=sac at budget=paper) loses nothing, longer still only idles the "
-                                "cores; a run with longer intervals (algo=sac_paper: ~13 min) drains that much earlier "
-                                "on its own")
-            p.add_argument("--dry-run", action="store_true", help="list what would run, run nothing, write nothing")
-            p.add_argument("--restart-stale", action="store_true",
-                           help="re-run from scratch entries whose arguments changed since they started")
-            p.add_argument("--retry-failed", action="store_true", help="try entries that failed repeatedly again")
-            p.add_argument("--poll", type=float, default=2.0, help=argparse.SUPPRESS)
-        if name == "stop":
-            p.add_argument("--now", action="store_true",
-                           help="stop every process at once (training loses up to budget.checkpoint_every steps)")
+        p.add_argument("--only", default=None, help="comma-separated stages, e.g. table1,table2 (extra: only when named)")
+        if name in ("commands", "run"):
+            p.add_argument("--launcher", default=None, choices=LAUNCHERS, help="hydra/launcher of every stage")
+            p.add_argument("--budget", default=None, choices=BUDGETS, help="training budget (default: the paper's)")
+            p.add_argument("overrides", nargs="*", help="Hydra overrides for every stage")
+        if name == "status":
+            p.add_argument("-v", "--verbose", action="store_true", help="name the runs not done")
         if name == "report":
             p.add_argument("--out", type=Path, default=ROOT / "results",
                            help="where reproduction.json/.md and img/ go (default results/); with --root also the "
                                 "finished runs' small files, to training/<name>/ and search/<name>/")
-        if name == "status":
-            p.add_argument("-v", "--verbose", action="store_true", help="one line per entry")
-            p.add_argument("--check-config", action="store_true",
-                           help="compare each started training run's config.yaml with what its arguments compose to now")
     return parser
-
-
-def _campaign(args):
-    if args.spec is not None and args.campaign is not None:
-        raise SpecError("give a campaign name or --spec FILE, not both")
-    campaign = load_spec(args.spec) if args.spec is not None else campaign_named(args.campaign or "paper")
-    root = args.root if args.root is not None else ROOT / "outputs" / "campaign" / campaign.name
-    only = [t for t in args.only.split(",") if t] if args.only else None
-    if args.jobs < 1:
-        raise SpecError(f"--jobs must be >= 1, got {args.jobs}")
-    return campaign, root.resolve(), only
-
-
-def dry_run(campaign, root: Path, only) -> str:
-    """What ``run`` would do now, entry by entry; reads the state, writes nothing."""
-    selected = campaign.select(only)
-    lines = [f"dry run: campaign {campaign.name}, {len(selected)} entries, state in {root}"]
-    for s in entry_states(campaign, root, selected):
-        e = s.entry
-        if s.state in ("done", "shared", "left (shared)", "running", "failed", "stale"):
-            note = f" = {e.same_as}" if e.same_as else ""
-            lines.append(f"  {s.state:<13} {e.key}{note}")
-        elif s.state == "waiting":
-            lines.append(f"  waiting       {e.key} (needs {', '.join(e.needs())})")
-        else:
-            cmd, mode = command(e, entry_dir(root, campaign, e), root)
-            lines.append(f"  {mode:<13} {e.key}: {' '.join(cmd[1:])}")
-    return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    args.campaign = getattr(args, "campaign", NAME)
+    root = (args.root or ROOT / "outputs" / "campaign" / args.campaign).resolve()
     try:
-        campaign, root, only = _campaign(args)
-        if args.command == "status":
-            Ledger(root, campaign.name)  # a ledger of another campaign fails here, clearly
-            sys.stdout.write(status_text(campaign, root, campaign.select(only), args.jobs, args.verbose))
-            if args.check_config:
-                from .drift import config_drift, drift_text
-
-                entries = campaign.select(only)
-                drift = config_drift(campaign, root, entries)
-                checked = sum((entry_dir(root, campaign, e) / "config.yaml").is_file()
-                              for e in entries if e.kind == "train" and not e.same_as)
-                sys.stdout.write(drift_text(drift, checked))
-                return 4 if drift else 0
-            return 0
+        stages = paper_stages(root, [t for t in args.only.split(",") if t] if args.only else None)
         if args.command == "report":
-            from .reproduction import write_report
+            from billiards.report.reproduction import Sources, write_report
 
-            if args.root is None:  # the committed run directories
-                paths = write_report(campaign, None, args.out.resolve(), results=ROOT / "results")
+            if args.root is None:
+                src = Sources(args.campaign, ROOT / "results" / "training" / args.campaign, ROOT / "results" / "search" / args.campaign)
+            elif not root.is_dir():
+                raise StageError(f"{root} does not exist: no stage has run there")
             else:
-                if not root.is_dir():
-                    raise SpecError(f"{root} does not exist: the campaign has not started")
-                Ledger(root, campaign.name)
-                paths = write_report(campaign, root, args.out.resolve())
-            for path in paths:
+                src = Sources(args.campaign, root, root, copy_to=args.out.resolve())
+            for path in write_report(src, args.out.resolve()):
                 print(f"wrote {display_path(path)}")
             return 0
-        if args.command == "stop":
-            if not root.is_dir():
-                raise SpecError(f"{root} does not exist: no runner to stop")
-            if args.now:
-                (root / STOP_NOW).touch()
-                print(f"asked the runner of {root} to stop every process now")
-                return 0
-            (root / STOP).touch()
-            print(f"asked the runner of {root} to drain: it starts nothing new, stops each training run "
-                  f"after its next checkpoint and waits for running searches (stop --now stops them)")
+        if args.command == "status":
+            from .status import status_text
+
+            sys.stdout.write(status_text(stages, args.verbose))
             return 0
-        if args.dry_run:
-            campaign.select(only)
-            sys.stdout.write(dry_run(campaign, root, only))
+        check_options(args.launcher, args.budget, args.overrides)
+        commands = [(s, s.command(args.launcher, args.budget, tuple(args.overrides))) for s in stages]
+        if args.command == "commands":
+            print("\n".join(shlex.join(c) for _, c in commands))
             return 0
-        if not args.grace_minutes >= 0:
-            raise SpecError(f"--grace-minutes must be >= 0, got {args.grace_minutes}")
-        deadline = parse_deadline(args.hours, args.until)
-        runner = Runner(campaign, root, jobs=args.jobs, deadline=deadline, grace=60.0 * args.grace_minutes,
-                        only=only, restart_stale=args.restart_stale, retry_failed=args.retry_failed, poll=args.poll)
-        left = runner.run()
-        return 0 if left == 0 else 3
-    except SpecError as err:
+        for stage, cmd in commands:
+            print(f"stage {stage.table}: {shlex.join(cmd)}", flush=True)
+            code = subprocess.run([sys.executable, *cmd[1:]], cwd=ROOT).returncode
+            if code != 0:
+                print(f"stage {stage.table} ended with exit status {code}; run the same command again to continue it",
+                      file=sys.stderr)
+                return code
+        return 0
+    except StageError as err:
         print(f"Error: {err}", file=sys.stderr)
         return 2
 

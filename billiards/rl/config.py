@@ -34,7 +34,7 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.device import device_error, threads_error
 from billiards.app_config import fixed_job_config as _fixed_job_config
-from billiards.app_config import BASIC_SWEEPER, numeric_bound_errors, register_app, validate_jobs
+from billiards.app_config import BASIC_SWEEPER, RESUME_AUTO, numeric_bound_errors, register_app, validate_jobs
 from billiards.files import CHECKPOINT_FILE, repo_path
 from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
@@ -241,9 +241,12 @@ class TrainConfig:
     # else the CPU), cpu, cuda, cuda:N; the simulator always runs on the CPU
     device: str = "auto"
     progress: bool = True  # tqdm progress bar on stderr
-    table: Optional[str] = None  # the paper table an experiment preset reproduces (for the report)
+    table: Optional[str] = None  # the paper table a variant (variant=<table>/<row>) belongs to
+    row: Optional[str] = None  # the table's row that variant trains (the report groups runs by table and row)
+    paper: Any = None  # an experiment preset's table: the paper's figures (billiards/tables.py reads it)
     paper_steps: int = 1_000_000  # the paper's budget for the table (budget=paper trains this long)
-    resume: Optional[str] = None  # a run dir to continue from its last checkpoint
+    # a run dir to continue from its last checkpoint; auto: this job's own dir if it holds one
+    resume: Optional[str] = None
 
 
 Config = TrainConfig  # the former name (billiards/rl/train.py imports it)
@@ -364,7 +367,7 @@ def _errors(cfg: DictConfig) -> list[str]:
         positive("algo.max_grad_norm", a.max_grad_norm)
     else:
         errs.append(f"algo.name must be one of sac, td3, ppo, got {a.name!r}")
-    if cfg.resume:
+    if cfg.resume and cfg.resume != RESUME_AUTO:
         run_dir = Path(cfg.resume)
         if not run_dir.is_dir():
             errs.append(f"resume={cfg.resume!r}: no such run directory")

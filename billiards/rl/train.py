@@ -42,11 +42,13 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tqdm import tqdm
 
+from billiards.app_config import RESUME_AUTO
 from billiards.device import resolve_device, set_threads
-from billiards.files import atomic_write_text, display_path
+from billiards.files import CHECKPOINT_FILE, atomic_write_text, display_path
 from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.noise import noise_from_config, noise_record
 from billiards.physics.warmup import warm_up
+from billiards.provenance import record_start
 
 from .agents import OFF_POLICY, Agent, make_agent
 from .checkpoint import CheckpointError, RunState, load_checkpoint, save_checkpoint
@@ -321,6 +323,8 @@ def load_run_config(cfg: DictConfig, run_dir: Path) -> tuple[DictConfig, Path, d
     ``run_dir``, or with ``resume=<dir>`` that run's checkpointed config (see
     :func:`resume_config`), dir and checkpoint. The config is validated (ConfigError)."""
     ckpt = None
+    if cfg.resume == RESUME_AUTO:  # this job's own dir: continue what an earlier attempt left there
+        cfg.resume = str(run_dir) if (Path(run_dir) / CHECKPOINT_FILE).is_file() else None
     if cfg.resume:
         ckpt = load_checkpoint(cfg.resume)
         if Path(cfg.resume).resolve() != Path(run_dir).resolve():
@@ -586,6 +590,8 @@ def train(cfg: DictConfig, run_dir: str | Path | None = None) -> float:
                         run_dir, frames, EVAL_FILE, mean)
             return mean
         run = make_run(cfg, run_dir, ckpt)
+        record_start(run_dir, "fresh" if ckpt is None else "resume", run.state.frames,
+                     command=["python", "train.py", *_command_line_overrides()])
     except (CheckpointError, ConfigError) as err:
         raise SystemExit(f"Error: {err}") from None
     return (train_off_policy if cfg.algo.name in OFF_POLICY else train_ppo)(run)

@@ -43,7 +43,8 @@ from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from billiards.app_config import BASIC_SWEEPER, numeric_bound_errors, register_app, validate_jobs
+from billiards.tables import paper_tables
+from billiards.app_config import BASIC_SWEEPER, RESUME_AUTO, numeric_bound_errors, register_app, validate_jobs
 from billiards.device import device_error, threads_error
 from billiards.files import CONFIG_FILE, repo_path
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
@@ -265,16 +266,14 @@ class PolicyProposerConfig:
 # (korean_medium), exported from the campaign's runs (its table6/export/<name>, the proposers of
 # the reproduced Table 6). The ensembles shipped before (international, 100k steps) are in git
 # history up to commit c7b3987.
-SHIPPED_PROPOSERS = {
-    "base": "foul_penalty",  # the foul-penalty base of Table 5
-    "gentle": "gentle",  # + the leave-position (gentle-shot) bonus
-    "near_miss": "near_miss",  # + the near-miss bonus
-    "both": "both",  # + both bonuses
-}
+# proposer=<name>: the ensembles of Table 6 (conf/experiment/table6.yaml), each the three seeds of
+# the Table 5 row it was exported from (base: the foul-penalty base), committed under
+# results/policies/<name>/ so that Table 6 regenerates from the repository alone
+SHIPPED_PROPOSERS = {name: row.trained_from.partition("/")[2] for name, row in paper_tables()["table6"].rows.items()
+                     if row.trained_from}
 SHIPPED_SEEDS = (0, 1, 2)
-# the campaign's Table 5 run (billiards/campaign/spec.py) for seeds 0, 1, 2, then the export
-TRAIN_COMMAND = ("python train.py table=table5 paper_steps=1000000 budget=paper physics=korean_medium algo=sac "
-                 "env=aim_features shaping={shaping} curriculum=none seed=0,1,2 -m && "
+# the Table 5 runs of those seeds (a stage of the reproduction), then the export
+TRAIN_COMMAND = ("python train.py -m experiment=table5 variant=table5/{shaping} seed=0,1,2 && "
                  "python -m billiards.rl.policy export <the three run dirs> --out {out}")
 
 
@@ -320,7 +319,11 @@ class SearchAppConfig:
     threads: Optional[int] = None  # threads for the simulator's batches (numba) and the proposer networks (torch); default: all cores
     progress: bool = True
     picture: bool = True
-    resume: Optional[str] = None  # a stopped search's run dir: continue it (P3: from its next chain)
+    # a stopped search's run dir: continue it (P3: from its next chain); auto: this job's own dir
+    # if it holds a stopped run (a finished one does nothing), else a fresh run there
+    resume: Optional[str] = None
+    table: Optional[str] = None  # the paper table an experiment preset reproduces (experiment=table6)
+    paper: Any = None  # that table's paper figures (billiards/tables.py reads them)
     # where a policy proposer's networks run: auto | cpu | cuda | cuda:N (billiards/device.py); the
     # simulator, the search and the geometric proposers stay on the CPU
     device: str = "auto"
@@ -530,7 +533,7 @@ def errors(cfg) -> list[str]:
                 errs.append(f"protocol.{key} must be >= 1, got {getattr(protocol, key)}")
     if cfg.threads is not None and (err := threads_error(cfg.threads)):
         errs.append(err)
-    if cfg.get("resume") and not (Path(cfg.resume) / CONFIG_FILE).is_file():
+    if cfg.get("resume") and cfg.resume != RESUME_AUTO and not (Path(cfg.resume) / CONFIG_FILE).is_file():
         errs.append(f"resume={cfg.resume!r}: not a search run directory (no {CONFIG_FILE} there)")
     errs.extend(physics_errors(cfg.physics))
     noise = cfg.get("noise")  # absent from a plain config written before it existed: exact play

@@ -10,12 +10,10 @@ import json
 import sys
 from pathlib import Path
 
-PAPER_TABLE6 = {
-    "base": {"p1_h2": 99.80, "p1_puct": 67.93, "p3_h2": (1383, 2634), "p3_puct": (85.7, 404)},
-    "gentle": {"p1_h2": 99.71, "p1_puct": 79.11, "p3_h2": (955, 1750), "p3_puct": (32.4, 157)},
-    "near_miss": {"p1_h2": 99.83, "p1_puct": 81.85, "p3_h2": (2052, 9392), "p3_puct": (77.4, 345)},
-    "both": {"p1_h2": 99.77, "p1_puct": 62.84, "p3_h2": (1194, 3272), "p3_puct": (50.4, 191)},
-}
+from tabulate import tabulate
+
+from billiards.tables import paper_tables
+
 COLUMNS = [("p1", "h2"), ("p1", "puct"), ("p3", "h2"), ("p3", "puct")]
 LEGACY_PHYSICS = "international"  # results written before the physics presets (billiards.physics.config)
 
@@ -71,11 +69,15 @@ def _cell(res: dict | None, protocol: str) -> str:
     return text + (f" ({', '.join(notes)})" if notes else "")
 
 
+def paper_table6() -> dict[str, dict]:
+    """The paper's Table 6 figures by proposer (conf/experiment/table6.yaml)."""
+    return {name: row.figures for name, row in paper_tables()["table6"].rows.items()}
+
+
 def _paper(name: str, protocol: str, kind: str) -> str:
-    row = PAPER_TABLE6.get(name)
-    if row is None:
+    v = paper_table6().get(name, {}).get(f"{protocol}_{kind}")
+    if v is None:
         return "—"
-    v = row[f"{protocol}_{kind}"]
     return f"{v:.2f}" if protocol == "p1" else f"{v[0]:g} ({v[1]})"
 
 
@@ -93,17 +95,13 @@ def _table6(physics: str, results: list[dict]) -> str:
     cells: dict[tuple[str, str, str], dict] = {}
     for r in results:
         cells[(r["proposer"], r["protocol"], r["search"])] = r
-    names = sorted({k[0] for k in cells}, key=lambda n: (n not in PAPER_TABLE6, list(PAPER_TABLE6).index(n) if n in PAPER_TABLE6 else 0, n))
-    lines = [
-        "Table 6: proposers at 400 simulations per shot. P1: points per 100-shot random-start inning (100 innings); "
-        "P3: canonical-start chain length before the first miss or foul, mean (longest). Ours | paper. "
-        f"(n inn.), (n-shot innings), (n chains): a run that departs from that protocol; cap: chains stopped "
-        f"at that length; partial: an interrupted run. Physics: `{physics}`.",
-        "",
-        "| proposer | P1 h=2 | P1 PUCT | P3 h=2 mean (max) | P3 PUCT mean (max) |",
-        "|---|---|---|---|---|",
-    ]
-    for name in names:
-        row = [f"{_cell(cells.get((name, p, k)), p)} \\| {_paper(name, p, k)}" for p, k in COLUMNS]
-        lines.append(f"| {name} | " + " | ".join(row) + " |")
-    return "\n".join(lines) + "\n"
+    paper = list(paper_table6())
+    names = sorted({k[0] for k in cells}, key=lambda n: (n not in paper, paper.index(n) if n in paper else 0, n))
+    rows = [[name] + [f"{_cell(cells.get((name, p, k)), p)} \\| {_paper(name, p, k)}" for p, k in COLUMNS] for name in names]
+    caption = ("Table 6: proposers at 400 simulations per shot. P1: points per 100-shot random-start inning (100 innings); "
+               "P3: canonical-start chain length before the first miss or foul, mean (longest). Ours | paper. "
+               "(n inn.), (n-shot innings), (n chains): a run that departs from that protocol; cap: chains stopped "
+               f"at that length; partial: an interrupted run. Physics: `{physics}`.")
+    table = tabulate(rows, headers=["proposer", "P1 h=2", "P1 PUCT", "P3 h=2 mean (max)", "P3 PUCT mean (max)"],
+                     tablefmt="github", disable_numparse=True)
+    return f"{caption}\n\n{table}\n"

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from billiards.app_config import RESUME_AUTO
 from billiards.device import resolve_device, set_threads
 from billiards.files import CONFIG_FILE, RESULTS_FILE, atomic_write_text, display_path
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
@@ -62,14 +63,30 @@ def resume_config(out_dir: Path, current):
     return saved
 
 
-def run(cfg, out_dir: str | Path) -> ProtocolResult:
+def finished_run(out_dir: Path) -> dict | None:
+    """The ``results.json`` of a search that finished in ``out_dir`` (not a partial one), or None."""
+    try:
+        res = json.loads((out_dir / RESULTS_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    return res if isinstance(res, dict) and not res.get("extra", {}).get("partial") else None
+
+
+def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
     """Run the configured protocol into ``out_dir``: ``config.yaml`` at start, each finished P3
     chain in ``chains.jsonl`` as it ends, ``results.json`` at the end. Ctrl-C writes
     ``results.json`` from what finished, marked ``partial``; ``resume=<out_dir>`` continues a
-    stopped P3 from its next chain."""
+    stopped P3 from its next chain. ``resume=auto``: a search finished in ``out_dir`` is left
+    as it is (None is returned), a stopped P3 there continues, anything else starts fresh."""
     commit = git_commit()  # the code that runs (read before anything runs: files may change meanwhile)
     out_dir = Path(out_dir)
     cfg = typed(cfg)
+    if cfg.get("resume") == RESUME_AUTO:
+        if (done := finished_run(out_dir)) is not None:
+            print(f"{display_path(out_dir)} is finished (mean {done['mean']:.2f}): nothing to do", flush=True)
+            return None
+        stopped = (out_dir / CONFIG_FILE).is_file() and (out_dir / CHAINS_FILE).is_file()
+        cfg.resume = str(out_dir) if stopped and cfg.protocol.name == "p3" else None
     if cfg.get("resume"):
         cfg = resume_config(out_dir, cfg)
     validate(cfg)

@@ -1,0 +1,5 @@
+"""``python -m billiards.report DIR...``."""
+
+from . import main
+
+main()
