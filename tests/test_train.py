@@ -415,7 +415,7 @@ def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_st
 
     import billiards.rl.train as train_module
     from billiards.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint
-    from billiards.rl.train import make_run, rack_rng, train_off_policy
+    from billiards.rl.train import env_rngs, make_run, train_off_policy
 
     saved = []
 
@@ -442,7 +442,7 @@ def test_checkpoint_restores_bit_for_bit_old_configs_resume_and_finished_runs_st
     assert same(run.agent.state_dict_extra(), state["agent_extra"])
     assert same(run.rb.storage[: len(run.rb)].to_dict(), state["buffer"]["data"])
     assert same(run.rb.writer.state_dict(), state["buffer"]["writer"])
-    assert same(rng_state(rack_rng(run.env)), state["rng"])
+    assert same(rng_state(env_rngs(run.env)), state["rng"])
     assert (run.state.frames, run.state.owed, run.state.next_eval) == tuple(state["counters"][k] for k in ("frames", "owed", "next_eval"))
     assert run.state.eval_history == state["eval_history"] and len(state["eval_history"]) == 1
     train_off_policy(run)
@@ -851,9 +851,12 @@ def test_a_run_on_a_device_collects_with_the_agents_own_policy(tmp_path):
 
 @pytest.mark.slow
 def test_a_checkpoint_with_a_valid_checksum_but_impossible_contents_is_refused(tmp_path):
-    """A checksum proves a file is what was written, not that it makes sense: impossible counters
-    and a malformed random-generator state are refused on resume with the checkpoint's error (no
-    traceback), and the run's files are left as they were."""
+    """A checksum proves a file is what was written, not that it makes sense: impossible counters,
+    a malformed random-generator state and a collector state that does not fit the env are
+    refused on resume with the checkpoint's error (no traceback), and the run's files are left as
+    they were."""
+    import torch
+
     from billiards.rl.checkpoint import load_checkpoint, save_checkpoint
 
     run_dir = tmp_path / "run"
@@ -867,10 +870,16 @@ def test_a_checkpoint_with_a_valid_checksum_but_impossible_contents_is_refused(t
         "negative CPU time": (lambda c: c["counters"].update(cpu_seconds=-1.0), "cpu_seconds=-1.0"),
         "malformed rng": (lambda c: c["rng"].update(env={"bit_generator": "PCG64", "state": "garbage"}),
                           "random-generator state is malformed"),
+        "another env's innings": (lambda c: c["collector"]["carrier"].update(shot=torch.zeros(5, 1, dtype=torch.int64)),
+                                  "collector state is malformed"),
+        "innings past their end": (lambda c: c["collector"]["carrier"].update(shot=torch.full((32, 1), 99)),
+                                   "collector state does not fit this env (shot)"),
+        "no table": (lambda c: c["collector"]["carrier"].pop("positions"), "collector state does not fit this env (positions)"),
     }
     for name, (change, message) in cases.items():
         ckpt = {k: v for k, v in good.items()}
         ckpt["counters"], ckpt["rng"] = dict(good["counters"]), dict(good["rng"])
+        ckpt["collector"] = {**good["collector"], "carrier": dict(good["collector"]["carrier"])}
         change(ckpt)
         save_checkpoint(run_dir, ckpt)
         proc = train(tmp_path, f"resume={run_dir}", "progress=false")
@@ -908,3 +917,81 @@ def test_a_signal_mid_run_checkpoints_that_step_and_exits_cleanly(tmp_path, sign
     resumed = ok(train(tmp_path, f"resume={run_dir}", timeout=600))
     assert f"at {frames} frames" in resumed.stdout + resumed.stderr
     assert json.loads((run_dir / "summary.json").read_text())["frames"] >= 8192
+
+
+# train.py sending itself SIGTERM (os.kill, through the trainer's real handler) as its training
+# env begins its AT-th step (argv[1]): a test hook around the real entry point, like
+# KILL_AFTER_FIRST_CHECKPOINT; evaluations play in envs of their own and do not count.
+SIGTERM_AT_STEP = f"""
+import os, runpy, signal, sys
+sys.path.insert(0, {str(REPO)!r})
+import billiards.rl.train as train
+
+at = int(sys.argv.pop(1))
+make_train_env = train.make_train_env
+
+def make_signalling_env(cfg, seed):
+    env = make_train_env(cfg, seed)
+    step, steps = env.base_env._step, []
+
+    def counted(tensordict):
+        steps.append(1)
+        if len(steps) == at:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return step(tensordict)
+
+    env.base_env._step = counted
+    return env
+
+train.make_train_env = make_signalling_env
+sys.argv[0] = {TRAIN!r}
+runpy.run_path({TRAIN!r}, run_name="__main__")
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo, at_step, overrides", [
+    ("sac", 20, ()),  # SAC updating (after its 512 warm-up frames); also killed after a periodic checkpoint
+    ("td3", 5, ("noise=fastfiz", "env=aim_features")),  # in the warm-up, with execution noise
+    ("ppo", 19, ("algo.frames_per_batch=256",)),  # in the middle of the third rollout (8 env steps of 32 innings)
+])
+def test_a_stopped_run_resumes_to_the_uninterrupted_runs_result(tmp_path, algo, at_step, overrides):
+    """SIGTERM in the middle of a run: the run finishes its batch and checkpoints that step,
+    collector included (every inning's table and shot, the rack and noise generators); resumed,
+    it ends with the same final evaluation, networks, optimizers, replay buffer and generators
+    as an uninterrupted run of the same seed, bit for bit. For SAC also a run SIGKILLed right
+    after its first periodic checkpoint."""
+    import signal
+
+    from billiards.rl.checkpoint import load_checkpoint
+
+    common = [f"algo={algo}", "budget=smoke", "budget.total_steps=1024", "budget.eval_every=512",
+              "budget.checkpoint_every=512", *overrides]
+    whole = tmp_path / "whole"
+    ok(train(tmp_path, *common, f"hydra.run.dir={whole}"))
+    batch = 256 if algo == "ppo" else 32  # SAC / TD3: one step of the 32 innings per batch
+    stops = {"sigterm": math.ceil(at_step * 32 / batch) * batch}
+    if algo == "sac":
+        stops["sigkill"] = 512
+    for how, frames in stops.items():
+        run_dir = tmp_path / how
+        if how == "sigterm":
+            proc = subprocess.run([sys.executable, "-c", SIGTERM_AT_STEP, str(at_step), *common, f"hydra.run.dir={run_dir}",
+                                   "progress=false"], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=240)
+            assert proc.returncode == 128 + signal.SIGTERM, proc.stderr[-3000:]
+        else:
+            proc = train_killed_after_first_checkpoint(tmp_path, *common, f"hydra.run.dir={run_dir}")
+            assert proc.returncode == -signal.SIGKILL, proc.stderr[-3000:]
+        stopped = load_checkpoint(run_dir)
+        assert stopped["counters"]["frames"] == frames and 0 < frames < 1024
+        assert stopped["collector"]["carrier"]["positions"].shape == (32, 4, 2)
+        assert not (run_dir / "eval.json").exists()
+        ok(train(tmp_path, f"resume={run_dir}"))
+        assert (run_dir / "eval.json").read_bytes() == (whole / "eval.json").read_bytes(), how
+        a, b = load_checkpoint(whole), load_checkpoint(run_dir)
+        for key in ("agent", "agent_extra", "buffer", "rng", "counters"):
+            if key == "counters":
+                a[key], b[key] = ({k: v for k, v in c[key].items() if not k.endswith("_seconds")} for c in (a, b))
+            assert same(a[key], b[key]), (how, key)
+        summaries = [json.loads((d / "summary.json").read_text()) for d in (whole, run_dir)]
+        assert summaries[0]["eval"] == summaries[1]["eval"] and summaries[0]["updates"] == summaries[1]["updates"]

@@ -15,8 +15,13 @@ runs code from the file):
 * ``counters``: env frames, fractional update debt, next log/eval/checkpoint steps,
   accumulated training seconds (wall-clock and CPU);
 * ``eval_history``: every evaluation so far;
-* ``rng``: torch, numpy, python and the training env's rack generator states
-  (:func:`rng_state`: numpy arrays as lists of ints), and the CUDA generator's of a run on a GPU;
+* ``rng``: torch, numpy, python and the training env's rack and execution-noise generator
+  states (:func:`rng_state`: numpy arrays as lists of ints), and the CUDA generator's of a run
+  on a GPU;
+* ``collector``: what the collector holds between two batches (:func:`collector_state`): the
+  tensordict the next env step starts from (every inning's table, shot count and done flags)
+  and the next trajectory id; None when no collector was running (the final checkpoint) and
+  in checkpoints written before it existed;
 * ``wandb_id``: to continue the same wandb run;
 * ``stage_log``: the curriculum stages entered so far.
 
@@ -47,6 +52,7 @@ import pickle
 import random
 import re
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -87,32 +93,84 @@ def _plain_array(value: Any) -> Any:
     return value
 
 
-def rng_state(env_rng: np.random.Generator, device: torch.device | None = None) -> dict[str, Any]:
+EnvRngs = np.random.Generator | Mapping[str, np.random.Generator]
+
+
+def _env_rngs(env_rngs: EnvRngs) -> Mapping[str, np.random.Generator]:
+    return {"env": env_rngs} if isinstance(env_rngs, np.random.Generator) else env_rngs
+
+
+def rng_state(env_rngs: EnvRngs, device: torch.device | None = None) -> dict[str, Any]:
     """Every random state a training run draws from, as tensors and plain types: torch's,
-    numpy's global one, Python's ``random``, the training env's rack generator and, on a CUDA
-    ``device``, that GPU's generator."""
+    numpy's global one, Python's ``random``, the training env's generators and, on a CUDA
+    ``device``, that GPU's generator. ``env_rngs``: the env's generators by name (the trainer
+    passes ``{"env": racks, "env_noise": execution noise}``), or one Generator, the racks'."""
     version, internal, gauss_next = random.getstate()
     state = {
         "torch": torch.get_rng_state(),
         "numpy": _plain_array(np.random.get_state(legacy=False)),
         "python": {"version": version, "internal": list(internal), "gauss_next": gauss_next},
-        "env": _plain_array(env_rng.bit_generator.state),
     }
+    state |= {name: _plain_array(rng.bit_generator.state) for name, rng in _env_rngs(env_rngs).items()}
     if device is not None and torch.device(device).type == "cuda":
         state["cuda"] = torch.cuda.get_rng_state(device)
     return state
 
 
-def set_rng_state(state: dict[str, Any], env_rng: np.random.Generator, device: torch.device | None = None) -> None:
-    """Restore what :func:`rng_state` saved (numpy accepts its states with lists for arrays);
-    a saved CUDA generator state goes to a CUDA ``device`` (a CPU run has none to restore)."""
+def set_rng_state(state: dict[str, Any], env_rngs: EnvRngs, device: torch.device | None = None) -> None:
+    """Restore what :func:`rng_state` saved (numpy accepts its states with lists for arrays).
+    The racks' generator (``"env"``) must be in ``state``; another env generator the state
+    lacks (``"env_noise"`` in checkpoints written before it was saved) keeps its seeded state.
+    A saved CUDA generator state goes to a CUDA ``device`` (a CPU run has none to restore)."""
     torch.set_rng_state(state["torch"])
     np.random.set_state(state["numpy"])
     py = state["python"]
     random.setstate((py["version"], tuple(py["internal"]), py["gauss_next"]))
-    env_rng.bit_generator.state = state["env"]
+    for name, rng in _env_rngs(env_rngs).items():
+        if name == "env" or name in state:
+            rng.bit_generator.state = state[name]
     if "cuda" in state and device is not None and torch.device(device).type == "cuda":
         torch.cuda.set_rng_state(state["cuda"], device)
+
+
+# ----------------------------------------------------------------------------- the collector
+
+
+def collector_state(collector) -> dict[str, Any] | None:
+    """What a TorchRL 0.14 :class:`~torchrl.collectors.Collector` holds between two batches and
+    a resume needs to collect the very batches the uninterrupted run would: its carrier, the
+    tensordict the next env step starts from (every inning's table, shot count, observation
+    and done flags; a nested dict of CPU tensors), and the next trajectory id. None if the
+    collector holds none (it was shut down)."""
+    carrier = getattr(collector, "_carrier", None)
+    if carrier is None:
+        return None
+    state: dict[str, Any] = {"carrier": carrier.detach().to("cpu").clone().to_dict()}
+    if getattr(collector, "track_traj_ids", False):
+        state["traj_id"] = int(collector._traj_pool.state_dict()["traj_id"])
+    return state
+
+
+def _collector_from(entry: Any, carrier_spec) -> dict[str, Any]:
+    """The checkpoint's collector entry with its carrier as a TensorDict of the env's batch,
+    checked against ``carrier_spec`` (the env's observation and done specs: every key there,
+    of its shape and dtype, within its bounds), or CheckpointError."""
+    from tensordict import TensorDict
+
+    try:
+        carrier = TensorDict(entry["carrier"], batch_size=carrier_spec.shape)
+        traj_id = entry.get("traj_id")
+        if traj_id is not None and (isinstance(traj_id, bool) or not isinstance(traj_id, int) or traj_id < 0):
+            raise ValueError(f"traj_id={traj_id!r}")
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as err:
+        raise CheckpointError(f"cannot resume: the checkpoint's collector state is malformed ({type(err).__name__}: "
+                              f"{err}); it is corrupt, start a new run") from None
+    bad = [str(key) for key, spec in carrier_spec.items(True, True)
+           if not isinstance(carrier.get(key, None), torch.Tensor) or not spec.is_in(carrier.get(key))]
+    if bad:
+        raise CheckpointError(f"cannot resume: the checkpoint's collector state does not fit this env ({', '.join(bad)}); "
+                              f"it is corrupt, start a new run")
+    return {"carrier": carrier, "traj_id": traj_id}
 
 
 # ----------------------------------------------------------------------------- the run state
@@ -129,6 +187,12 @@ class RunState:
     and checkpoint are due (``inf``: never). ``train_seconds`` and ``cpu_seconds`` are the
     wall-clock and process CPU seconds of the run's earlier processes; :meth:`times` adds this
     process's since :meth:`start_clock`.
+
+    A restored state also keeps the checkpoint's collector state and random states (``pending``)
+    until :meth:`resume_collector` puts them into the run's new collector, right before its
+    first batch: building a collector resets the env (drawing racks) and may run the policy,
+    so the generators are set again after that, and the resumed run collects, draws and updates
+    exactly as the uninterrupted run did after the checkpoint.
     """
 
     frames: int = 0
@@ -141,6 +205,7 @@ class RunState:
     eval_history: list[dict] = field(default_factory=list)
     stage_log: list[dict] = field(default_factory=list)  # {"stage", "from_step", "free", "step"} at each stage entry
     wandb_id: str | None = None
+    pending: dict[str, Any] | None = field(default=None, repr=False)  # {"collector", "rng"} until resume_collector
     _t0: float = field(default=0.0, repr=False)
     _c0: float = field(default=0.0, repr=False)
 
@@ -166,11 +231,11 @@ class RunState:
         self.owed -= k
         return k
 
-    def capture(self, config: dict, agent, rb, env_rng: np.random.Generator, *, save_buffer: bool = True,
+    def capture(self, config: dict, agent, rb, env_rngs: EnvRngs, *, collector=None, save_buffer: bool = True,
                 device: torch.device | None = None) -> dict[str, Any]:
         """The checkpoint dict (see the module docstring) of this state, ``config`` (plain),
-        the agent, the replay buffer ``rb`` (None for PPO; left out unless ``save_buffer``)
-        and every random generator."""
+        the agent, the replay buffer ``rb`` (None for PPO; left out unless ``save_buffer``),
+        the running ``collector``'s state (None: none running) and every random generator."""
         buffer = None
         if rb is not None and save_buffer and len(rb):
             n = len(rb)  # a TensorDict is no plain type: its nested dict of tensors and its length
@@ -193,17 +258,20 @@ class RunState:
                 "next_ckpt": self.next_ckpt,
             },
             "eval_history": self.eval_history,
-            "rng": rng_state(env_rng, device),
+            "rng": rng_state(env_rngs, device),
+            "collector": None if collector is None else collector_state(collector),
             "wandb_id": self.wandb_id,
             "stage_log": self.stage_log,
         }
 
     @classmethod
-    def restore(cls, ckpt: dict[str, Any], agent, rb, env_rng: np.random.Generator,
-                device: torch.device | None = None) -> RunState:
+    def restore(cls, ckpt: dict[str, Any], agent, rb, env_rngs: EnvRngs, device: torch.device | None = None,
+                carrier_spec=None) -> RunState:
         """Puts a checkpoint's networks, optimizers, replay buffer and random generators back
-        into the run's objects and returns its counters. Reads checkpoints of every earlier
-        version of format 2 (e.g. those written before ``stage_log`` existed)."""
+        into the run's objects and returns its counters, with its collector state (checked
+        against ``carrier_spec``, the env's observation and done specs) pending for
+        :meth:`resume_collector`. Reads checkpoints of every earlier version of format 2 (e.g.
+        those written before ``stage_log`` or the collector state existed)."""
         try:
             agent.load_state_dict(ckpt["agent"])
             agent.load_state_dict_extra(ckpt["agent_extra"])
@@ -223,11 +291,30 @@ class RunState:
         elif rb is not None:
             log.warning("resume: the checkpoint has no replay buffer (checkpoint.save_buffer=false); refilling from scratch")
         try:
-            set_rng_state(ckpt["rng"], env_rng, device)
+            set_rng_state(ckpt["rng"], env_rngs, device)
         except (TypeError, ValueError, KeyError, IndexError, RuntimeError, OverflowError) as err:
             raise CheckpointError(f"cannot resume: the checkpoint's random-generator state is malformed "
                                   f"({type(err).__name__}: {err}); it is corrupt, start a new run") from None
+        entry = ckpt.get("collector")
+        if entry is not None and carrier_spec is not None:
+            state.pending = {"collector": _collector_from(entry, carrier_spec), "rng": ckpt["rng"]}
+        elif carrier_spec is not None:
+            log.info("resume: the checkpoint holds no collector state (written at the end of a run or by an older "
+                     "version): the innings in progress are not restored, the collector starts fresh ones")
         return state
+
+    def resume_collector(self, collector, env_rngs: EnvRngs, device: torch.device | None = None) -> None:
+        """Into a collector just built for the resumed run: the checkpoint's carrier and next
+        trajectory id, then every random generator's state at the checkpoint again (no-op
+        unless :meth:`restore` left them pending)."""
+        if self.pending is None:
+            return
+        pending, self.pending = self.pending, None
+        saved = pending["collector"]
+        collector._carrier.update(saved["carrier"])
+        if saved["traj_id"] is not None and getattr(collector, "track_traj_ids", False):
+            collector._traj_pool.load_state_dict({"traj_id": torch.tensor(saved["traj_id"], dtype=torch.int)})
+        set_rng_state(pending["rng"], env_rngs, device)
 
 
 def check_counters(ckpt: dict[str, Any]) -> dict[str, Any]:

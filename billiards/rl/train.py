@@ -18,7 +18,9 @@ paper's "step". A run is read in three places:
   ``budget.checkpoint_every``; :func:`finish` makes the final evaluation (eval.json,
   eval_<start>.json for further starts), summary.json and the last checkpoint.
 
-A killed run keeps its last checkpoint and goes on from it with ``resume=<run dir>``.
+A killed run keeps its last checkpoint and goes on from it with ``resume=<run dir>``; a checkpoint
+holds the collector's state between two batches and every random generator, so the resumed run
+ends exactly as the uninterrupted one would have.
 """
 
 from __future__ import annotations
@@ -116,9 +118,16 @@ def make_train_env(cfg, seed: int):
     return make_env(cfg.env.num_envs, seed=seed, **env_kwargs(cfg))
 
 
-def rack_rng(env) -> np.random.Generator:
-    """The numpy Generator the training env draws its racks from."""
-    return env.base_env.rng
+def env_rngs(env) -> dict[str, np.random.Generator]:
+    """The numpy Generators the training env draws from: its racks (``"env"``) and its
+    execution noise (``"env_noise"``)."""
+    return {"env": env.base_env.rng, "env_noise": env.base_env.noise_rng}
+
+
+def carrier_spec(env):
+    """What the tensordict between two env steps holds of the env: its observation and done
+    specs (a checkpoint's collector state must fit them)."""
+    return env.full_observation_spec.clone().update(env.full_done_spec)
 
 
 def evaluate_policy(cfg, policy, n_innings: int, start: str):
@@ -255,6 +264,7 @@ class Run:
     logger: MetricLogger
     stages: Stages | None  # the curriculum, None without one
     window: Window
+    collector: Any = None  # the running collector (while a loop collects), whose state checkpoints hold
 
     def budget_spent(self) -> bool:
         """The training budget is spent: budget.total_steps frames or budget.cpu_minutes."""
@@ -308,8 +318,8 @@ class Run:
         return result, live
 
     def checkpoint(self) -> Path:
-        """Writes checkpoint.pt: the run state with the config, agent, buffer and RNGs."""
-        state = self.state.capture(_plain(self.cfg), self.agent, self.rb, rack_rng(self.env),
+        """Writes checkpoint.pt: the run state with the config, agent, buffer, collector and RNGs."""
+        state = self.state.capture(_plain(self.cfg), self.agent, self.rb, env_rngs(self.env), collector=self.collector,
                                    save_buffer=self.cfg.checkpoint.save_buffer, device=self.device)
         return save_checkpoint(self.run_dir, state)
 
@@ -354,7 +364,7 @@ def make_run(cfg: DictConfig, run_dir: Path, ckpt: dict | None = None) -> Run:
     if ckpt is None:
         state = RunState.fresh(cfg.budget)
     else:
-        state = RunState.restore(ckpt, agent, rb, rack_rng(env), device)
+        state = RunState.restore(ckpt, agent, rb, env_rngs(env), device, carrier_spec(env))
         log.info("resumed from %s at %d frames, %d updates", display_path(run_dir), state.frames, agent.n_updates)
     metric_names = agent.metric_names + (("stage",) if stages else ())
     logger = MetricLogger(cfg, run_dir, metric_names, resume_step=None if ckpt is None else state.frames,
@@ -374,8 +384,10 @@ class StopRequests:
     """SIGINT (Ctrl-C), SIGTERM and SIGUSR1 (a scheduler's preemption notice: SLURM, submitit)
     while a run trains: the handler only records the signal; the loop checks after each batch,
     writes a checkpoint at that step and exits with 128 + the signal's number, so nothing finished
-    is lost and ``resume=<run dir>`` continues. A second Ctrl-C stops at once (KeyboardInterrupt),
-    losing at most what came after the last checkpoint. Installed only in the main thread."""
+    is lost and ``resume=<run dir>`` continues to the uninterrupted run's result (a batch boundary:
+    the checkpoint holds the collector's state there). A second Ctrl-C stops at once
+    (KeyboardInterrupt), losing at most what came after the last checkpoint. Installed only in
+    the main thread."""
 
     SIGNALS = ("SIGINT", "SIGTERM", "SIGUSR1")
 
@@ -511,14 +523,20 @@ def finish(run: Run, bar) -> float:
 @contextmanager
 def collecting(run: Run, policy, frames_per_batch: int) -> Iterator[Iterable[TensorDictBase]]:
     """The batches of a :func:`make_collector` until the budget's frames are collected (none
-    if the budget is already spent); the collector is shut down at the end."""
+    if the budget is already spent); the collector is shut down at the end. A resumed run's
+    collector first gets the checkpoint's collector and random states back
+    (:meth:`RunState.resume_collector`), and ``run.collector`` is the collector meanwhile, so
+    that every checkpoint written between two batches holds its state."""
     if run.budget_spent():
         yield ()
         return
     collector = make_collector(run, policy, frames_per_batch)
+    run.state.resume_collector(collector, env_rngs(run.env), run.device)
+    run.collector = collector
     try:
         yield collector
     finally:
+        run.collector = None
         collector.shutdown()
 
 
