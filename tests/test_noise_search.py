@@ -151,14 +151,14 @@ def test_train_config_takes_the_noise_group_and_refuses_bad_sigmas():
     from hydra import initialize_config_dir
 
     from billiards.rl.config import ConfigError, validate  # importing it registers the training schemas
-    from billiards.rl.train import env_kwargs
+    from billiards.rl.config import env_options
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         plain = hydra_compose(config_name="config", overrides=["budget=smoke"])
         noisy = hydra_compose(config_name="config", overrides=["budget=smoke", "noise=fastfiz_x5", "noise.speed=0.2"])
         bad = hydra_compose(config_name="config", overrides=["budget=smoke", "noise=fastfiz", "noise.tip_mm=-0.5"])
-    assert env_kwargs(plain)["noise"].is_exact
-    assert env_kwargs(noisy)["noise"] == NoiseModel(X5.sigma_aim_deg, 0.2, X5.sigma_tip_mm)
+    assert env_options(plain).noise.is_exact
+    assert env_options(noisy).noise == NoiseModel(X5.sigma_aim_deg, 0.2, X5.sigma_tip_mm)
     validate(noisy)
     with pytest.raises(ConfigError, match="noise.tip_mm must be a finite number >= 0"):
         validate(bad)

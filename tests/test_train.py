@@ -87,7 +87,7 @@ def test_smoke_run_writes_eval_json(tmp_path, algo):
     proc = subprocess.run([sys.executable, "-m", "billiards.report", str(run_dir)], cwd=tmp_path, env=ENV,
                           capture_output=True, text=True, timeout=180)
     ok(proc)
-    assert f"{algo}, random_continue, plain, shaping=none | 1 |" in proc.stdout
+    assert [f"{algo}, random_continue, plain, shaping=none", "1"] in [r[:2] for r in table_cells(proc.stdout)]
     assert (run_dir / "report.md").read_text() == proc.stdout
     if algo == "sac":
         check_learning_curves(run_dir, tmp_path)
@@ -105,9 +105,12 @@ def check_learning_curves(run_dir: Path, tmp_path: Path) -> None:
     out, png = tmp_path / "curves.md", tmp_path / "curves.png"
     report_main([str(run_dir), "--curves", "--cpu-budget", str(budget_min), "--plot", str(png), "--out", str(out)])
     text = out.read_text()
+    rows = table_cells(text)
     for h in history:
-        assert f"| {h['step']:,} | 1 | {h['updates']:,} | {h['cpu_time'] / 60:.1f} | {h['eval_mean']:.3f} ± 0.000 |" in text
-    assert f"| 0 | 1,024 | {history[0]['cpu_time'] / 60:.1f} |" in text and f"{history[0]['eval_mean']:.3f} | no |" in text
+        assert [f"{h['step']:,}", "1", f"{h['updates']:,}", f"{h['cpu_time'] / 60:.1f}", f"{h['eval_mean']:.3f} ± 0.000"] in \
+            [r[:5] for r in rows]
+    pick = next(r for r in rows if r[:2] == ["0", "1,024"])  # the CPU-budget pick: seed 0 at its first evaluation
+    assert pick[2] == f"{history[0]['cpu_time'] / 60:.1f}" and pick[4:] == [f"{history[0]['eval_mean']:.3f}", "no"]
     assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
     with pytest.raises(SystemExit):  # a CPU budget without --curves is a usage error
         report_main([str(run_dir), "--cpu-budget", "5"])
@@ -137,8 +140,7 @@ def test_joblib_multirun_and_report(tmp_path):
     proc = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(sweep)], cwd=tmp_path, env=ENV,
                              capture_output=True, text=True, timeout=180))
     # Table 4 layout with the paper's figures beside ours
-    row = next(line for line in proc.stdout.splitlines() if line.startswith("| + extra feat."))
-    cells = [c.strip() for c in row.strip("|").split("|")]
+    cells = next(r for r in table_cells(proc.stdout) if r[0] == "+ extra feat.")
     assert cells[1] == "2" and cells[6] == paper_figure("table4", "aim_features"), cells
     assert "No runs yet for: plain SAC, + aim constraint." in proc.stdout
     # --copy-to keeps the small files only, and the report reads the copies the same way
@@ -149,7 +151,14 @@ def test_joblib_multirun_and_report(tmp_path):
     assert not list(copies.rglob("checkpoint.pt")) and len(list(copies.rglob("eval.json"))) == 2
     again = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(copies)], cwd=tmp_path, env=ENV,
                               capture_output=True, text=True, timeout=180))
-    assert row in again.stdout
+    assert cells in table_cells(again.stdout)
+
+
+def table_cells(markdown: str) -> list[list[str]]:
+    """The body rows of every Markdown table in ``markdown``, as lists of stripped cells."""
+    lines = [line.strip() for line in markdown.splitlines() if line.strip().startswith("|")]
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in lines]
+    return [r for r in rows if not all(set(c) <= set("-: ") for c in r)]
 
 
 def paper_figure(table: str, row: str) -> str:
@@ -182,8 +191,8 @@ def test_cpu_hour_preset_stops_at_its_cpu_budget(tmp_path):
     proc = ok(subprocess.run([sys.executable, "-m", "billiards.report", str(sweep)], cwd=tmp_path, env=ENV,
                              capture_output=True, text=True, timeout=180))
     assert "One CPU hour per seed" in proc.stdout
-    row = next(line for line in proc.stdout.splitlines() if line.startswith("| + extra feat."))
-    assert "| 1 |" in row and "6.460 ± 0.123" in row
+    row = next(r for r in table_cells(proc.stdout) if r[0] == "+ extra feat.")
+    assert row[1] == "1" and row[6] == paper_figure("table4", "aim_features")
 
 
 def test_report_never_merges_runs_with_different_settings(tmp_path):
@@ -637,8 +646,8 @@ def test_averaged_actor_is_what_a_run_evaluates_checkpoints_and_exports(tmp_path
 
     report_main([str(run_dir), "--curves", "--out", str(tmp_path / "curves.md")])
     last = history[-1]
-    assert (f"| {last['eval_mean']:.3f} ± 0.000 | {last['eval_best']} | {last['live_eval_mean']:.3f} ± 0.000 |"
-            in (tmp_path / "curves.md").read_text())
+    assert [f"{last['eval_mean']:.3f} ± 0.000", str(last["eval_best"]), f"{last['live_eval_mean']:.3f} ± 0.000"] in \
+        [r[4:7] for r in table_cells((tmp_path / "curves.md").read_text())]
 
     live, avg = list(agent.actor.parameters()), list(agent.actor_avg.parameters())
     assert all(not p.requires_grad for p in avg)

@@ -11,7 +11,7 @@ import importlib
 
 import gymnasium
 
-from ._common import ON_MISS, PARADIGMS, STARTS
+from ._common import ON_MISS, PARADIGMS, STARTS, EnvOptions
 from .gym_env import INFO_KEYS as GYM_INFO_KEYS
 from .gym_env import Billiards4BallInningEnv
 
@@ -49,6 +49,7 @@ def __dir__():
 
 
 __all__ = [
+    "EnvOptions",
     "GYM_ID",
     "GYM_INFO_KEYS",
     "INFO_KEYS",

@@ -195,3 +195,29 @@ class Shaping:
                                     res.second_red, foul_c=self.foul_penalty, gentle_beta=self.gentle,
                                     gentle_kind=self.gentle_kind, near_miss_beta=self.near_miss,
                                     near_miss_sigma=self.near_miss_sigma)
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvOptions:
+    """Everything :func:`billiards.envs.make_env` builds an env from but its batch size and seed,
+    as one object: what a training config means for its env
+    (:func:`billiards.rl.config.env_options`), passed whole (``make_env(B, options, seed=s)``).
+    The fields are ``make_env``'s keyword arguments, with the same defaults and meaning; they
+    are checked when the env is built."""
+
+    start: str | None = None
+    on_miss: str | None = None
+    paradigm: str | None = None
+    max_shots: int = 10
+    constrain_aim: bool = False
+    normalize_actions: bool = False
+    extra_features: bool = False
+    foul_penalty: float = 0.0
+    gentle: float = 0.0
+    gentle_kind: str = "leave"
+    near_miss: float = 0.0
+    near_miss_sigma: float = domain.NEAR_MISS_SIGMA
+    rm: float = 0.0
+    rm_model: object = None
+    params: object = None
+    noise: object = None

@@ -23,6 +23,8 @@ The reward transforms only add to ``"reward"``; the raw carom outcome stays in `
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import torch
 from tensordict import TensorDictBase
@@ -33,7 +35,7 @@ from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params
 from billiards.physics.config import warn_physics_mismatch
 
-from ._common import Shaping, check_flag, resolve_paradigm, unnormalize_checked, validate_action
+from ._common import EnvOptions, Shaping, check_flag, resolve_paradigm, unnormalize_checked, validate_action
 from .torchrl_env import BilliardsEnv, exact_positions
 
 
@@ -254,28 +256,12 @@ class RewardModelBonus(_RewardTerm):
         return self.beta * self.model.prob(positions, action)
 
 
-def make_env(
-    batch_size: int = 1,
-    *,
-    start: str | None = None,
-    on_miss: str | None = None,
-    paradigm: str | None = None,
-    max_shots: int = 10,
-    constrain_aim: bool = False,
-    normalize_actions: bool = False,
-    extra_features: bool = False,
-    foul_penalty: float = 0.0,
-    gentle: float = 0.0,
-    gentle_kind: str = "leave",
-    near_miss: float = 0.0,
-    near_miss_sigma: float = domain.NEAR_MISS_SIGMA,
-    rm: float = 0.0,
-    rm_model=None,
-    seed: int | None = None,
-    params: PhysicsParams | str | dict | None = None,
-    noise=None,
-) -> TransformedEnv:
+def make_env(batch_size: int = 1, options: EnvOptions | None = None, *, seed: int | None = None, **kwargs) -> TransformedEnv:
     """The environment of every experiment: a :class:`BilliardsEnv` with the chosen layers.
+
+    ``options`` (an :class:`EnvOptions`) holds every choice below but the batch size and seed,
+    as one object; keyword arguments given beside it replace its fields
+    (``make_env(4, options, seed=0, max_shots=5)``), or stand alone.
 
     Args:
         batch_size: B innings stepped together by one ``simulate_batch`` call per step.
@@ -310,14 +296,24 @@ def make_env(
     Raises:
         ValueError: a shaping coefficient (foul_penalty, gentle, near_miss, rm) that is NaN,
             inf or negative, near_miss_sigma <= 0 (named as passed), or an unknown gentle_kind.
+        TypeError: a keyword that is not a field of :class:`EnvOptions`.
     """
-    start, on_miss = resolve_paradigm(paradigm, start, on_miss)
-    shaping = Shaping(foul_penalty, gentle, gentle_kind, near_miss, near_miss_sigma)  # checked before anything is built
-    domain.check_coefficient("rm", rm)
-    constrain_aim, normalize_actions = check_flag("constrain_aim", constrain_aim), check_flag("normalize_actions", normalize_actions)
-    extra_features = check_flag("extra_features", extra_features)
-    params = get_params(params)
-    base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=max_shots, params=params, seed=seed, noise=noise)
+    try:
+        o = dataclasses.replace(options if options is not None else EnvOptions(), **kwargs)
+    except TypeError:
+        unknown = sorted(set(kwargs) - {f.name for f in dataclasses.fields(EnvOptions)})
+        raise TypeError(f"make_env got unknown options {unknown}") from None
+    return _build(batch_size, o, seed)
+
+
+def _build(batch_size: int, o: EnvOptions, seed: int | None) -> TransformedEnv:
+    start, on_miss = resolve_paradigm(o.paradigm, o.start, o.on_miss)
+    shaping = Shaping(o.foul_penalty, o.gentle, o.gentle_kind, o.near_miss, o.near_miss_sigma)  # checked before anything is built
+    domain.check_coefficient("rm", o.rm)
+    constrain_aim, normalize_actions = check_flag("constrain_aim", o.constrain_aim), check_flag("normalize_actions", o.normalize_actions)
+    extra_features = check_flag("extra_features", o.extra_features)
+    params = get_params(o.params)
+    base = BilliardsEnv(batch_size, start=start, on_miss=on_miss, max_shots=o.max_shots, params=params, seed=seed, noise=o.noise)
     transforms: list[Transform] = []
     if constrain_aim:
         transforms.append(AimConstraint(params.ball_radius))
@@ -331,10 +327,10 @@ def make_env(
         transforms.append(GentleShotBonus(shaping.gentle, shaping.gentle_kind))
     if shaping.near_miss:
         transforms.append(NearMissBonus(shaping.near_miss, shaping.near_miss_sigma))
-    if rm:
-        if rm_model is None:
+    if o.rm:
+        if o.rm_model is None:
             raise ValueError("rm > 0 needs rm_model (a billiards.rm.RewardModel or a path to one)")
-        transforms.append(RewardModelBonus(rm_model, rm, params))
+        transforms.append(RewardModelBonus(o.rm_model, o.rm, params))
     return TransformedEnv(base, Compose(*transforms))
 
 

@@ -79,6 +79,19 @@ class WandbMode(str, enum.Enum):
 # ----------------------------------------------------------------------------- algorithms
 
 
+def _positive(path: str, value, strict: bool = True) -> list[str]:
+    """``[message]`` unless ``value`` is finite and > 0 (``strict``) or >= 0."""
+    ok = (value > 0 if strict else value >= 0) and math.isfinite(value)
+    return [] if ok else [f"{path} must be {'> 0' if strict else '>= 0'}, got {value!r}"]
+
+
+def _need(ok: bool, message: str) -> list[str]:
+    return [] if ok else [message]
+
+
+# Each schema's ``errors(node)`` checks what its types cannot say about its own node (a composed
+# DictConfig node, read by attribute); checks across nodes are :func:`_errors`'.
+
 @dataclass
 class OffPolicyConfig:
     """Shared by SAC and TD3. ``utd`` is the update-to-data ratio: gradient updates per
@@ -98,6 +111,13 @@ class OffPolicyConfig:
     # evaluate the live actor.
     actor_ema: float = 0.0
 
+    @staticmethod
+    def errors(a) -> list[str]:
+        return [*_network_errors(a), *_positive("algo.batch_size", a.batch_size), *_positive("algo.utd", a.utd),
+                *_positive("algo.buffer_size", a.buffer_size), *_need(0.0 < a.tau <= 1.0, f"algo.tau must lie in (0, 1], got {a.tau!r}"),
+                *_need(0.0 <= a.actor_ema < 1.0, f"algo.actor_ema must lie in [0, 1) (0 = off), got {a.actor_ema!r}"),
+                *_positive("algo.frames_per_batch", a.frames_per_batch, strict=False)]
+
 
 @dataclass
 class SACConfig(OffPolicyConfig):
@@ -107,6 +127,10 @@ class SACConfig(OffPolicyConfig):
     alpha_init: float = 1.0
     target_entropy: Optional[float] = None  # None = "auto" = -dim(action)
 
+    @staticmethod
+    def errors(a) -> list[str]:
+        return OffPolicyConfig.errors(a) + _positive("algo.alpha_init", a.alpha_init)
+
 
 @dataclass
 class TD3Config(OffPolicyConfig):
@@ -115,6 +139,12 @@ class TD3Config(OffPolicyConfig):
     policy_noise: float = 0.2  # target policy smoothing noise
     noise_clip: float = 0.5
     policy_delay: int = 2  # one actor and target update per policy_delay critic updates
+
+    @staticmethod
+    def errors(a) -> list[str]:
+        return [*OffPolicyConfig.errors(a), *_positive("algo.exploration_noise", a.exploration_noise, strict=False),
+                *_positive("algo.policy_noise", a.policy_noise, strict=False),
+                *_positive("algo.noise_clip", a.noise_clip, strict=False), *_positive("algo.policy_delay", a.policy_delay)]
 
 
 @dataclass
@@ -133,6 +163,23 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     normalize_advantage: bool = True
 
+    @staticmethod
+    def errors(a) -> list[str]:
+        return [*_network_errors(a), *_positive("algo.frames_per_batch", a.frames_per_batch), *_positive("algo.epochs", a.epochs),
+                *_positive("algo.minibatch_size", a.minibatch_size),
+                *_need(a.minibatch_size <= a.frames_per_batch,
+                       f"algo.minibatch_size ({a.minibatch_size}) must not exceed algo.frames_per_batch ({a.frames_per_batch})"),
+                *_need(0.0 < a.clip_epsilon < 1.0, f"algo.clip_epsilon must lie in (0, 1), got {a.clip_epsilon!r}"),
+                *_need(0.0 <= a.gae_lambda <= 1.0, f"algo.gae_lambda must lie in [0, 1], got {a.gae_lambda!r}"),
+                *_positive("algo.max_grad_norm", a.max_grad_norm)]
+
+
+def _network_errors(a) -> list[str]:
+    """What every algorithm's node says about its networks and optimiser."""
+    return [*_need(len(a.hidden_sizes) > 0 and all(h > 0 for h in a.hidden_sizes),
+                   f"algo.hidden_sizes must be a non-empty list of positive widths, got {list(a.hidden_sizes)}"),
+            *_positive("algo.lr", a.lr), *_need(0.0 < a.gamma <= 1.0, f"algo.gamma must lie in (0, 1], got {a.gamma!r}")]
+
 
 # ----------------------------------------------------------------------------- the rest
 
@@ -146,6 +193,10 @@ class EnvConfig:
     extra_features: bool = False  # CaromFeatures: observation 28 -> 32
     max_shots: int = 10  # shots per training inning
     num_envs: int = 32  # B innings stepped together by one batched env
+
+    @staticmethod
+    def errors(e) -> list[str]:
+        return _positive("env.num_envs", e.num_envs) + _positive("env.max_shots", e.max_shots)
 
 
 @dataclass
@@ -163,6 +214,26 @@ class ShapingConfig:
     rm: float = 0.0  # reward += rm * V_rm(s, a), the learned reward model's P(score | s, a)
     rm_model: str = "results/rm/model.pt"  # the reward model (python -m billiards.rm train); relative paths: cwd, then the repo
 
+    @staticmethod
+    def errors(sh) -> list[str]:
+        errs = [m for key in ("foul_penalty", "gentle", "near_miss", "rm") for m in _positive(f"shaping.{key}", sh[key], strict=False)]
+        errs += _positive("shaping.near_miss_sigma", sh.near_miss_sigma)
+        errs += _need(sh.gentle_kind in ("leave", "power"),
+                      f"shaping.gentle_kind must be leave (the paper's leave-position bonus) or power, got {sh.gentle_kind!r}")
+        if not sh.rm:
+            return errs
+        path = resolve_rm_model(sh.rm_model)
+        if not (path.is_file() and path.stat().st_size > 0):
+            return errs + [f"shaping.rm_model={sh.rm_model!r}: no reward model there; train one with "
+                           f"`python -m billiards.rm generate` and `python -m billiards.rm train` (see the README)"]
+        from billiards.rm.model import RewardModelError, load_model
+
+        try:  # loaded and checked now, before any directory is written
+            load_model(path)
+        except RewardModelError as err:
+            errs.append(f"shaping.rm_model={sh.rm_model!r}: {err}")
+        return errs
+
 
 @dataclass
 class CurriculumConfig:
@@ -177,6 +248,24 @@ class CurriculumConfig:
     hold_power: float = 0.5
     hold_english: float = 0.0
 
+    @staticmethod
+    def errors(c) -> list[str]:
+        if c.name == "none":
+            return []
+        errs = []
+        stages = [list(s) for s in c.stages]
+        if not stages or any(not s or any(d not in (0, 1, 2, 3) for d in s) or len(set(s)) != len(s) for s in stages):
+            errs.append(f"curriculum.stages must be non-empty lists of distinct action dims in 0..3, got {stages}")
+        elif sorted(stages[-1]) != [0, 1, 2, 3]:
+            errs.append(f"curriculum.stages: the last stage must free the whole action [0, 1, 2, 3], got {stages[-1]}")
+        f = list(c.switch_at)
+        if len(f) != len(stages) - 1:
+            errs.append(f"curriculum.switch_at needs one fraction per stage boundary ({len(stages) - 1}), got {f}")
+        elif not all(0.0 < x < 1.0 for x in f) or any(b <= a for a, b in zip(f, f[1:])):
+            errs.append(f"curriculum.switch_at must increase strictly inside (0, 1), got {f}")
+        errs += _need(0.0 <= c.hold_power <= 1.0, f"curriculum.hold_power must lie in [0, 1], got {c.hold_power!r}")
+        return errs + _need(-1.0 <= c.hold_english <= 1.0, f"curriculum.hold_english must lie in [-1, 1], got {c.hold_english!r}")
+
 
 @dataclass
 class LoggerConfig:
@@ -186,6 +275,18 @@ class LoggerConfig:
     entity: Optional[str] = None
     group: Optional[str] = None
     mode: WandbMode = WandbMode.offline  # never asks for a login unless set to online
+
+    @staticmethod
+    def errors(lg) -> list[str]:
+        """A backend whose optional package is missing fails before the run starts."""
+        import importlib.util
+
+        backend = LoggerBackend(lg.backend)
+        if backend not in LOGGER_EXTRAS or importlib.util.find_spec(LOGGER_EXTRAS[backend][0]) is not None:
+            return []
+        module, extra = LOGGER_EXTRAS[backend]
+        return [f"logger={backend.value} needs the {module!r} package, which is not installed: "
+                f'pip install -e ".[{extra}]" (or pip install {module})']
 
 
 @dataclass
@@ -205,6 +306,14 @@ class BudgetConfig:
     # the final evaluation follows
     cpu_minutes: float = 0.0
 
+    @staticmethod
+    def errors(b) -> list[str]:
+        errs = _positive("budget.total_steps", b.total_steps)
+        for key in ("init_random_steps", "eval_every", "checkpoint_every"):
+            errs += _positive(f"budget.{key}", b[key], strict=False)
+        errs += [m for key in ("eval_innings", "final_eval_innings", "log_every") for m in _positive(f"budget.{key}", b[key])]
+        return errs + _positive("budget.cpu_minutes", b.cpu_minutes, strict=False)
+
 
 @dataclass
 class EvalConfig:
@@ -215,6 +324,13 @@ class EvalConfig:
     starts: List[Start] = field(default_factory=lambda: [Start.random])
     max_shots: int = 10
     seed: int = 0  # eval racks are the same for every run and every evaluation
+
+    @staticmethod
+    def errors(ev) -> list[str]:
+        # eval.seed: the racks' np.random.default_rng (any integer >= 0), checked here, not at the final evaluation
+        return [*_positive("eval.max_shots", ev.max_shots),
+                *_need(len(ev.starts) > 0, "eval.starts must list at least one start (random, canonical)"),
+                *_need(ev.seed >= 0, f"eval.seed must be an integer >= 0 (a numpy seed), got {ev.seed!r}")]
 
 
 @dataclass
@@ -282,91 +398,25 @@ def appended_keys(cfg: DictConfig) -> list[str]:
 
 
 def _errors(cfg: DictConfig) -> list[str]:
-    errs: list[str] = numeric_bound_errors(cfg)
-
-    def need(ok: bool, msg: str) -> None:
-        if not ok:
-            errs.append(msg)
-
-    def positive(path: str, value, strict: bool = True) -> None:
-        ok = value > 0 if strict else value >= 0
-        need(ok and math.isfinite(value), f"{path} must be {'> 0' if strict else '>= 0'}, got {value!r}")
-
-    errs.extend(appended_keys(cfg))
-    b, a, e = cfg.budget, cfg.algo, cfg.env
-    positive("budget.total_steps", b.total_steps)
-    for key in ("init_random_steps", "eval_every", "checkpoint_every"):
-        positive(f"budget.{key}", b[key], strict=False)
-    for key in ("eval_innings", "final_eval_innings", "log_every"):
-        positive(f"budget.{key}", b[key])
-    positive("budget.cpu_minutes", b.cpu_minutes, strict=False)
-    positive("env.num_envs", e.num_envs)
-    positive("env.max_shots", e.max_shots)
-    positive("eval.max_shots", cfg.eval.max_shots)
-    need(len(cfg.eval.starts) > 0, "eval.starts must list at least one start (random, canonical)")
-    # seed: random.seed, np.random.seed (which takes [0, 2**32)) and torch; eval.seed: the racks'
-    # np.random.default_rng (any integer >= 0). Checked here, not at the final evaluation.
-    need(0 <= cfg.seed < 2**32, f"seed must be an integer in [0, 2**32 - 1] (a numpy seed), got {cfg.seed!r}")
-    need(cfg.eval.seed >= 0, f"eval.seed must be an integer >= 0 (a numpy seed), got {cfg.eval.seed!r}")
-    errs.extend(filter(None, [threads_error(cfg.threads), device_error(cfg.device)]))
-    positive("paper_steps", cfg.paper_steps)
-    for key in ("foul_penalty", "gentle", "near_miss"):
-        positive(f"shaping.{key}", cfg.shaping[key], strict=False)
-    positive("shaping.near_miss_sigma", cfg.shaping.near_miss_sigma)
-    need(cfg.shaping.gentle_kind in ("leave", "power"),
-         f"shaping.gentle_kind must be leave (the paper's leave-position bonus) or power, got {cfg.shaping.gentle_kind!r}")
-    errs.extend(physics_errors(cfg.physics))
-    errs.extend(noise_errors(cfg.noise) if "noise" in cfg else [])
-    positive("shaping.rm", cfg.shaping.rm, strict=False)
-    if cfg.shaping.rm:
-        path = resolve_rm_model(cfg.shaping.rm_model)
-        need(path.is_file() and path.stat().st_size > 0,
-             f"shaping.rm_model={cfg.shaping.rm_model!r}: no reward model there; train one with "
-             f"`python -m billiards.rm generate` and `python -m billiards.rm train` (see the README)")
-        if path.is_file() and path.stat().st_size > 0:  # loaded and checked now, before any directory is written
-            from billiards.rm.model import RewardModelError, load_model
-
-            try:
-                load_model(path)
-            except RewardModelError as err:
-                need(False, f"shaping.rm_model={cfg.shaping.rm_model!r}: {err}")
-    errs.extend(_curriculum_errors(cfg))
-    errs.extend(_logger_errors(cfg))
-
-    need(len(a.hidden_sizes) > 0 and all(h > 0 for h in a.hidden_sizes),
-         f"algo.hidden_sizes must be a non-empty list of positive widths, got {list(a.hidden_sizes)}")
-    positive("algo.lr", a.lr)
-    need(0.0 < a.gamma <= 1.0, f"algo.gamma must lie in (0, 1], got {a.gamma!r}")
-    if a.name in ("sac", "td3"):
-        positive("algo.batch_size", a.batch_size)
-        positive("algo.utd", a.utd)
-        positive("algo.buffer_size", a.buffer_size)
-        need(0.0 < a.tau <= 1.0, f"algo.tau must lie in (0, 1], got {a.tau!r}")
-        need(0.0 <= a.actor_ema < 1.0, f"algo.actor_ema must lie in [0, 1) (0 = off), got {a.actor_ema!r}")
-        positive("algo.frames_per_batch", a.frames_per_batch, strict=False)
-        fpb = a.frames_per_batch or e.num_envs
-        need(e.num_envs <= 0 or fpb % e.num_envs == 0,
-             f"algo.frames_per_batch ({fpb}) must be a multiple of env.num_envs ({e.num_envs})")
-        if a.name == "sac":
-            positive("algo.alpha_init", a.alpha_init)
-        else:
-            positive("algo.exploration_noise", a.exploration_noise, strict=False)
-            positive("algo.policy_noise", a.policy_noise, strict=False)
-            positive("algo.noise_clip", a.noise_clip, strict=False)
-            positive("algo.policy_delay", a.policy_delay)
-    elif a.name == "ppo":
-        positive("algo.frames_per_batch", a.frames_per_batch)
-        need(e.num_envs <= 0 or a.frames_per_batch % e.num_envs == 0,
-             f"algo.frames_per_batch ({a.frames_per_batch}) must be a multiple of env.num_envs ({e.num_envs})")
-        positive("algo.epochs", a.epochs)
-        positive("algo.minibatch_size", a.minibatch_size)
-        need(a.minibatch_size <= a.frames_per_batch,
-             f"algo.minibatch_size ({a.minibatch_size}) must not exceed algo.frames_per_batch ({a.frames_per_batch})")
-        need(0.0 < a.clip_epsilon < 1.0, f"algo.clip_epsilon must lie in (0, 1), got {a.clip_epsilon!r}")
-        need(0.0 <= a.gae_lambda <= 1.0, f"algo.gae_lambda must lie in [0, 1], got {a.gae_lambda!r}")
-        positive("algo.max_grad_norm", a.max_grad_norm)
+    errs: list[str] = numeric_bound_errors(cfg) + appended_keys(cfg)
+    a, e = cfg.algo, cfg.env
+    for key, schema in (("budget", BudgetConfig), ("env", EnvConfig), ("eval", EvalConfig), ("shaping", ShapingConfig),
+                        ("curriculum", CurriculumConfig), ("logger", LoggerConfig)):
+        errs += schema.errors(cfg[key])
+    errs += physics_errors(cfg.physics) + (noise_errors(cfg.noise) if "noise" in cfg else [])
+    if a.name in ALGO_SCHEMAS:
+        errs += ALGO_SCHEMAS[a.name].errors(a)
     else:
         errs.append(f"algo.name must be one of sac, td3, ppo, got {a.name!r}")
+    if a.name in ALGO_SCHEMAS:  # across nodes: a collector batch is whole steps of every inning
+        fpb = (a.frames_per_batch or e.num_envs) if a.name in ("sac", "td3") else a.frames_per_batch
+        errs += _need(e.num_envs <= 0 or fpb % e.num_envs == 0,
+                      f"algo.frames_per_batch ({fpb}) must be a multiple of env.num_envs ({e.num_envs})")
+    if cfg.curriculum.name != "none" and a.name not in ("sac", "td3"):
+        errs.append(f"curriculum={cfg.curriculum.name} needs an off-policy algorithm (sac, td3), got algo={a.name}")
+    # seed: random.seed, np.random.seed (which takes [0, 2**32)) and torch
+    errs += _need(0 <= cfg.seed < 2**32, f"seed must be an integer in [0, 2**32 - 1] (a numpy seed), got {cfg.seed!r}")
+    errs += list(filter(None, [threads_error(cfg.threads), device_error(cfg.device)])) + _positive("paper_steps", cfg.paper_steps)
     if cfg.resume and cfg.resume != RESUME_AUTO:
         run_dir = Path(cfg.resume)
         if not run_dir.is_dir():
@@ -384,44 +434,6 @@ def _errors(cfg: DictConfig) -> list[str]:
 def resolve_rm_model(path: str) -> Path:
     """A reward-model path as given if it exists (or is absolute), else relative to the repo."""
     return repo_path(path)
-
-
-def _logger_errors(cfg: DictConfig) -> list[str]:
-    """A logger backend whose optional package is missing fails before the run starts."""
-    import importlib.util
-
-    backend = LoggerBackend(cfg.logger.backend)
-    if backend not in LOGGER_EXTRAS:
-        return []
-    module, extra = LOGGER_EXTRAS[backend]
-    if importlib.util.find_spec(module) is not None:
-        return []
-    return [f"logger={backend.value} needs the {module!r} package, which is not installed: "
-            f'pip install -e ".[{extra}]" (or pip install {module})']
-
-
-def _curriculum_errors(cfg: DictConfig) -> list[str]:
-    c = cfg.curriculum
-    if c.name == "none":
-        return []
-    errs = []
-    stages = [list(s) for s in c.stages]
-    if cfg.algo.name not in ("sac", "td3"):
-        errs.append(f"curriculum={c.name} needs an off-policy algorithm (sac, td3), got algo={cfg.algo.name}")
-    if not stages or any(not s or any(d not in (0, 1, 2, 3) for d in s) or len(set(s)) != len(s) for s in stages):
-        errs.append(f"curriculum.stages must be non-empty lists of distinct action dims in 0..3, got {stages}")
-    elif sorted(stages[-1]) != [0, 1, 2, 3]:
-        errs.append(f"curriculum.stages: the last stage must free the whole action [0, 1, 2, 3], got {stages[-1]}")
-    f = list(c.switch_at)
-    if len(f) != len(stages) - 1:
-        errs.append(f"curriculum.switch_at needs one fraction per stage boundary ({len(stages) - 1}), got {f}")
-    elif not all(0.0 < x < 1.0 for x in f) or any(b <= a for a, b in zip(f, f[1:])):
-        errs.append(f"curriculum.switch_at must increase strictly inside (0, 1), got {f}")
-    if not 0.0 <= c.hold_power <= 1.0:
-        errs.append(f"curriculum.hold_power must lie in [0, 1], got {c.hold_power!r}")
-    if not -1.0 <= c.hold_english <= 1.0:
-        errs.append(f"curriculum.hold_english must lie in [-1, 1], got {c.hold_english!r}")
-    return errs
 
 
 def validate(cfg: DictConfig) -> None:
@@ -499,6 +511,22 @@ def _without(d: dict, path: list[str]) -> dict:
 def env_paradigm(paradigm: Paradigm | str) -> str:
     """A paradigm as :func:`billiards.envs.make_env` takes it: the one spelling, ``random_continue``."""
     return Paradigm(paradigm).value
+
+
+def env_options(cfg: DictConfig):
+    """What a training config means for its env, as one :class:`billiards.envs.EnvOptions`
+    (``make_env(cfg.env.num_envs, env_options(cfg), seed=s)``): the env node, the shaping (the
+    reward model's path resolved), the table and the execution noise."""
+    from billiards.envs import EnvOptions
+    from billiards.physics.config import params_from_config
+    from billiards.physics.noise import noise_from_config
+
+    sh = cfg.shaping
+    return EnvOptions(paradigm=env_paradigm(cfg.env.paradigm), max_shots=cfg.env.max_shots, constrain_aim=cfg.env.constrain_aim,
+                      extra_features=cfg.env.extra_features, foul_penalty=sh.foul_penalty, gentle=sh.gentle,
+                      gentle_kind=sh.gentle_kind, near_miss=sh.near_miss, near_miss_sigma=sh.near_miss_sigma, rm=sh.rm,
+                      rm_model=str(resolve_rm_model(sh.rm_model)) if sh.rm else None,
+                      params=params_from_config(cfg.physics), noise=noise_from_config(cfg.get("noise")))
 
 
 def wandb_env_defaults() -> None:

@@ -62,8 +62,7 @@ from .config import (
     RETIRED_KEYS,
     Config,
     ConfigError,
-    env_paradigm,
-    resolve_rm_model,
+    env_options,
     validate,
     with_physics,
     without_retired,
@@ -92,30 +91,11 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def env_kwargs(cfg) -> dict[str, Any]:
-    """make_env keyword arguments of the training env (shaping included)."""
-    return dict(
-        paradigm=env_paradigm(cfg.env.paradigm),
-        max_shots=cfg.env.max_shots,
-        constrain_aim=cfg.env.constrain_aim,
-        extra_features=cfg.env.extra_features,
-        foul_penalty=cfg.shaping.foul_penalty,
-        gentle=cfg.shaping.gentle,
-        near_miss=cfg.shaping.near_miss,
-        near_miss_sigma=cfg.shaping.near_miss_sigma,
-        gentle_kind=cfg.shaping.gentle_kind,
-        rm=cfg.shaping.rm,
-        rm_model=str(resolve_rm_model(cfg.shaping.rm_model)) if cfg.shaping.rm else None,
-        params=params_from_config(cfg.physics),
-        noise=noise_from_config(cfg.get("noise")),
-    )
-
-
 def make_train_env(cfg, seed: int):
     """The batched training env; it (the simulator) always runs on the CPU."""
     from billiards.envs import make_env
 
-    return make_env(cfg.env.num_envs, seed=seed, **env_kwargs(cfg))
+    return make_env(cfg.env.num_envs, env_options(cfg), seed=seed)
 
 
 def env_rngs(env) -> dict[str, np.random.Generator]:

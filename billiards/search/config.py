@@ -53,8 +53,22 @@ from billiards.physics.noise import NoiseConfig, noise_errors, noise_from_config
 # ----------------------------------------------------------------------------- search
 
 
+class _SearchOption:
+    """What the search options share: their checks (the budget, and the knobs' own ranges as the
+    search's settings object checks them)."""
+
+    def errors(self) -> list[str]:
+        if self.budget < 1:
+            return [f"search.budget must be >= 1, got {self.budget}"]
+        try:
+            self.settings()
+        except ValueError as err:
+            return [f"search ({self.kind}): {err}"]
+        return []
+
+
 @dataclass
-class H2SearchConfig:
+class H2SearchConfig(_SearchOption):
     """Greedy depth-2 K-expansion (paper §5): ``budget`` = k1 + m1 * k2 simulations per shot,
     k2 derived (:meth:`billiards.search.lookahead.H2Config.from_budget`)."""
 
@@ -80,7 +94,7 @@ class H2SearchConfig:
 
 
 @dataclass
-class PUCTSearchConfig:
+class PUCTSearchConfig(_SearchOption):
     """PUCT over sampled continuous actions: ``budget`` simulations per shot, progressive
     widening (pw_c, pw_alpha) over ``pool`` proposer samples per node. The knobs are those of
     :class:`billiards.search.puct.PUCTConfig`, by name."""
@@ -112,7 +126,7 @@ class PUCTSearchConfig:
 
 
 @dataclass
-class RobustSearchConfig:
+class RobustSearchConfig(_SearchOption):
     """Noise-aware search (:mod:`billiards.search.robust`): each candidate scored by its verifier
     reward over noisy replays; ``budget`` = [k1 exact screen] + noisy samples + m1 * k2
     simulations per shot. Needs execution noise (``noise=fastfiz|fastfiz_x5``). The knobs are
@@ -151,8 +165,15 @@ class RobustSearchConfig:
 # ----------------------------------------------------------------------------- protocols
 
 
+class _ProtocolOption:
+    def errors(self) -> list[str]:
+        """Every count of the protocol must be >= 1."""
+        return [f"protocol.{f.name} must be >= 1, got {getattr(self, f.name)}"
+                for f in dataclasses.fields(self) if f.name != "name" and getattr(self, f.name) < 1]
+
+
 @dataclass
-class P1Config:
+class P1Config(_ProtocolOption):
     """P1: ``n_innings`` random-start innings of ``shots`` shots (continue-on-miss)."""
 
     name: str = "p1"
@@ -161,7 +182,7 @@ class P1Config:
 
 
 @dataclass
-class P3Config:
+class P3Config(_ProtocolOption):
     """P3: ``seeds`` canonical-start chains (seeds ``seed`` ... ``seed + seeds - 1``), each
     until the first miss or foul, capped at ``cap`` shots."""
 
@@ -187,6 +208,20 @@ class GeometricProposerConfig:
     spin_low: float = -1.0  # vertical tip offset b in [spin_low, spin_high] (-1 draw, 1 follow)
     spin_high: float = 1.0
     far_share: float = 0.0  # this share of the candidates aims into the farther red's cone (0: the nearer red only)
+
+    def errors(self) -> list[str]:
+        errs = []
+        if not 0.0 <= self.power_low <= self.power_high <= 1.0:
+            errs.append(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
+                        f"got {self.power_low}, {self.power_high}")
+        if not 0.0 <= self.u_low <= self.u_high <= 1.0:
+            errs.append(f"proposer.u_low and proposer.u_high must satisfy 0 <= low <= high <= 1, got {self.u_low}, {self.u_high}")
+        if not -1.0 <= self.spin_low <= self.spin_high <= 1.0:
+            errs.append(f"proposer.spin_low and proposer.spin_high must satisfy -1 <= low <= high <= 1, "
+                        f"got {self.spin_low}, {self.spin_high}")
+        if not 0.0 <= self.far_share <= 1.0:
+            errs.append(f"proposer.far_share must lie in [0, 1], got {self.far_share}")
+        return errs
 
     def build(self, params, device=None):
         """The proposer (NumPy, on the CPU whatever ``device`` says)."""
@@ -226,6 +261,20 @@ class RankedProposerConfig:
     def path(self) -> str:
         return str(repo_path(self.ranker))
 
+    def errors(self) -> list[str]:
+        """The pool, and the ranker file loaded and checked now, before any directory is written."""
+        errs = [f"proposer.pool must be >= 1, got {self.pool}"] if self.pool < 1 else []
+        if not Path(self.path()).is_file():
+            how = f" (trained with: {self.command})" if self.command else ""
+            return errs + [f"proposer {self.name!r}: no ranker file at {self.ranker}{how}"]
+        from .ranker import RankerFileError, ShotRanker
+
+        try:
+            ShotRanker.load(self.path())
+        except RankerFileError as err:
+            errs.append(f"proposer {self.name!r}: {err}")
+        return errs
+
     def build(self, params, device=None):
         """The proposer (NumPy, on the CPU whatever ``device`` says); a ranker trained on
         another table warns (PhysicsMismatchWarning)."""
@@ -251,6 +300,16 @@ class PolicyProposerConfig:
 
     def paths(self) -> list[str]:
         return [str(repo_path(c)) for c in self.checkpoints]
+
+    def errors(self) -> list[str]:
+        """Checkpoints listed, there, and each loaded and checked now."""
+        if not self.checkpoints:
+            return [f"proposer {self.name!r} is a policy ensemble but lists no checkpoints"]
+        missing = [c for c, p in zip(self.checkpoints, self.paths()) if not Path(p).exists()]
+        if missing:
+            how = f" (trained with: {self.command})" if self.command else ""
+            return [f"proposer {self.name!r}: no checkpoint at {', '.join(missing)}{how}"]
+        return _policy_file_errors(self)
 
     def build(self, params, device=None):
         """The ensemble, its networks on ``device`` (a :class:`torch.device`; default the CPU)."""
@@ -480,57 +539,13 @@ def errors(cfg) -> list[str]:
         elif value != chosen:
             errs.append(f"{group}.{key}={value!r} contradicts {group}={chosen} "
                         f"(choose the {group} with {group}=<option>; {key} follows it)")
-    search, protocol, proposer = nodes.get("search"), nodes.get("protocol"), nodes.get("proposer")
-    if search is not None:
-        if search.budget < 1:
-            errs.append(f"search.budget must be >= 1, got {search.budget}")
-        else:
-            try:
-                search.settings()
-            except ValueError as err:
-                errs.append(f"search ({search.kind}): {err}")
+    search = nodes.get("search")
+    for node in nodes.values():  # each option's own checks (its schema's errors())
+        errs.extend(node.errors())
     if cfg.seed < 0:
         errs.append(f"seed must be >= 0 (a numpy seed), got {cfg.seed}")
     if (device_err := device_error(cfg.get("device", "auto"))) is not None:
         errs.append(device_err)
-    if isinstance(proposer, GeometricProposerConfig):
-        if not 0.0 <= proposer.power_low <= proposer.power_high <= 1.0:
-            errs.append(f"proposer.power_low and proposer.power_high must satisfy 0 <= low <= high <= 1, "
-                        f"got {proposer.power_low}, {proposer.power_high}")
-        if not 0.0 <= proposer.u_low <= proposer.u_high <= 1.0:
-            errs.append(f"proposer.u_low and proposer.u_high must satisfy 0 <= low <= high <= 1, "
-                        f"got {proposer.u_low}, {proposer.u_high}")
-        if not -1.0 <= proposer.spin_low <= proposer.spin_high <= 1.0:
-            errs.append(f"proposer.spin_low and proposer.spin_high must satisfy -1 <= low <= high <= 1, "
-                        f"got {proposer.spin_low}, {proposer.spin_high}")
-        if not 0.0 <= proposer.far_share <= 1.0:
-            errs.append(f"proposer.far_share must lie in [0, 1], got {proposer.far_share}")
-    if isinstance(proposer, PolicyProposerConfig):
-        if not proposer.checkpoints:
-            errs.append(f"proposer {proposer.name!r} is a policy ensemble but lists no checkpoints")
-        missing = [c for c, p in zip(proposer.checkpoints, proposer.paths()) if not Path(p).exists()]
-        if missing:
-            how = f" (trained with: {proposer.command})" if proposer.command else ""
-            errs.append(f"proposer {proposer.name!r}: no checkpoint at {', '.join(missing)}{how}")
-        else:
-            errs.extend(_policy_file_errors(proposer))
-    if isinstance(proposer, RankedProposerConfig):
-        if proposer.pool < 1:
-            errs.append(f"proposer.pool must be >= 1, got {proposer.pool}")
-        if not Path(proposer.path()).is_file():
-            how = f" (trained with: {proposer.command})" if proposer.command else ""
-            errs.append(f"proposer {proposer.name!r}: no ranker file at {proposer.ranker}{how}")
-        else:  # loaded and checked now, before any directory is written
-            from .ranker import RankerFileError, ShotRanker
-
-            try:
-                ShotRanker.load(proposer.path())
-            except RankerFileError as err:
-                errs.append(f"proposer {proposer.name!r}: {err}")
-    if protocol is not None:
-        for key in (f.name for f in dataclasses.fields(protocol) if f.name != "name"):
-            if getattr(protocol, key) < 1:
-                errs.append(f"protocol.{key} must be >= 1, got {getattr(protocol, key)}")
     if cfg.threads is not None and (err := threads_error(cfg.threads)):
         errs.append(err)
     if cfg.get("resume") and cfg.resume != RESUME_AUTO and not (Path(cfg.resume) / CONFIG_FILE).is_file():
