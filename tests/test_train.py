@@ -207,7 +207,7 @@ def test_report_never_merges_runs_with_different_settings(tmp_path):
         d = tmp_path / "runs" / name
         d.mkdir(parents=True)
         (d / "summary.json").write_text(json.dumps({"frames": steps}))
-        config = {"table": "table4", "row": "aim_features", "seed": seed, "budget": {"total_steps": budget, "cpu_minutes": 60.0},
+        config = {"table": "table4", "row": "aim_features", "seed": seed, "physics": {"preset": "korean_medium"}, "budget": {"total_steps": budget, "cpu_minutes": 60.0},
                   "algo": {"name": "sac", "lr": lr, "hidden_sizes": [256, 256]},
                   "env": {"paradigm": "random_continue", "constrain_aim": True, "extra_features": True},
                   "shaping": {"name": "none"}}
@@ -239,13 +239,12 @@ def test_report_rows_are_configurations_and_count_distinct_seeds(tmp_path):
     from billiards.report.markdown import row_summary, table_groups
     from billiards.report.runs import find_runs
 
-    def fake_run(name, seed, steps, mean, physics=None):
+    def fake_run(name, seed, steps, mean, physics="korean_medium"):
         d = tmp_path / name
         d.mkdir()
         config = {"seed": seed, "budget": {"name": "x", "total_steps": steps, "eval_every": steps // 2},
                   "algo": {"name": "sac"}, "env": {"paradigm": "random_continue"}, "shaping": {"name": "none"}}
-        if physics:
-            config["physics"] = {"preset": physics}
+        config["physics"] = {"preset": physics}
         (d / "config.yaml").write_text(yaml.safe_dump(config))
         (d / "summary.json").write_text(json.dumps({"frames": steps}))
         (d / "eval.json").write_text(json.dumps({"mean": mean, "best": 3, "start": "random", "foul_innings_pct": 0.0,
@@ -255,7 +254,7 @@ def test_report_rows_are_configurations_and_count_distinct_seeds(tmp_path):
     fake_run("s0_100k", 0, 100_000, 0.4, "korean_medium")
     fake_run("s0_100k_again", 0, 100_000, 0.6, "korean_medium")
     fake_run("s1_100k", 1, 100_000, 0.5, "korean_medium")
-    fake_run("s1_100k_old", 1, 100_000, 0.9)  # before the presets: the international table
+    fake_run("s1_100k_old", 1, 100_000, 0.9, "international")
     rows = {v: row_summary(None, v, runs) for v, runs in table_groups(find_runs([tmp_path])[0])[None].items()}
     assert len(rows) == 4, rows
     two_k = next(r for label, r in rows.items() if "budget.total_steps=2000" in label)
@@ -276,7 +275,7 @@ def test_report_skips_broken_run_dirs_with_a_warning_naming_them(tmp_path, capsy
     from billiards.report.markdown import table_groups
     from billiards.report.runs import find_curves, find_runs
 
-    config = {"seed": 0, "budget": {"total_steps": 1000}, "algo": {"name": "sac"},
+    config = {"seed": 0, "budget": {"total_steps": 1000}, "algo": {"name": "sac"}, "physics": {"preset": "korean_medium"},
               "env": {"paradigm": "random_continue"}, "shaping": {"name": "none"}}
     result = {"mean": 2.5, "best": 6, "start": "random", "foul_innings_pct": 50.0, "foul_per_shot_pct": 10.0,
               "success_per_shot_pct": 25.0}

@@ -56,10 +56,6 @@ class Run:
         return self.config.get("row") or generic_label(self.config)
 
 
-# The table of runs saved before the physics presets existed (billiards.physics.config's
-# LEGACY_PHYSICS; not imported, so the report loads without numba). Runs of different physics
-# never share a row: split_by_settings compares physics.preset like any other setting.
-LEGACY_PHYSICS = "international"
 
 # Top-level config keys that never put two runs in different rows: the seed, run-time switches,
 # logging and the table label itself. Everything else does, the budget included (total steps,
@@ -166,7 +162,6 @@ def read_config(run_dir: Path) -> dict:
         raise ValueError(f"config.yaml is not valid YAML ({err})") from None
     if not isinstance(config, dict) or not isinstance(config.get("seed"), int):
         raise ValueError("config.yaml is not a training config (no integer seed)")
-    config.setdefault("physics", {"preset": LEGACY_PHYSICS})
     return config
 
 

@@ -15,12 +15,11 @@ from tabulate import tabulate
 from billiards.tables import paper_tables
 
 COLUMNS = [("p1", "h2"), ("p1", "puct"), ("p3", "h2"), ("p3", "puct")]
-LEGACY_PHYSICS = "international"  # results written before the physics presets (billiards.physics.config)
 
 
 def physics_of(res: dict) -> str:
-    """The table a search result played (results from before the presets: international)."""
-    return res.get("physics") or LEGACY_PHYSICS
+    """The table a search result played (every result since the physics presets names it)."""
+    return res.get("physics") or "unknown"
 
 
 def find_results(dirs) -> list[dict]:
