@@ -207,7 +207,8 @@ def test_report_never_merges_runs_with_different_settings(tmp_path):
         d = tmp_path / "runs" / name
         d.mkdir(parents=True)
         (d / "summary.json").write_text(json.dumps({"frames": steps}))
-        config = {"table": "table4", "row": "aim_features", "seed": seed, "physics": {"preset": "korean_medium"}, "budget": {"total_steps": budget, "cpu_minutes": 60.0},
+        config = {"table": "table4", "row": "aim_features", "seed": seed, "physics": {"preset": "korean_medium"},
+                  "budget": {"total_steps": budget, "cpu_minutes": 60.0},
                   "algo": {"name": "sac", "lr": lr, "hidden_sizes": [256, 256]},
                   "env": {"paradigm": "random_continue", "constrain_aim": True, "extra_features": True},
                   "shaping": {"name": "none"}}
