@@ -26,6 +26,7 @@ from __future__ import annotations
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
+from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from billiards.physics.config import PhysicsConfig
@@ -178,6 +179,27 @@ def validate_jobs(config: DictConfig, validate, errors: tuple[type[BaseException
 
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
 
+
+class ValidatingCallback(Callback):
+    """A Hydra callback (``hydra.callbacks.validate`` in an app's config) that validates before
+    Hydra creates the run directory -- for a basic-sweeper multirun, every job's config first --
+    so a bad command line fails at once, writes nothing, and exits with the message (Hydra would
+    only warn). Subclasses set ``validate`` (a function raising ValueError)."""
+
+    validate = None
+
+    def on_run_start(self, config, **kwargs) -> None:
+        try:
+            type(self).validate(config)
+        except ValueError as err:
+            raise SystemExit(f"Error: {err}") from None
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        if config.hydra.sweeper._target_ != BASIC_SWEEPER:
+            self.on_run_start(config)
+            return
+        validate_jobs(config, type(self).validate, errors=(ValueError,))
+
 # ----------------------------------------------------------------------------- numbers in range
 
 INT_BOUND = 2**31 - 1  # the largest count any kernel, array or generator here is sized by
@@ -269,5 +291,5 @@ def guard_command_line(argv=None) -> None:
         raise SystemExit("Error: " + "\n".join(errors))
 
 
-__all__ = ["BASIC_SWEEPER", "RESUME_AUTO", "SCHEMA_GROUP", "fixed_job_config", "guard_command_line", "job_configs", "numeric_bound_errors",
-           "override_errors", "register_app", "register_resolvers", "validate_jobs"]
+__all__ = ["BASIC_SWEEPER", "RESUME_AUTO", "SCHEMA_GROUP", "ValidatingCallback", "fixed_job_config", "guard_command_line",
+           "job_configs", "numeric_bound_errors", "override_errors", "register_app", "register_resolvers", "validate_jobs"]

@@ -135,7 +135,7 @@ LAYERS = [  # lowest first; a new top-level module or subpackage takes its place
     ("billiards.evaluation",),
     ("billiards.rl",),
     ("billiards.search",),
-    ("billiards.pictures", "billiards.report"),
+    ("billiards.pictures", "billiards.report", "billiards.league"),
     ("billiards.campaign",),
 ]
 

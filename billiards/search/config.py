@@ -39,12 +39,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, List, Optional
 
-from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from billiards.tables import paper_tables
-from billiards.app_config import BASIC_SWEEPER, RESUME_AUTO, numeric_bound_errors, register_app, validate_jobs
+from billiards.app_config import RESUME_AUTO, ValidatingCallback, numeric_bound_errors, register_app
 from billiards.device import device_error, threads_error
 from billiards.files import CONFIG_FILE, repo_path
 from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
@@ -567,22 +566,11 @@ def validate(cfg) -> None:
         raise SearchConfigError("invalid search config:\n  - " + "\n  - ".join(errs))
 
 
-class ValidateSearchConfig(Callback):
-    """Hydra callback (``hydra.callbacks`` in conf/search.yaml): validates before Hydra creates
-    the run directory -- for a multirun, every job's config first -- so a bad command line fails
-    at once, writes nothing, and exits with the message (Hydra would only warn)."""
+class ValidateSearchConfig(ValidatingCallback):
+    """Hydra callback (``hydra.callbacks`` in conf/search.yaml): :func:`validate` before Hydra
+    creates the run directory."""
 
-    def on_run_start(self, config, **kwargs) -> None:
-        try:
-            validate(config)
-        except ValueError as err:
-            raise SystemExit(f"Error: {err}") from None
-
-    def on_multirun_start(self, config, **kwargs) -> None:
-        if config.hydra.sweeper._target_ != BASIC_SWEEPER:
-            self.on_run_start(config)
-            return
-        validate_jobs(config, validate, errors=(ValueError,))
+    validate = staticmethod(validate)
 
 
 __all__ = ["FORGIVING", "GeometricProposerConfig", "H2SearchConfig", "OPTIONS", "P1Config", "P3Config",

@@ -1,0 +1,44 @@
+"""Two-player matches and leagues (``python match.py``; docs/matches.md): the players
+(:mod:`.agents`), matches, the league and its Elo table (:mod:`.play`), the app's schema
+(:mod:`.config`) and the app itself (:func:`run`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def run(cfg, out_dir) -> dict:
+    """Play the league ``cfg`` describes into ``out_dir`` (or continue it there)."""
+    from omegaconf import OmegaConf
+
+    from billiards.device import set_threads
+    from billiards.files import display_path, recorded_command
+    from billiards.physics.config import params_from_config
+    from billiards.physics.noise import noise_from_config
+    from billiards.provenance import git_commit
+
+    from .agents import make_agent
+    from .config import agent_config, validate
+    from .play import run_league
+
+    import sys
+
+    validate(cfg)
+    set_threads(cfg.threads)
+    out_dir = Path(cfg.resume or out_dir)
+    params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
+    players = {name: make_agent(agent_config(cfg.agents[name]), noise, params) for name in cfg.players}
+    record = {"command": " ".join(recorded_command(["python", "match.py", *sys.argv[1:]])), "commit": git_commit(),
+              "noise": noise.describe(), "physics": params.describe(), "target": cfg.target, "start": cfg.start,
+              "foul_penalty": cfg.foul_penalty, "max_innings": cfg.max_innings, "matches_per_ordered_pair": cfg.matches,
+              "seed": cfg.seed, "agents": {n: OmegaConf.to_container(cfg.agents[n]) for n in cfg.players}}
+    print(f"league of {', '.join(cfg.players)}: {cfg.matches} matches per ordered pair to {cfg.target} points, "
+          f"noise {noise.describe()}; output: {display_path(out_dir)}", flush=True)
+    league = run_league(players, out_dir=out_dir, matches=cfg.matches, seed=cfg.seed, noise_name=noise.describe(),
+                        record=record, progress=cfg.progress, target=cfg.target, max_innings=cfg.max_innings,
+                        start=cfg.start, foul_penalty=cfg.foul_penalty, noise=noise, physics=params)
+    for p in league["pairs"]:
+        print(f"{p['a']} vs {p['b']}: {p['a_wins']}-{p['b_wins']} ({p['draws']} draws) of {p['matches']}, "
+              f"{p['a']}'s score rate {p['a_score_rate']:.3f} [{p['ci95'][0]:.3f}, {p['ci95'][1]:.3f}]", flush=True)
+    print("Elo: " + ", ".join(f"{n} {r:.0f}" for n, r in sorted(league["elo"].items(), key=lambda x: -x[1])), flush=True)
+    return league

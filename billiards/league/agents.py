@@ -1,0 +1,159 @@
+"""Players of a two-player match (:mod:`billiards.envs.sagu_v0`).
+
+A player sees the table from its own point of view (its cue ball in slot 0, as the simulator's
+shooter: :func:`billiards.envs.sagu.shooter_view`) and returns the normalised action the env
+takes. Three kinds:
+
+* ``random``: uniform actions;
+* ``search`` (*greedy*): a search of :mod:`billiards.search` (by default the noise-aware robust
+  search) maximising its own chance to score, blind to the leave;
+* ``safety`` (*safety-aware*): the same search's shot and ``k`` of its proposer's candidates,
+  each replayed ``replays`` times under the execution noise; a candidate is worth its chance to
+  score, less ``foul_penalty`` times its chance to foul, less ``leave_weight`` times, over the
+  replays that do not score, the opponent's best chance to score from the table it leaves (the opponent's own
+  ``opp_k`` candidates from that leave, each replayed ``opp_replays`` times). It plays a safety
+  when a hard shot would hand the opponent an easy table.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from billiards import domain
+from billiards.envs.sagu import SWAP
+from billiards.physics import PhysicsParams, simulate_batch
+from billiards.physics.noise import NoiseModel
+
+KINDS = ("random", "search", "safety")
+
+
+@dataclass
+class AgentConfig:
+    """One player. ``search`` and ``proposer``: options of ``search.py`` (``conf/search/``, the
+    ``proposer=`` names); ``search_budget``: simulations per decision of that search; the safety
+    knobs (``kind=safety``) as in the module docstring."""
+
+    kind: str = "search"
+    search: str = "robust"
+    proposer: str = "ranked"
+    search_budget: int = 400
+    k: int = 32
+    replays: int = 12
+    opp_k: int = 32
+    opp_replays: int = 2
+    foul_penalty: float = 1.0
+    leave_weight: float = 1.0  # how much the opponent's chance from a leave costs (0: greedy over the candidates)
+    overrides: dict = field(default_factory=dict)  # further knobs of the search option, by name
+
+    def errors(self, name: str) -> list[str]:
+        errs = [] if self.kind in KINDS else [f"agents.{name}.kind must be one of {', '.join(KINDS)}, got {self.kind!r}"]
+        for key in ("search_budget", "k", "replays", "opp_k", "opp_replays"):
+            if getattr(self, key) < 1:
+                errs.append(f"agents.{name}.{key} must be >= 1, got {getattr(self, key)}")
+        for key in ("foul_penalty", "leave_weight"):
+            if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0):
+                errs.append(f"agents.{name}.{key} must be >= 0, got {getattr(self, key)}")
+        return errs
+
+
+def to_env_action(raw: np.ndarray) -> np.ndarray:
+    """A raw (theta, p, a, b) as the env's normalised float32 action (theta wrapped into [0, 2 pi))."""
+    raw = np.array(raw, dtype=np.float64)
+    raw[0] = raw[0] % (2 * math.pi)
+    return np.clip(domain.normalize_action(raw), -1.0, 1.0).astype(np.float32)
+
+
+class RandomAgent:
+    def __init__(self):
+        self.rng = np.random.default_rng(0)
+
+    def reseed(self, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def act(self, view: np.ndarray) -> np.ndarray:
+        return self.rng.uniform(-1.0, 1.0, 4).astype(np.float32)
+
+
+class SearchAgent:
+    """The greedy player: the search's chosen shot."""
+
+    def __init__(self, actor):
+        self.actor = actor
+
+    def reseed(self, seed: int) -> None:
+        self.actor.reseed(seed)
+
+    def act(self, view: np.ndarray) -> np.ndarray:
+        result = self.actor.search(view[None])
+        return to_env_action(result.actions[0])
+
+
+def _score_rates(tables: np.ndarray, actions: np.ndarray, replays: int, noise: NoiseModel, rng, params) -> tuple:
+    """Each (table, action) replayed ``replays`` times under ``noise``: (score rate, foul rate,
+    the result of every replay), tables (N, 4, 2) and actions (N, 4)."""
+    n = len(tables)
+    t, a = np.repeat(tables, replays, axis=0), np.repeat(actions, replays, axis=0)
+    played = noise.perturb(a, rng, params)
+    res = simulate_batch(t, played, params)
+    score, foul = res.score.reshape(n, replays), res.foul.reshape(n, replays)
+    return score.mean(axis=1), foul.mean(axis=1), res
+
+
+class SafetyAgent:
+    """The safety-aware player (see the module docstring)."""
+
+    def __init__(self, actor, proposer, opponent_proposer, cfg: AgentConfig, noise: NoiseModel, params: PhysicsParams):
+        self.actor, self.proposer, self.opponent = actor, proposer, opponent_proposer
+        self.cfg, self.noise, self.params = cfg, noise, params
+        self.rng = np.random.default_rng(0)
+
+    def reseed(self, seed: int) -> None:
+        self.actor.reseed(seed)
+        self.rng = np.random.default_rng(seed + 1)
+
+    def opponent_chance(self, leaves: np.ndarray) -> np.ndarray:
+        """The opponent's best score rate from each leave (mover's frame; (L, 4, 2))."""
+        if not len(leaves):
+            return np.zeros(0)
+        theirs = leaves[:, SWAP]
+        cands = self.opponent.propose(theirs, self.cfg.opp_k, self.rng)  # (L, K, 4)
+        tables = np.repeat(theirs, self.cfg.opp_k, axis=0)
+        rate, _, _ = _score_rates(tables, cands.reshape(-1, 4), self.cfg.opp_replays, self.noise, self.rng, self.params)
+        return rate.reshape(len(leaves), self.cfg.opp_k).max(axis=1)
+
+    def values(self, view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The candidates (C, 4) (the search's shot first) and their values."""
+        best = self.actor.search(view[None]).actions[0]
+        cands = np.concatenate([best[None], self.proposer.propose(view[None], self.cfg.k, self.rng)[0]])
+        c, r = len(cands), self.cfg.replays
+        score, foul, res = _score_rates(np.repeat(view[None], c, axis=0), cands, r, self.noise, self.rng, self.params)
+        missed = ~res.score
+        q = np.zeros(c * r)
+        q[missed] = self.opponent_chance(res.positions[missed])
+        leave_cost = (q * missed).reshape(c, r).sum(axis=1) / r  # over all replays: (1 - p) x mean q of the misses
+        return cands, score - self.cfg.foul_penalty * foul - self.cfg.leave_weight * leave_cost
+
+    def act(self, view: np.ndarray) -> np.ndarray:
+        cands, value = self.values(view)
+        return to_env_action(cands[int(np.argmax(value))])
+
+
+def make_agent(cfg: AgentConfig, noise: NoiseModel, params: PhysicsParams):
+    """The player ``cfg`` describes, for the execution noise and table of the match."""
+    if cfg.kind == "random":
+        return RandomAgent()
+    from billiards.search.config import OPTIONS, proposer_options
+
+    proposer = proposer_options()[cfg.proposer].build(params)
+    search = OPTIONS["search"][1][cfg.search](budget=cfg.search_budget, **cfg.overrides)
+    actor = search.actor(proposer, 0, params, noise=noise)
+    if cfg.kind == "search":
+        return SearchAgent(actor)
+    opponent = proposer_options()["geometric"].build(params)
+    return SafetyAgent(actor, proposer, opponent, cfg, noise, params)
+
+
+__all__ = ["AgentConfig", "KINDS", "RandomAgent", "SafetyAgent", "SearchAgent", "make_agent", "to_env_action"]

@@ -1,0 +1,81 @@
+"""The match app's schema (``python match.py``, ``conf/match.yaml``): the players, the league
+and the game, typed and closed; :func:`validate` checks what types cannot say, before Hydra
+writes anything (:class:`ValidateMatchConfig`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional
+
+from omegaconf import MISSING, DictConfig, OmegaConf
+
+from billiards.app_config import ValidatingCallback, numeric_bound_errors, register_app
+from billiards.device import threads_error
+from billiards.physics.config import PhysicsConfig, physics_errors
+from billiards.physics.noise import NoiseConfig, noise_errors
+
+from .agents import AgentConfig
+
+
+@dataclass
+class MatchAppConfig:
+    agents: Dict[str, AgentConfig] = field(default_factory=dict)  # every player the app knows, by name
+    players: List[str] = MISSING  # who plays the league (names of agents)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    target: int = 10  # points to win a match
+    max_innings: int = 200  # then the match is truncated (a draw unless the scores differ)
+    foul_penalty: float = 1.0  # points a foul costs
+    start: str = "canonical"  # canonical (the opening rack) | random
+    matches: int = 20  # per ordered pair of players (the break alternating)
+    seed: int = 0
+    threads: int = 1
+    progress: bool = True
+    resume: Optional[str] = None  # a league's run dir: play only its missing matches there
+
+
+register_app("match_schema", MatchAppConfig, {})
+
+
+class MatchConfigError(ValueError):
+    """An invalid match config; the message names the key."""
+
+
+def errors(cfg: DictConfig) -> list[str]:
+    errs = numeric_bound_errors(cfg) + physics_errors(cfg.physics) + noise_errors(cfg.noise)
+    for name, agent in cfg.agents.items():
+        errs += AgentConfig.errors(agent, name)
+    unknown = [p for p in cfg.players if p not in cfg.agents]
+    if unknown or len(set(cfg.players)) != len(cfg.players) or len(cfg.players) < 2:
+        errs.append(f"players must name at least two different agents of {sorted(cfg.agents)}; got {list(cfg.players)}")
+    for key in ("target", "max_innings", "matches"):
+        if cfg[key] < 1:
+            errs.append(f"{key} must be >= 1, got {cfg[key]}")
+    if not cfg.foul_penalty >= 0:
+        errs.append(f"foul_penalty must be >= 0, got {cfg.foul_penalty}")
+    if cfg.start not in ("canonical", "random"):
+        errs.append(f"start must be canonical or random, got {cfg.start!r}")
+    if cfg.seed < 0:
+        errs.append(f"seed must be >= 0, got {cfg.seed}")
+    if err := threads_error(cfg.threads):
+        errs.append(err)
+    return errs
+
+
+def validate(cfg: DictConfig) -> None:
+    if errs := errors(cfg):
+        raise MatchConfigError("invalid match config:\n  - " + "\n  - ".join(errs))
+
+
+class ValidateMatchConfig(ValidatingCallback):
+    """Hydra callback (``hydra.callbacks`` in conf/match.yaml): :func:`validate` before Hydra
+    creates the run directory."""
+
+    validate = staticmethod(validate)
+
+
+def agent_config(node) -> AgentConfig:
+    return OmegaConf.to_object(node) if isinstance(node, DictConfig) else node
+
+
+__all__ = ["MatchAppConfig", "MatchConfigError", "ValidateMatchConfig", "agent_config", "errors", "validate"]

@@ -1,0 +1,160 @@
+"""Matches and a league among players (:mod:`.agents`), with seeds, resume and an Elo table.
+
+A league plays, for every ordered pair of players (a, b), ``matches`` matches with a as white
+and b as yellow, the break alternating (a breaks in the even-numbered ones). Match ``i`` of pair
+``p`` uses seed ``seed + 1000 p + i`` (the rack, the execution noise and both players' own
+draws), so every match replays alone. Each finished match is appended to ``matches.jsonl`` as it
+ends; a league started again over the same directory plays only what is missing. ``league.json``:
+per ordered pair ``a``, ``b``, ``noise``, ``matches``, ``a_wins``, ``b_wins``, ``draws``, ``ci95``
+(the Wilson 95 % interval of a's score rate, a draw counting half), points and CPU ms per turn of
+each; and the Elo ratings of a Bradley-Terry fit over all matches (mean 1500).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from billiards.envs import sagu_v0
+from billiards.envs.sagu import AGENTS, shooter_view
+from billiards.files import atomic_write_text
+
+MATCHES_FILE, LEAGUE_FILE = "matches.jsonl", "league.json"
+
+
+def play_match(white, yellow, *, seed: int, first: str = "white", frames: list | None = None, **game) -> dict:
+    """One match (``game``: :func:`billiards.envs.sagu_v0.raw_env`'s keywords); with ``frames`` a
+    list, the table after every shot is appended to it (rgb_array frames)."""
+    env = sagu_v0.raw_env(first=first, render_mode="rgb_array" if frames is not None else None, **game)
+    env.reset(seed=seed)
+    players = {"white": white, "yellow": yellow}
+    for i, p in enumerate(AGENTS):
+        players[p].reseed(seed * 2 + i)
+    cpu, turns = {p: 0.0 for p in AGENTS}, {p: 0 for p in AGENTS}
+    for agent in env.agent_iter():
+        _, _, terminated, truncated, _ = env.last()
+        if terminated or truncated:
+            env.step(None)
+            continue
+        view = shooter_view(env.game.positions, AGENTS.index(agent))
+        t0 = time.process_time()
+        action = players[agent].act(view)
+        cpu[agent] += time.process_time() - t0
+        turns[agent] += 1
+        env.step(action)
+        if frames is not None:
+            frames.append(env.render())
+    scores = dict(zip(AGENTS, env.game.scores))
+    winner = None if scores["white"] == scores["yellow"] else max(scores, key=scores.get)
+    return {"seed": seed, "first": first, "winner": winner, "scores": scores, "shots": env.game.shots,
+            "innings": env.game.innings, "cpu_s": cpu, "turns": turns}
+
+
+def wilson(successes: float, n: int, z: float = 1.96) -> list[float]:
+    """The Wilson score interval of a rate ``successes / n``."""
+    if n == 0:
+        return [0.0, 1.0]
+    p = successes / n
+    centre, half = (p + z * z / (2 * n)) / (1 + z * z / n), z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [round(centre - half, 4), round(centre + half, 4)]
+
+
+def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 2000) -> dict[str, float]:
+    """Bradley-Terry strengths by minorisation-maximisation over ``(a, b, a's score)`` results
+    (1 win, 0.5 draw, 0 loss), as Elo ratings (400 log10 of the strength) with mean 1500. A
+    player that never lost or never won gets a finite rating through one virtual draw against
+    every other player (a weak prior)."""
+    idx = {n: i for i, n in enumerate(names)}
+    k = len(names)
+    wins, games = np.zeros((k, k)), np.zeros((k, k))
+    for a, b, s in results:
+        wins[idx[a], idx[b]] += s
+        wins[idx[b], idx[a]] += 1 - s
+        games[idx[a], idx[b]] += 1
+        games[idx[b], idx[a]] += 1
+    off = ~np.eye(k, dtype=bool)
+    wins, games = wins + 0.5 * off, games + 1.0 * off  # the virtual draws
+    gamma = np.ones(k)
+    for _ in range(iters):
+        denom = (games / (gamma[:, None] + gamma[None, :])).sum(axis=1)
+        gamma = wins.sum(axis=1) / denom
+        gamma /= np.exp(np.log(gamma).mean())
+    rating = 400 * np.log10(gamma)
+    return {n: round(float(1500 + rating[i] - rating.mean()), 1) for n, i in idx.items()}
+
+
+def summarize(records: list[dict], names: list[str], noise: str) -> dict:
+    """``league.json``'s pairs and Elo table from the finished matches."""
+    pairs, results = [], []
+    for a in names:
+        for b in names:
+            if a == b:
+                continue
+            mine = [r for r in records if (r["a"], r["b"]) == (a, b)]
+            if not mine:
+                continue
+            a_wins = sum(r["winner"] == "white" for r in mine)
+            b_wins = sum(r["winner"] == "yellow" for r in mine)
+            draws = len(mine) - a_wins - b_wins
+            turns = {p: sum(r["turns"][p] for r in mine) for p in AGENTS}
+            cpu = {p: sum(r["cpu_s"][p] for r in mine) for p in AGENTS}
+            pairs.append({"a": a, "b": b, "noise": noise, "matches": len(mine), "a_wins": a_wins, "b_wins": b_wins,
+                          "draws": draws, "a_score_rate": round((a_wins + 0.5 * draws) / len(mine), 4),
+                          "ci95": wilson(a_wins + 0.5 * draws, len(mine)),
+                          "a_points": round(float(np.mean([r["scores"]["white"] for r in mine])), 3),
+                          "b_points": round(float(np.mean([r["scores"]["yellow"] for r in mine])), 3),
+                          "a_ms_per_turn": round(1000 * cpu["white"] / max(turns["white"], 1), 2),
+                          "b_ms_per_turn": round(1000 * cpu["yellow"] / max(turns["yellow"], 1), 2)})
+            results += [(a, b, 1.0 if r["winner"] == "white" else 0.0 if r["winner"] == "yellow" else 0.5) for r in mine]
+    return {"pairs": pairs, "elo": elo(names, results) if results else {}}
+
+
+def read_matches(path: Path) -> list[dict]:
+    """The finished matches of a league directory (a torn last line, from a kill, is dropped)."""
+    if not path.is_file():
+        return []
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except ValueError:
+            continue
+    return out
+
+
+def run_league(players: dict, *, out_dir: Path, matches: int, seed: int, noise_name: str, record: dict,
+               progress: bool = True, **game) -> dict:
+    """Play every missing match of the league among ``players`` (name -> player) into
+    ``out_dir`` and write ``league.json`` (with ``record``: the command, commit, settings)."""
+    from tqdm import tqdm
+
+    names = list(players)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    ledger = out_dir / MATCHES_FILE
+    done = read_matches(ledger)
+    if ledger.is_file() and not ledger.read_text().endswith("\n"):  # a torn last line (a kill mid-write): drop it
+        atomic_write_text(ledger, "".join(json.dumps(r) + "\n" for r in done))
+    have = {(r["a"], r["b"], r["i"]) for r in done}
+    todo = [(p, a, b, i) for p, (a, b) in enumerate((a, b) for a in names for b in names if a != b)
+            for i in range(matches) if (a, b, i) not in have]
+    bar = tqdm(total=len(todo) + len(have), initial=len(have), desc="matches", disable=not progress, unit="match")
+    with ledger.open("a") as f:
+        for p, a, b, i in todo:
+            result = play_match(players[a], players[b], seed=seed + 1000 * p + i, first="white" if i % 2 == 0 else "yellow",
+                                **game)
+            row = {"a": a, "b": b, "i": i, **result}
+            f.write(json.dumps(row) + "\n")
+            f.flush()
+            done.append(row)
+            bar.update(1)
+    bar.close()
+    league = {**record, **summarize(done, names, noise_name)}
+    atomic_write_text(out_dir / LEAGUE_FILE, json.dumps(league, indent=2) + "\n")
+    return league
+
+
+__all__ = ["LEAGUE_FILE", "MATCHES_FILE", "elo", "play_match", "read_matches", "run_league", "summarize", "wilson"]

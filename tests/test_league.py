@@ -1,0 +1,97 @@
+"""Leagues of two-player matches (billiards.league, python match.py): the players, replayable
+matches, a league that resumes, the Elo fit and the interval, and the app's config checks."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pettingzoo")
+
+from billiards.league.agents import AgentConfig, SafetyAgent, make_agent, to_env_action  # noqa: E402
+from billiards.league.play import MATCHES_FILE, elo, play_match, run_league, wilson  # noqa: E402
+from billiards.physics import DEFAULT_PARAMS  # noqa: E402
+from billiards.physics.noise import get_noise  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+X5 = get_noise("fastfiz_x5")
+CHEAP = AgentConfig(kind="search", search="h2", proposer="geometric", search_budget=60, overrides={"k1": 40, "m1": 2})
+
+
+def test_elo_and_the_interval():
+    # a beats b 9 of 10, b beats c 9 of 10: a > b > c, symmetric in the names' order
+    results = [("a", "b", 1.0)] * 9 + [("a", "b", 0.0)] + [("b", "c", 1.0)] * 9 + [("b", "c", 0.0)]
+    r = elo(["a", "b", "c"], results)
+    assert r["a"] > r["b"] > r["c"] and abs(np.mean(list(r.values())) - 1500) < 1e-6
+    assert elo(["c", "b", "a"], results) == r
+    assert elo(["a", "b"], [("a", "b", 0.5)] * 4) == {"a": 1500.0, "b": 1500.0}
+    lo, hi = wilson(60, 100)
+    assert lo < 0.6 < hi and 0.49 < lo < 0.51 and wilson(0, 10)[0] == 0.0
+
+
+def test_an_action_of_a_search_is_the_envs_action():
+    raw = np.array([7.0, 0.5, -0.25, 1.0])  # theta beyond 2 pi wraps
+    x = to_env_action(raw)
+    assert x.dtype == np.float32 and np.all(np.abs(x) <= 1.0)
+    assert np.allclose(x, [(7.0 - 2 * np.pi) / np.pi - 1.0, 0.0, -0.25, 1.0], atol=1e-6)
+
+
+def test_a_match_replays_from_its_seed():
+    a, b = make_agent(CHEAP, X5, DEFAULT_PARAMS), make_agent(AgentConfig(kind="random"), X5, DEFAULT_PARAMS)
+    first = play_match(a, b, seed=5, noise=X5, target=2)
+    again = play_match(a, b, seed=5, noise=X5, target=2)
+    strip = lambda r: {k: v for k, v in r.items() if k != "cpu_s"}  # noqa: E731
+    assert strip(first) == strip(again) and first["winner"] == "white" and first["scores"]["white"] == 2.0
+    assert sum(first["turns"].values()) == first["shots"]
+
+
+def test_a_league_resumes_and_plays_only_what_is_missing(tmp_path):
+    players = {"cheap": make_agent(CHEAP, X5, DEFAULT_PARAMS), "random": make_agent(AgentConfig(kind="random"), X5, DEFAULT_PARAMS)}
+    game = dict(noise=X5, target=1, max_innings=30)
+    league = run_league(players, out_dir=tmp_path / "a", matches=3, seed=0, noise_name="fastfiz_x5", record={"x": 1},
+                        progress=False, **game)
+    pairs = {(p["a"], p["b"]): p for p in league["pairs"]}
+    assert set(pairs) == {("cheap", "random"), ("random", "cheap")} and league["x"] == 1
+    assert all(p["matches"] == 3 and p["a_wins"] + p["b_wins"] + p["draws"] == 3 for p in pairs.values())
+    assert league["elo"]["cheap"] > league["elo"]["random"]
+    lines = (tmp_path / "a" / MATCHES_FILE).read_text().splitlines()
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / MATCHES_FILE).write_text("\n".join(lines[:4]) + "\n" + lines[4][:20])  # killed mid-write
+    again = run_league(players, out_dir=tmp_path / "b", matches=3, seed=0, noise_name="fastfiz_x5", record={"x": 1},
+                       progress=False, **game)
+    untimed = lambda pairs: [{k: v for k, v in p.items() if not k.endswith("ms_per_turn")} for p in pairs]  # noqa: E731
+    assert untimed(again["pairs"]) == untimed(league["pairs"])
+    replayed = [json.loads(x) for x in (tmp_path / "b" / MATCHES_FILE).read_text().splitlines()[4:]]
+    assert [(r["a"], r["i"]) for r in replayed] == [(json.loads(x)["a"], json.loads(x)["i"]) for x in lines[4:]]
+
+
+def test_the_safety_player_values_the_searchs_shot_and_its_candidates():
+    agent = make_agent(AgentConfig(kind="safety", search="h2", proposer="geometric", search_budget=60, k=8, replays=2,
+                                   opp_k=4, opp_replays=1, overrides={"k1": 40, "m1": 2}), X5, DEFAULT_PARAMS)
+    assert isinstance(agent, SafetyAgent)
+    agent.reseed(0)
+    from billiards.envs._common import initial_racks
+
+    view = initial_racks(np.random.default_rng(1), "random", 1, DEFAULT_PARAMS)[0]
+    cands, value = agent.values(view)
+    assert cands.shape == (9, 4) and value.shape == (9,)
+    assert np.all(value <= 1.0) and np.all(value >= -1.0 - agent.cfg.foul_penalty)
+    agent.reseed(0)
+    assert np.array_equal(agent.values(view)[1], value)  # the same draws from the same seed
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("args, message", [
+    (["players=[greedy,nobody]"], "players must name at least two different agents"),
+    (["agents.greedy.kind=smart"], "agents.greedy.kind must be one of random, search, safety"),
+    (["target=0"], "target must be >= 1"),
+])
+def test_a_bad_match_config_fails_at_once_and_writes_nothing(tmp_path, args, message):
+    proc = subprocess.run([sys.executable, str(REPO / "match.py"), *args, f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0 and message in proc.stderr + proc.stdout and not (tmp_path / "run").exists()
