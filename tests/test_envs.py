@@ -166,6 +166,94 @@ def test_gym_same_seed_same_inning_and_reset_to_positions():
     np.testing.assert_array_equal(info["positions"], pos)
 
 
+def _assert_same(a, b, where="out"):
+    """a == b to the bit, through tuples and dicts (keys in the same order, arrays of the same dtype)."""
+    assert type(a) is type(b), (where, type(a), type(b))
+    if isinstance(a, tuple):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            _assert_same(x, y, f"{where}[{i}]")
+    elif isinstance(a, dict):
+        assert list(a) == list(b), where
+        for key in a:
+            _assert_same(a[key], b[key], f"{where}[{key!r}]")
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and a.shape == b.shape, (where, a.dtype, b.dtype, a.shape, b.shape)
+        assert np.array_equal(a.view(np.uint8), b.view(np.uint8)), where
+    else:
+        assert a == b, where
+
+
+VECTOR_CONFIGS = {
+    "defaults": {},
+    "all_layers": dict(ALL_LAYERS, max_shots=4),
+    "reset_on_miss_canonical": dict(on_miss="reset", start="canonical", max_shots=6),
+    "noise": dict(noise="fastfiz", max_shots=3, foul_penalty=1.0),
+    "raw_international_power": dict(normalize_actions=False, physics="international", gentle=0.5, gentle_kind="power",
+                                    on_miss="reset"),
+}
+
+
+@pytest.mark.parametrize("name", list(VECTOR_CONFIGS))
+def test_gym_vector_env_is_the_sync_vector_env_bit_for_bit(name):
+    """gymnasium.make_vec builds the batched vector env (one simulate_batch per step); its
+    observations, rewards, flags and stacked info equal SyncVectorEnv's over single envs to
+    the bit, through autoresets, per-inning seeds and per-inning execution noise."""
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    config, B = VECTOR_CONFIGS[name], 5
+    sync = gym.make_vec(GYM_ID, num_envs=B, vectorization_mode="sync", **config)
+    batched = gym.make_vec(GYM_ID, num_envs=B, **config)
+    assert isinstance(batched.unwrapped, Billiards4BallVectorEnv)
+    assert batched.action_space == sync.action_space and batched.observation_space == sync.observation_space
+    _assert_same(batched.reset(seed=4), sync.reset(seed=4), "reset")
+    rng = np.random.default_rng(0)
+    low, high = sync.single_action_space.low, sync.single_action_space.high
+    ended = 0
+    for t in range(25):
+        action = (low + (high - low) * rng.random((B, 4))).astype(np.float32)
+        out = batched.step(action)
+        _assert_same(out, sync.step(action), f"step {t}")
+        ended += int((out[2] | out[3]).sum())
+    assert ended >= B  # innings ended and were reset along the way
+
+
+def test_gym_vector_env_resets_like_the_sync_vector_env():
+    """Per-inning seeds, a reset mask and a given table reset the same innings the same way; a
+    bad option or a render mode is refused."""
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    sync = gym.make_vec(GYM_ID, num_envs=4, vectorization_mode="sync", max_shots=3)
+    batched = gym.make_vec(GYM_ID, num_envs=4, max_shots=3)
+    actions = [np.random.default_rng(t).uniform(-1, 1, (4, 4)).astype(np.float32) for t in range(3)]
+    table = random_racks(np.random.default_rng(5), 1)[0]
+    for kwargs in (dict(seed=[3, 9, 1, 2]), dict(options={"reset_mask": np.array([True, False, False, True])}),
+                   dict(seed=7, options={"positions": table})):
+        _assert_same(batched.reset(**kwargs), sync.reset(**kwargs), str(kwargs))
+        for t, action in enumerate(actions):
+            _assert_same(batched.step(action), sync.step(action), f"{kwargs} step {t}")
+    with pytest.raises(ValueError, match="reset options may only be"):
+        batched.reset(options={"postions": table})
+    with pytest.raises(ValueError, match="reset_mask"):
+        batched.reset(options={"reset_mask": np.zeros(4, dtype=bool)})
+    with pytest.raises(ValueError, match="does not render"):
+        Billiards4BallVectorEnv(2, render_mode="rgb_array")
+
+
+def test_random_racks_each_draws_every_generators_own_rack():
+    """Row i is random_racks(rngs[i], 1) to the bit, and each generator ends where that call
+    leaves it, also when racks are redrawn (a clearance that rejects most draws)."""
+    from billiards.physics import get_params
+    from billiards.physics.api import random_racks_each
+
+    for params in (DEFAULT_PARAMS, get_params({"rack_clearance": 0.5})):
+        mine, theirs = [np.random.default_rng(s) for s in range(6)], [np.random.default_rng(s) for s in range(6)]
+        racks = random_racks_each(mine, params)
+        for i, rng in enumerate(theirs):
+            np.testing.assert_array_equal(racks[i], random_racks(rng, 1, params)[0])
+            assert mine[i].bit_generator.state == rng.bit_generator.state
+
+
 def test_gym_shaping_and_constraint_match_domain():
     rng = np.random.default_rng(1)
     env = Billiards4BallInningEnv(**ALL_LAYERS, normalize_actions=False)  # the paper's raw (u, p, a, b)

@@ -1,7 +1,8 @@
 """Environments: a gymnasium env (``Billiards4Ball-v0``) and a batched TorchRL env, plus the
 TorchRL transforms of the paper's domain knowledge and :func:`make_env`.
 
-Importing this package registers ``Billiards4Ball-v0`` and loads only the gymnasium side
+Importing this package registers ``Billiards4Ball-v0`` (``gymnasium.make_vec`` of it builds the
+batched vector env of :mod:`billiards.envs.gym_vector`) and loads only the gymnasium side
 (numpy, numba, gymnasium). The TorchRL names (:class:`BilliardsEnv`, :func:`make_env`, the
 transforms) load torch and TorchRL on first use, so a gymnasium-only user neither pays for
 that import nor gets the multiprocessing start method TorchRL sets.
@@ -17,7 +18,8 @@ from .gym_env import Billiards4BallInningEnv
 
 GYM_ID = "Billiards4Ball-v0"
 if GYM_ID not in gymnasium.registry:
-    gymnasium.register(id=GYM_ID, entry_point="billiards.envs.gym_env:Billiards4BallInningEnv")
+    gymnasium.register(id=GYM_ID, entry_point="billiards.envs.gym_env:Billiards4BallInningEnv",
+                       vector_entry_point="billiards.envs.gym_vector:Billiards4BallVectorEnv")
 
 # TorchRL names -> the submodule that defines them, imported on first attribute access.
 _LAZY = {

@@ -154,12 +154,16 @@ class Shots(NamedTuple):
 
 
 def play_shots(positions: np.ndarray, commanded: np.ndarray, shots_before: np.ndarray, *, params: PhysicsParams,
-               noise: NoiseModel, rng: np.random.Generator, on_miss: str, max_shots: int) -> Shots:
+               noise: NoiseModel, rng, on_miss: str, max_shots: int) -> Shots:
     """One step of B innings, the step of both envs: the commanded raw shots (B, 4) perturbed
-    by the execution noise (its draws from ``rng``; an exact model draws nothing and plays
-    them bit for bit), simulated from the tables ``positions`` (B, 4, 2) in one
-    ``simulate_batch`` call, and each inning's end (:func:`terminated_truncated`) after it."""
-    played = noise.perturb(commanded, rng, params)
+    by the execution noise (its draws from ``rng``, a Generator, or a sequence of B of them,
+    one per inning, each perturbing its own shot as a batch of one; an exact model draws
+    nothing and plays them bit for bit), simulated from the tables ``positions`` (B, 4, 2) in
+    one ``simulate_batch`` call, and each inning's end (:func:`terminated_truncated`) after it."""
+    if noise.is_exact or isinstance(rng, np.random.Generator):
+        played = noise.perturb(commanded, rng, params)
+    else:
+        played = np.concatenate([noise.perturb(shot[None], r, params) for shot, r in zip(commanded, rng, strict=True)])
     result = simulate_batch(positions, played, params)
     shot = np.asarray(shots_before) + 1
     terminated, truncated = terminated_truncated(result.score, shot, on_miss, max_shots)

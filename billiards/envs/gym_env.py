@@ -11,7 +11,8 @@ A thin layer over the step code the TorchRL env and its transforms run (``_commo
 :mod:`billiards.domain`: :func:`~billiards.domain.raw_action`,
 :func:`~billiards.domain.observation`, :func:`~billiards.domain.action_bounds`), on a batch of
 one, so ``constrain_aim``, ``extra_features`` and the shaping coefficients mean exactly what
-they mean in :func:`billiards.envs.make_env`, and give the same shots.
+they mean in :func:`billiards.envs.make_env`, and give the same shots. ``gymnasium.make_vec``
+steps B of them as one batch (:mod:`billiards.envs.gym_vector`).
 """
 
 from __future__ import annotations

@@ -245,6 +245,19 @@ def random_racks(rng: np.random.Generator, n: int, params: PhysicsParams = DEFAU
     (the paper's sampling on ``korean_medium``: m = 5 mm, clearance 2 mm; 0 and 0 on
     ``international``). Raises ValueError if some rack is still not placed after
     ``RACK_ATTEMPTS`` rounds (a table barely larger than four balls)."""
+    return _place_racks(lambda todo: rng.random((todo.size, 4, 2)), n, params)
+
+
+def random_racks_each(rngs, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
+    """One rack per generator of ``rngs``, (len(rngs), 4, 2): row i is ``random_racks(rngs[i], 1,
+    params)[0]`` bit for bit (the same draws from each generator, which it advances alike),
+    with the rejection test run on all the racks at once."""
+    return _place_racks(lambda todo: np.stack([rngs[i].random((4, 2)) for i in todo]), len(rngs), params)
+
+
+def _place_racks(draw, n: int, params: PhysicsParams) -> np.ndarray:
+    """:func:`random_racks` with the uniform draws of the racks still to place, (todo.size, 4, 2)
+    in [0, 1), from ``draw(todo)``."""
     params = get_params(params)  # a preset's name is accepted wherever parameters are
     R, m = params.ball_radius, params.rack_margin
     lo = np.array([R + m, R + m])
@@ -255,7 +268,7 @@ def random_racks(rng: np.random.Generator, n: int, params: PhysicsParams = DEFAU
     for _ in range(RACK_ATTEMPTS):
         if not todo.size:
             return out
-        cand = lo + (hi - lo) * rng.random((todo.size, 4, 2))
+        cand = lo + (hi - lo) * draw(todo)
         d = np.linalg.norm(cand[:, :, None, :] - cand[:, None, :, :], axis=-1)
         d[:, np.arange(4), np.arange(4)] = np.inf
         ok = d.min(axis=(1, 2)) >= min_gap

@@ -14,8 +14,10 @@ search with one candidate and no expansion plays exactly what the proposer would
 
 from __future__ import annotations
 
+import math
 from typing import Protocol, Sequence
 
+import numba
 import numpy as np
 import torch
 
@@ -88,21 +90,35 @@ class GeometricProposer:
 class EnsembleHeads:
     """The Gaussian heads of an ensemble of identical policy networks as stacked float32 arrays.
 
-    Every layer of the E policies is one compiled call over the stacked weights
-    (:func:`billiards.numerics.dense`), so the whole ensemble's forward pass at S states costs a
-    few calls instead of E framework calls
+    The whole proposal -- observation, every layer of the E policies over the stacked weights
+    (:func:`billiards.numerics.dense`'s kernel), the heads, the squashed draws and the map to
+    the raw shot -- is one compiled call (:meth:`candidates`), instead of E framework calls
     (TensorDict, distribution and transform objects) that dwarf a 32->256->256->8 network at
-    the batch sizes the search uses (S <= a few hundred). It reproduces, in float32 like the
-    torch modules: the MLP (Linear/ReLU), TorchRL's ``NormalParamExtractor`` (biased softplus
-    scale, lower bound), the ``TanhNormal`` on [-1, 1] (tanh clamped to +-(1 - float32
-    resolution), TorchRL's safe tanh) and :class:`~billiards.rl.agents.ScaleAction`.
+    the batch sizes the search uses (S <= a few hundred; PUCT calls it for one table at a
+    time). It reproduces, in float32 like the torch modules: the MLP (Linear/ReLU), TorchRL's
+    ``NormalParamExtractor`` (biased softplus scale, lower bound), the ``TanhNormal`` on
+    [-1, 1] (tanh clamped to +-(1 - float32 resolution), TorchRL's safe tanh) and
+    :class:`~billiards.rl.agents.ScaleAction`.
     """
 
     def __init__(self, weights, biases, scale_bias, scale_min, scale_lb, tanh_lim, mid, half, held):
         self.weights, self.biases = weights, biases  # per layer: (E, in, out), (E, out)
         self.scale_bias, self.scale_min, self.scale_lb, self.tanh_lim = scale_bias, scale_min, scale_lb, tanh_lim
-        self.mid, self.half, self.held = mid, half, held  # (E, 1, 1, A); held: None or (mask, values)
+        self.mid, self.half, self.held = mid, half, held  # (E, A) float32; held: None or (mask, values)
         self.size = weights[0].shape[0]
+        # the kernel's operands: every layer's weights and biases in one float32 buffer, each
+        # layer's (in, out, weight offset, bias offset), the head's constants as float32
+        parts, layout, off = [], [], 0
+        for w, b in zip(weights, biases):
+            E, n_in, n_out = w.shape
+            layout.append((n_in, n_out, off, off + w.size))
+            parts += [np.ascontiguousarray(w, dtype=np.float32).ravel(), np.ascontiguousarray(b, dtype=np.float32).ravel()]
+            off += w.size + b.size
+        self._flat, self._layout = np.concatenate(parts), np.array(layout, dtype=np.int64)
+        self._consts = np.array([scale_bias, scale_min, scale_lb, tanh_lim], dtype=np.float64).astype(np.float32)
+        A = self.mid.shape[-1]
+        self._held_mask = np.zeros(A, dtype=np.bool_) if held is None else np.asarray(held[0], dtype=np.bool_)
+        self._held_values = np.zeros(A, dtype=np.float32) if held is None else np.asarray(held[1], dtype=np.float32)
 
     @classmethod
     def from_policies(cls, policies) -> "EnsembleHeads":
@@ -118,30 +134,99 @@ class EnsembleHeads:
         stack = lambda key: [np.stack(ws) for ws in zip(*(part[key] for part in parts))]
         p0 = parts[0]
         tanh_lim = 1.0 - float(np.finfo(np.float32).resolution)
-        mid = np.stack([part["mid"] for part in parts])[:, None, None]
-        half = np.stack([part["half"] for part in parts])[:, None, None]
+        mid = np.stack([part["mid"] for part in parts])
+        half = np.stack([part["half"] for part in parts])
         return cls(stack("weights"), stack("biases"), p0["scale_bias"], p0["scale_min"],
                    p0["scale_lb"], tanh_lim, mid, half, p0["held"])
 
-    def heads(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """obs (S, D) float32 -> loc, scale (E, S, A) float32 of every policy's Gaussian.
+    def draws(self, S: int, k: int) -> int:
+        """How many standard normals :meth:`candidates` takes for S tables and k candidates."""
+        return S * self.mid.shape[-1] * sum(max(len(range(e, k, self.size)) - 1, 0) for e in range(self.size))
 
-        Every layer is :func:`billiards.numerics.dense` (float32, a fixed summation order), the
-        softplus and tanh go through the C library in float64: the same bits on every CPU,
-        whatever BLAS kernel or NumPy loops it would choose (equal to the torch modules up to
-        float32 rounding).
+    def candidates(self, positions: np.ndarray, normals: np.ndarray, k: int, extra_features: bool,
+                   constrain_aim: bool, R: float) -> np.ndarray:
+        """(S, k, 4) float64 raw shots on the tables ``positions`` (S, 4, 2).
+
+        Policy e's i-th candidate is candidate j = i * E + e: its deterministic action for
+        i = 0, else squashed from its Gaussian's ``loc + scale * eps`` with eps the i-th row
+        of the policy's (S, n_e - 1, A) block of ``normals`` (float64, rounded to float32; the
+        blocks of policies 0, 1, ... one after the other, :meth:`draws` in all). Then mapped
+        onto the env's bounds, p clipped to [0, 1], a and b to [-1, 1], and with
+        ``constrain_aim`` u clipped to [-1, 1] and aimed by :func:`billiards.domain.constrained_theta`.
+
+        In float32 as :func:`billiards.numerics.mlp` and :func:`~billiards.numerics.softplus32`
+        / :func:`~billiards.numerics.tanh32` compute (each layer's sums in index order, softplus
+        and tanh through the C library in float64), then float64: the same bits on every CPU.
         """
-        x = numerics.mlp(np.asarray(obs, dtype=np.float32)[None], self.weights, self.biases)
-        A = x.shape[-1] // 2
-        scale = numerics.softplus32(x[..., A:] + np.float32(self.scale_bias)) + np.float32(self.scale_min)
-        return x[..., :A], np.maximum(scale, np.float32(self.scale_lb))
+        pos = np.ascontiguousarray(positions, dtype=np.float64)
+        if normals.shape != (self.draws(pos.shape[0], k),):
+            raise ValueError(f"candidates: {self.draws(pos.shape[0], k)} normals needed, got shape {normals.shape}")
+        return _candidates(pos, normals, self._flat, self._layout, self._consts, self.mid, self.half, self._held_mask,
+                           self._held_values, k, extra_features, constrain_aim, 2.0 * R,
+                           math.sin(domain.AIM_MAX_HALF_WIDTH))
 
-    def actions(self, pre_tanh: np.ndarray) -> np.ndarray:
-        """Pre-tanh draws (E, S, n, A) -> actions in the env's bounds (E, S, n, A), float32."""
-        y = np.clip(numerics.tanh32(pre_tanh), np.float32(-self.tanh_lim), np.float32(self.tanh_lim))
-        if self.held is not None:
-            y = np.where(self.held[0], self.held[1], y)
-        return self.mid + self.half * y
+
+@numba.njit(cache=True, nogil=True)
+def _clip(x, low, high):
+    """NumPy's clip of one value (NaN passes through; -0.0 stays -0.0 at a low bound of 0)."""
+    return low if x < low else (high if x > high else x)
+
+
+@numba.njit(cache=True, nogil=True)
+def _candidates(pos, normals, flat, layout, consts, mid, half, held_mask, held_values, k, extra_features, constrain_aim,
+                two_r, cap):
+    """:meth:`EnsembleHeads.candidates`: the observation (:func:`billiards.domain.observation`),
+    the stacked layers, the heads, the squashed draws and the raw shots, the NumPy formulas'
+    operations in their order."""
+    S, E, A = pos.shape[0], mid.shape[0], mid.shape[1]
+    D = domain.OBS_DIM + (domain.N_CAROM_FEATURES if extra_features else 0)
+    x = np.zeros((1, S, D), dtype=np.float32)
+    for s in range(S):
+        for ball in range(domain.N_BALLS):
+            x[0, s, ball * domain.BALL_STATE_DIM] = np.float32(pos[s, ball, 0])
+            x[0, s, ball * domain.BALL_STATE_DIM + 1] = np.float32(pos[s, ball, 1])
+    if extra_features:
+        feats = domain._carom_features_rows(pos)
+        for s in range(S):
+            for f in range(domain.N_CAROM_FEATURES):
+                x[0, s, domain.OBS_DIM + f] = np.float32(feats[s, f])
+    n_layers = layout.shape[0]
+    for layer in range(n_layers):
+        n_in, n_out, w_off, b_off = layout[layer, 0], layout[layer, 1], layout[layer, 2], layout[layer, 3]
+        w = flat[w_off:w_off + E * n_in * n_out].reshape((E, n_in, n_out))
+        b = flat[b_off:b_off + E * n_out].reshape((E, n_out))
+        x = numerics._dense_kernel(x, w, b, layer < n_layers - 1, np.empty((E, S, n_out), dtype=np.float32))
+    bias, scale_min, scale_lb, lim = consts[0], consts[1], consts[2], consts[3]
+    out = np.empty((S, k, A))
+    first = 0  # where policy e's block of normals starts
+    for e in range(E):
+        n_e = (k - e + E - 1) // E if k > e else 0  # its candidates e, e + E, ...
+        for s in range(S):
+            for a in range(A):
+                loc = x[e, s, a]
+                z = x[e, s, A + a] + bias  # softplus32 (identity above 20), + min, then the lower bound
+                scale = z if z > np.float32(20.0) else np.float32(math.log1p(math.exp(np.float64(z))))
+                scale = scale + scale_min
+                if not (scale > scale_lb or scale != scale):  # np.maximum
+                    scale = scale_lb
+                for i in range(n_e):
+                    eps = np.float32(0.0) if i == 0 else np.float32(normals[first + (s * (n_e - 1) + i - 1) * A + a])
+                    y = _clip(np.float32(math.tanh(np.float64(loc + scale * eps))), -lim, lim)
+                    if held_mask[a]:
+                        y = held_values[a]
+                    out[s, i * E + e, a] = np.float64(mid[e, a] + half[e, a] * y)
+        first += S * max(n_e - 1, 0) * A
+    theta_target, half_width = np.zeros(0), np.zeros(0)
+    if constrain_aim:
+        theta_target, half_width = domain._aim_window_rows(pos, domain._nearest_red_rows(pos), two_r, cap)
+    for s in range(S):
+        for j in range(k):
+            out[s, j, 1] = _clip(out[s, j, 1], 0.0, 1.0)
+            out[s, j, 2] = _clip(out[s, j, 2], -1.0, 1.0)
+            out[s, j, 3] = _clip(out[s, j, 3], -1.0, 1.0)
+            if constrain_aim:
+                out[s, j, 0] = theta_target[s] + _clip(out[s, j, 0], -1.0, 1.0) * half_width[s]
+    return out
 
 
 def _head_parts(policy) -> dict:
@@ -262,22 +347,18 @@ class PolicyProposer:
         norm = torch.cat(draws, dim=1).reshape(S * n, -1)
         return scale(TensorDict({"action_norm": norm}, batch_size=[S * n]))["action"].reshape(S, n, -1)
 
-    def _raw_batched(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
-        """(S, k, 4) float32 actions in the env's bounds, all policies in one pass.
+    def _batched(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+        """(S, k, 4) raw candidates, all policies in one compiled call (:meth:`EnsembleHeads.candidates`).
 
         Policy e's i-th candidate is candidate j = i * E + e; its draw eps is the i-th row of
-        the (S, n_e - 1, A) normals the reference draws for policy e (the same calls in the
-        same order), 0 for the deterministic candidate i = 0: tanh(loc + scale * 0) = tanh(loc).
+        the (S, n_e - 1, A) normals the reference draws for policy e, 0 for the deterministic
+        candidate i = 0: tanh(loc + scale * 0) = tanh(loc). A Generator draws normals one
+        after the other, so one call for all policies gives the reference's values and leaves
+        the generator in its state.
         """
-        S, E = positions.shape[0], self.heads.size
-        loc, scale = self.heads.heads(self.observation_array(positions))  # (E, S, A)
-        counts = [len(range(e, k, E)) for e in range(E)]
-        eps = np.zeros((E, S, max(counts), loc.shape[-1]), dtype=np.float32)
-        for e, n in enumerate(counts):
-            if n > 1:
-                eps[e, :, 1:n] = rng.standard_normal((S, n - 1, loc.shape[-1]))
-        acts = self.heads.actions(loc[:, :, None] + scale[:, :, None] * eps)  # (E, S, n_max, A)
-        return acts.transpose(1, 2, 0, 3).reshape(S, -1, acts.shape[-1])[:, :k]
+        n = self.heads.draws(positions.shape[0], k)  # the reference's per-policy draws, in one call
+        normals = rng.standard_normal(n) if n else np.empty(0)
+        return self.heads.candidates(positions, normals, k, self.extra_features, self.constrain_aim, self.R)
 
     @torch.no_grad()
     def _raw_reference(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
@@ -292,8 +373,9 @@ class PolicyProposer:
         return out
 
     def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
-        raw = self._raw_batched if self.impl == "batched" else self._raw_reference
-        out = raw(positions, k, rng).astype(np.float64)
+        if self.impl == "batched":
+            return self._batched(positions, k, rng)
+        out = self._raw_reference(positions, k, rng).astype(np.float64)
         out[..., 1] = np.clip(out[..., 1], 0.0, 1.0)
         out[..., 2:] = np.clip(out[..., 2:], -1.0, 1.0)
         if self.constrain_aim:

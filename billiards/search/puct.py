@@ -97,10 +97,11 @@ def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random
     # enough for simulate_batch's threads; the outcomes are the same bits either way
     max_serial = _max_serial(S)
     c = domain.check_coefficient("foul penalty c", cfg.foul_penalty)
+    widen = tree.widening(cfg.budget, cfg.pw_c, cfg.pw_alpha)
     while True:
         m = tree.run_rounds(ints, floats, t["positions"], t["actions"], pool, t["n_nodes"], t["sims"], t["path"],
                             t["path_len"], t["kind"], start, actions, after, score, reward, out_int, out_float, io,
-                            rounds, cfg.budget, cfg.max_depth, cfg.c_puct, cfg.pw_c, cfg.pw_alpha, cfg.gamma,
+                            rounds, cfg.budget, cfg.max_depth, cfg.c_puct, widen, cfg.gamma,
                             params.array, POSITION_TOL, c, max_serial)
         if m == tree.DONE:
             break
@@ -117,7 +118,7 @@ def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random
         io[:] = 0, m
 
     best, value = np.empty(S, dtype=np.int64), np.empty(S)
-    tree.root_choice(ints, floats, cfg.gamma, best, value)
+    tree.root_choice(ints, floats, t["n_nodes"], cfg.gamma, best, value)
     rows = np.arange(S)
     return SearchResult(t["actions"][rows, best], value, floats[rows, best, tree.REWARD].copy(),
                         t["positions"][rows, best], int(t["sims"].sum()))

@@ -1,9 +1,13 @@
 """The PUCT trees as arrays, and the compiled steps that walk them (numba, ``cache=True``).
 
 S trees, each with room for C nodes (a decision at budget B creates at most B + 1). Node n of
-tree s is a table at rest; its integer fields are ``ints[s, n, FIELD]`` and its two floats
-``value_sum, reward = floats[s, n]`` (``reward``: verifier reward of the shot into the node).
-Children form a singly linked list in creation (= sampling) order: ``FIRST``, ``LAST``, ``NEXT``.
+tree s is a table at rest; its integer fields are ``ints[s, n, FIELD]`` and its floats
+``value_sum, reward, q = floats[s, n]`` (``reward``: verifier reward of the shot into the node;
+``q = value_sum / visits``, 0 before the first visit, kept up to date by the back-up so the
+selection reads it instead of dividing again). Node ids follow creation order, so a node's
+children, in sampling order, are the nodes of depth + 1 created under it; its *live*
+(non-terminal) children also form a singly linked list in that order, ``FIRST``, ``LAST``,
+``NEXT``, the only children the selection looks at (terminal ones are counted in ``N_CHILD``).
 
 A round of the search is: every unfinished tree walks down to the node it acts on
 (:func:`descend`), the caller draws prior samples for leaves that have used theirs up,
@@ -15,6 +19,7 @@ reference's order (``puct_reference.py``), so both compute bit-identical scores.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -23,9 +28,13 @@ from numba import njit
 from billiards.physics.core import ERR_OK, O_HIT1, O_HIT2, O_HIT3, check_actions, check_positions, run_batch_serial
 
 # integer fields of a node
-DEPTH, TERMINAL, VISITS, N_CHILD, FIRST, LAST, NEXT, DRAWN = range(8)
-N_INT = 8
-VALUE_SUM, REWARD = 0, 1
+DEPTH, TERMINAL, VISITS, N_CHILD, FIRST, LAST, NEXT, DRAWN, FAV, NLB = range(10)
+N_INT = 10
+VALUE_SUM, REWARD, Q, AUB = range(4)
+N_FLOAT = 4
+_NO_VISITS = 1 << 62  # NLB of a node whose only live child is its favourite
+
+MAX_ROUNDS = 20  # rounds per simulation of the budget before a search counts as stalled
 
 # what a tree does this round
 IDLE, EXPAND, MAX_DEPTH, NEEDS_POOL = 0, 1, 2, 3
@@ -39,9 +48,9 @@ def new_trees(positions: np.ndarray, budget: int, pool: int, max_depth: int):
     children take ``DRAWN - pool .. DRAWN - 1`` in order, and the per-round path buffers."""
     S, C = positions.shape[0], budget + 1
     ints = np.empty((S, C, N_INT), dtype=np.int64)
-    ints[:, 0] = (0, 0, 0, 0, -1, -1, -1, 0)
-    floats = np.empty((S, C, 2))
-    floats[:, 0] = 0.0
+    ints[:, 0] = (0, 0, 0, 0, -1, -1, -1, 0, -1, _NO_VISITS)
+    floats = np.empty((S, C, N_FLOAT))
+    floats[:, 0] = (0.0, 0.0, 0.0, -math.inf)
     node_pos = np.empty((S, C, 4, 2))
     node_pos[:, 0] = positions
     return {
@@ -53,43 +62,85 @@ def new_trees(positions: np.ndarray, budget: int, pool: int, max_depth: int):
     }
 
 
-@njit(cache=True)
-def _has_live_child(ints, s, node):
-    c = ints[s, node, FIRST]
-    while c >= 0:
-        if not ints[s, c, TERMINAL]:
-            return True
-        c = ints[s, c, NEXT]
-    return False
+def widening(budget: int, pw_c: float, pw_alpha: float) -> np.ndarray:
+    """Progressive widening as a table: ``widen[N] = ceil(pw_c * (N + 1) ** pw_alpha)``, the
+    children a node visited N times may have, for every N a search at this budget reaches
+    (a node's visits never exceed the rounds, at most ``MAX_ROUNDS * budget``). Read-only;
+    one table per setting, computed once."""
+    return _widening(budget, float(pw_c), float(pw_alpha))
+
+
+@functools.lru_cache(maxsize=32)
+def _widening(budget: int, pw_c: float, pw_alpha: float) -> np.ndarray:
+    widen = _widening_table(MAX_ROUNDS * budget + 1, pw_c, pw_alpha)
+    widen.setflags(write=False)
+    return widen
 
 
 @njit(cache=True)
+def _widening_table(n, pw_c, pw_alpha):
+    widen = np.empty(n, dtype=np.int64)
+    for visits in range(n):
+        widen[visits] = math.ceil(pw_c * (visits + 1) ** pw_alpha)
+    return widen
+
+
+@njit(cache=True, inline="always")
 def _select(ints, floats, s, node, c_puct, gamma):
-    """argmax over the live children of Q + c_puct * P * sqrt(N) / (1 + N_child); first wins ties."""
+    """argmax over the live children of r + gamma * Q + c_puct * P * sqrt(N) / (1 + N_child);
+    first wins ties; -1 if every child is terminal.
+
+    Each score is ``a + bonus / (1 + n)`` with ``a = r + gamma * Q`` (the same operations in the
+    same order as the formula). Only the node's favourite ``FAV`` (the child chosen last time)
+    and newly added children change between two selections at a node -- a back-up only
+    reaches children on the walked path, which its parent chose -- so the node keeps, over its
+    other live children, the largest ``a`` (``AUB``) and the fewest visits (``NLB``). Rounding
+    is monotone, so no other child scores above ``AUB + bonus / (1 + NLB)``: a favourite that
+    scores strictly more is the argmax, and only otherwise are the children scanned (which
+    also finds the new favourite and its bounds).
+    """
     visits = ints[s, node, VISITS]
     sqrt_n = math.sqrt(visits)
     prior = 1.0 / ints[s, node, N_CHILD]
+    bonus = c_puct * prior * sqrt_n  # the same operations, in the same order, as c_puct * prior * sqrt_n / (1 + n)
+    f = ints[s, node, FAV]
+    if f >= 0:
+        score = floats[s, f, REWARD] + gamma * floats[s, f, Q] + bonus / (1 + ints[s, f, VISITS])
+        if score > floats[s, node, AUB] + bonus / (1 + ints[s, node, NLB]):
+            return f
     best, best_score = -1, -math.inf
+    a1, a1_child, a2 = -math.inf, -1, -math.inf  # the two largest a (NaN never counts)
+    n1, n1_child, n2 = _NO_VISITS, -1, _NO_VISITS  # the two fewest visits
     c = ints[s, node, FIRST]
-    while c >= 0:
-        if not ints[s, c, TERMINAL]:
-            n = ints[s, c, VISITS]
-            q = floats[s, c, VALUE_SUM] / n if n else 0.0
-            score = floats[s, c, REWARD] + gamma * q + c_puct * prior * sqrt_n / (1 + n)
-            if score > best_score:
-                best, best_score = c, score
+    while c >= 0:  # live children only
+        n = ints[s, c, VISITS]
+        a = floats[s, c, REWARD] + gamma * floats[s, c, Q]
+        score = a + bonus / (1 + n)
+        if score > best_score:
+            best, best_score = c, score
+        if a > a1:
+            a1, a1_child, a2 = a, c, a1
+        elif a > a2:
+            a2 = a
+        if n < n1:
+            n1, n1_child, n2 = n, c, n1
+        elif n < n2:
+            n2 = n
         c = ints[s, c, NEXT]
+    ints[s, node, FAV] = best
+    floats[s, node, AUB] = a2 if a1_child == best else a1
+    ints[s, node, NLB] = n2 if n1_child == best else n1
     return best
 
 
-@njit(cache=True)
-def descend(ints, floats, sims, path, path_len, kind, budget, max_depth, c_puct, pw_c, pw_alpha, gamma):
+@njit(cache=True, inline="always")
+def descend(ints, floats, sims, path, path_len, kind, budget, max_depth, c_puct, widen, gamma):
     """Walk every tree with sims < budget from its root to the node this round acts on.
 
     The walk stops at a node of depth ``max_depth`` (``MAX_DEPTH``: nothing to simulate) or
-    at a node that may widen -- fewer children than ``ceil(pw_c * (N + 1) ** pw_alpha)``, or
-    no live (scoring) child -- (``EXPAND``, or ``NEEDS_POOL`` if its prior samples are used
-    up); otherwise it follows :func:`_select`. Returns how many trees need prior samples.
+    at a node that may widen -- fewer children than ``widen[N]`` (:func:`widening`), or no
+    live (scoring) child -- (``EXPAND``, or ``NEEDS_POOL`` if its prior samples are used up);
+    otherwise it follows :func:`_select`. Returns how many trees need prior samples.
     """
     needs = 0
     for s in range(ints.shape[0]):
@@ -104,22 +155,24 @@ def descend(ints, floats, sims, path, path_len, kind, budget, max_depth, c_puct,
                 kind[s] = MAX_DEPTH
                 break
             n_child = ints[s, node, N_CHILD]
-            allowed = math.ceil(pw_c * (ints[s, node, VISITS] + 1) ** pw_alpha)
-            if n_child < allowed or not _has_live_child(ints, s, node):
+            child = -1
+            if n_child >= widen[ints[s, node, VISITS]]:
+                child = _select(ints, floats, s, node, c_puct, gamma)
+            if child < 0:  # may widen, or every child is terminal
                 if n_child == ints[s, node, DRAWN]:
                     kind[s] = NEEDS_POOL
                     needs += 1
                 else:
                     kind[s] = EXPAND
                 break
-            node = _select(ints, floats, s, node, c_puct, gamma)
+            node = child
             path[s, n] = node
             n += 1
         path_len[s] = n
     return needs
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def gather(ints, node_pos, pool, path, path_len, kind, start, actions):
     """The shots of this round's ``EXPAND`` leaves, in tree order: each leaf's table into
     ``start`` and its next unused prior sample into ``actions``. Returns their number."""
@@ -130,13 +183,14 @@ def gather(ints, node_pos, pool, path, path_len, kind, start, actions):
             continue
         leaf = path[s, path_len[s] - 1]
         k = ints[s, leaf, N_CHILD] - (ints[s, leaf, DRAWN] - P)
-        start[m] = node_pos[s, leaf]
-        actions[m] = pool[s, leaf, k]
+        for b in range(4):
+            start[m, b, 0], start[m, b, 1] = node_pos[s, leaf, b, 0], node_pos[s, leaf, b, 1]
+            actions[m, b] = pool[s, leaf, k, b]
         m += 1
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def attach_and_back_up(ints, floats, node_pos, node_actions, n_nodes, sims, path, path_len, kind,
                        actions, after, score, reward, gamma):
     """Add each simulated shot (rows in :func:`gather`'s order) as the newest child of its leaf,
@@ -155,15 +209,21 @@ def attach_and_back_up(ints, floats, node_pos, node_actions, n_nodes, sims, path
             ints[s, c, LAST] = -1
             ints[s, c, NEXT] = -1
             ints[s, c, DRAWN] = 0
+            ints[s, c, FAV] = -1
+            ints[s, c, NLB] = _NO_VISITS
             floats[s, c, VALUE_SUM] = 0.0
             floats[s, c, REWARD] = reward[m]
-            node_pos[s, c] = after[m]
-            node_actions[s, c] = actions[m]
-            if ints[s, leaf, LAST] >= 0:
-                ints[s, ints[s, leaf, LAST], NEXT] = c
-            else:
-                ints[s, leaf, FIRST] = c
-            ints[s, leaf, LAST] = c
+            floats[s, c, Q] = 0.0
+            floats[s, c, AUB] = -math.inf
+            for b in range(4):
+                node_pos[s, c, b, 0], node_pos[s, c, b, 1] = after[m, b, 0], after[m, b, 1]
+                node_actions[s, c, b] = actions[m, b]
+            if score[m]:  # a live child: linked after the leaf's last one
+                if ints[s, leaf, LAST] >= 0:
+                    ints[s, ints[s, leaf, LAST], NEXT] = c
+                else:
+                    ints[s, leaf, FIRST] = c
+                ints[s, leaf, LAST] = c
             ints[s, leaf, N_CHILD] += 1
             path[s, path_len[s]] = c
             path_len[s] += 1
@@ -174,47 +234,64 @@ def attach_and_back_up(ints, floats, node_pos, node_actions, n_nodes, sims, path
             node = path[s, d]
             ints[s, node, VISITS] += 1
             floats[s, node, VALUE_SUM] += ret
+            floats[s, node, Q] = floats[s, node, VALUE_SUM] / ints[s, node, VISITS]
             ret = floats[s, node, REWARD] + gamma * ret
+        if kind[s] == EXPAND and not ints[s, path[s, path_len[s] - 1], TERMINAL]:
+            # a new live child (now visited once) joins its parent's bounds (see _select)
+            c, leaf = path[s, path_len[s] - 1], path[s, path_len[s] - 2]
+            a = floats[s, c, REWARD] + gamma * floats[s, c, Q]
+            if a > floats[s, leaf, AUB]:
+                floats[s, leaf, AUB] = a
+            ints[s, leaf, NLB] = min(ints[s, leaf, NLB], ints[s, c, VISITS])
 
 
 @njit(cache=True)
-def root_choice(ints, floats, gamma, best_child, best_value):
+def root_choice(ints, floats, n_nodes, gamma, best_child, best_value):
     """Each root's most visited child (ties: higher r + gamma * Q, then sampling order) into
-    ``best_child[s]``, and its value r + gamma * Q into ``best_value[s]``."""
+    ``best_child[s]``, and its value r + gamma * Q into ``best_value[s]``. The root's children,
+    terminal ones included, are the nodes of depth 1, in creation order."""
     for s in range(ints.shape[0]):
         best, best_n, best_v = -1, -1, -math.inf
-        c = ints[s, 0, FIRST]
-        while c >= 0:
+        for c in range(1, n_nodes[s]):
+            if ints[s, c, DEPTH] != 1:
+                continue
             n = ints[s, c, VISITS]
             v = floats[s, c, REWARD] + gamma * (floats[s, c, VALUE_SUM] / n if n else 0.0)
             if n > best_n or (n == best_n and v > best_v):
                 best, best_n, best_v = c, n, v
-            c = ints[s, c, NEXT]
         best_child[s] = best
         best_value[s] = best_v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _all_done(sims, budget):
+    for s in range(sims.shape[0]):
+        if sims[s] < budget:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
 def advance(ints, floats, node_pos, node_actions, pool, n_nodes, sims, path, path_len, kind, start, actions,
-            after, score, reward, rounds, budget, max_depth, c_puct, pw_c, pw_alpha, gamma):
+            after, score, reward, rounds, budget, max_depth, c_puct, widen, gamma):
     """Finish the current round with its simulated shots (``after, score, reward``; none in the
     first call, whose ``kind`` is all ``IDLE``), then run rounds until one has shots to simulate.
 
     Rounds in which every walk ends at ``max_depth`` simulate nothing and are finished here.
     Returns the number of shots gathered into ``start, actions`` (> 0), ``DRAW_POOLS`` (the
     caller draws prior samples, then calls :func:`gather`), ``DONE`` when every tree has
-    simulated ``budget`` shots, or ``STALLED`` after ``20 * budget`` rounds (``rounds[0]``
+    simulated ``budget`` shots, or ``STALLED`` after ``MAX_ROUNDS * budget`` rounds (``rounds[0]``
     counts them).
     """
     attach_and_back_up(ints, floats, node_pos, node_actions, n_nodes, sims, path, path_len, kind,
                        actions, after, score, reward, gamma)
     while True:
-        if not (sims < budget).any():
+        if _all_done(sims, budget):
             return DONE
         rounds[0] += 1
-        if rounds[0] > 20 * budget:
+        if rounds[0] > MAX_ROUNDS * budget:
             return STALLED
-        if descend(ints, floats, sims, path, path_len, kind, budget, max_depth, c_puct, pw_c, pw_alpha, gamma):
+        if descend(ints, floats, sims, path, path_len, kind, budget, max_depth, c_puct, widen, gamma):
             return DRAW_POOLS
         m = gather(ints, node_pos, pool, path, path_len, kind, start, actions)
         if m:
@@ -229,7 +306,7 @@ BAD_SHOTS = -4
 
 @njit(cache=True)
 def run_rounds(ints, floats, node_pos, node_actions, pool, n_nodes, sims, path, path_len, kind, start, actions,
-               after, score, reward, out_int, out_float, io, rounds, budget, max_depth, c_puct, pw_c, pw_alpha,
+               after, score, reward, out_int, out_float, io, rounds, budget, max_depth, c_puct, widen,
                gamma, p, tol, foul_penalty, max_serial):
     """:func:`advance`, simulating the gathered shots itself, so the caller only hears of the
     rounds that need it: ``DONE``, ``STALLED``, ``DRAW_POOLS`` (it draws, gathers and sets
@@ -259,7 +336,7 @@ def run_rounds(ints, floats, node_pos, node_actions, pool, n_nodes, sims, path, 
             io[0], io[1] = 0, m
         k = io[1]
         m = advance(ints, floats, node_pos, node_actions, pool, n_nodes, sims, path, path_len, kind, start, actions,
-                    after[:k], score[:k], reward[:k], rounds, budget, max_depth, c_puct, pw_c, pw_alpha, gamma)
+                    after[:k], score[:k], reward[:k], rounds, budget, max_depth, c_puct, widen, gamma)
         io[1] = 0
         if m <= 0:
             return m
