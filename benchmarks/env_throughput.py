@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import sys
 import time
@@ -133,6 +134,7 @@ def main() -> None:
     from billiards.provenance import git_commit
 
     commit = git_commit()  # before the runs: the code they measure
+    load_start = os.getloadavg()[0]  # 2 shared cores: other jobs' load is recorded beside the figures
     for name in args.envs:  # compile / warm up numba, torchrl and gymnasium (autoresets included)
         ENVS[name](4, CONFIGS["all"], 12, 0)
     print(f"python {platform.python_version()}, {platform.machine()}, numba up to {numba.config.NUMBA_NUM_THREADS} threads")
@@ -158,7 +160,7 @@ def main() -> None:
                           f"{row['ratio']:>8.2f} {'' if goal is None else f'{goal:.2f}':>5}", flush=True)
     if args.json:
         payload = {"command": "python benchmarks/env_throughput.py " + " ".join(sys.argv[1:]), "commit": commit,
-                   "rows": rows}
+                   "load_average_1min_start": load_start, "load_average_1min_end": os.getloadavg()[0], "rows": rows}
         with open(args.json, "w") as f:
             json.dump(payload, f, indent=2)
 
