@@ -37,12 +37,11 @@ from billiards.app_config import fixed_job_config as _fixed_job_config
 from billiards.app_config import BASIC_SWEEPER, RESUME_AUTO, numeric_bound_errors, register_app, validate_jobs
 from billiards.files import CHECKPOINT_FILE, repo_path
 from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
-from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
+from billiards.physics.config import PhysicsConfig, physics_errors
 from billiards.physics.noise import NoiseConfig, noise_errors
 
 # Keys that configs saved by earlier versions have and the schema no longer does; a resume
 # drops them (the test-only kill switch left the schema: tests kill runs from outside).
-RETIRED_KEYS = ("budget.kill_after_checkpoint",)
 
 
 class Paradigm(str, enum.Enum):
@@ -480,32 +479,6 @@ class ValidateConfig(Callback):
         if errs:
             raise SystemExit("Error: invalid training config (every trial of the sweep would fail):\n  - "
                              + "\n  - ".join(errs))
-
-
-def with_physics(container: dict) -> dict:
-    """A saved config with its ``physics`` node; configs saved before the presets existed
-    played pooltool's international table and get ``physics.preset: international``."""
-    if "physics" in container:
-        return container
-    return {**container, "physics": {"preset": LEGACY_PHYSICS}}
-
-
-def without_retired(container: dict) -> dict:
-    """A saved config without the :data:`RETIRED_KEYS` (a copy where it had any)."""
-    out = container
-    for key in RETIRED_KEYS:
-        *parents, leaf = key.split(".")
-        node = out
-        for p in parents:
-            node = node.get(p) if isinstance(node, dict) else None
-        if isinstance(node, dict) and leaf in node:
-            out = _without(out, [*parents, leaf])
-    return out
-
-
-def _without(d: dict, path: list[str]) -> dict:
-    head, *rest = path
-    return {k: (_without(v, rest) if k == head and rest else v) for k, v in d.items() if rest or k != head}
 
 
 def env_paradigm(paradigm: Paradigm | str) -> str:

@@ -19,8 +19,9 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from billiards.files import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE, display_path, save_tagged
-from billiards.physics import PRESETS, PhysicsParams
-from billiards.physics.config import LEGACY_PHYSICS, params_from_config
+from billiards.physics import PhysicsParams
+from billiards import compat
+from billiards.physics.config import params_from_config
 
 from .checkpoint import CheckpointError, load_checkpoint
 
@@ -91,8 +92,7 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
 
 def policy_physics(cfg) -> PhysicsParams:
     """The table a run trained on (runs saved before the presets existed: ``international``)."""
-    physics = cfg.get("physics")
-    return params_from_config(physics) if physics is not None else PRESETS[LEGACY_PHYSICS]
+    return params_from_config(compat.saved_physics_node(cfg))
 
 
 def main(argv: list[str] | None = None) -> None:

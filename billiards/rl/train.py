@@ -44,6 +44,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from tqdm import tqdm
 
+from billiards import compat
 from billiards.app_config import RESUME_AUTO
 from billiards.device import resolve_device, set_threads
 from billiards.files import CHECKPOINT_FILE, atomic_write_text, display_path
@@ -59,13 +60,10 @@ from .config import (
     CONFIG_FILE,
     EVAL_FILE,
     EVAL_HISTORY_FILE,
-    RETIRED_KEYS,
     Config,
     ConfigError,
     env_options,
     validate,
-    with_physics,
-    without_retired,
 )
 from .curriculum import Stages, make_curriculum
 from .metrics import MetricLogger, Window, eval_row
@@ -78,7 +76,7 @@ RUNTIME_KEYS = ("threads", "progress", "compile", "device")
 # a killed run can be given a CPU-time limit, e.g. to end it within one CPU hour.
 RESUME_KEYS = ("budget.cpu_minutes",)
 
-__all__ = ["RESUME_KEYS", "RETIRED_KEYS", "RUNTIME_KEYS", "OnDevice", "Run", "finish", "load_run_config", "make_collector",
+__all__ = ["RESUME_KEYS", "RUNTIME_KEYS", "OnDevice", "Run", "finish", "load_run_config", "make_collector",
            "make_replay_buffer", "make_run", "periodic", "train", "train_off_policy", "train_ppo"]
 
 
@@ -140,7 +138,7 @@ def _typed(container: dict) -> DictConfig:
     keys added to the schema after the run started (e.g. ``algo.actor_ema``) take their
     documented defaults."""
     schema = OmegaConf.structured(Config)
-    container = without_retired(with_physics(container))
+    container = compat.training_config(container)
     algo = (container.get("algo") or {}).get("name")
     if algo in ALGO_SCHEMAS:
         schema.algo = OmegaConf.structured(ALGO_SCHEMAS[algo])

@@ -42,11 +42,12 @@ from typing import Any, List, Optional
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from billiards import compat
 from billiards.tables import paper_tables
 from billiards.app_config import RESUME_AUTO, ValidatingCallback, numeric_bound_errors, register_app
 from billiards.device import device_error, threads_error
 from billiards.files import CONFIG_FILE, repo_path
-from billiards.physics.config import LEGACY_PHYSICS, PhysicsConfig, physics_errors
+from billiards.physics.config import PhysicsConfig, physics_errors
 from billiards.physics.noise import NoiseConfig, noise_errors, noise_from_config
 
 # ----------------------------------------------------------------------------- search
@@ -479,28 +480,9 @@ def search_config(search: str = "h2", protocol: str = "p3", proposer: str = "geo
 # (config.yaml of a search run, results.json's "config") has them all, and the option ignored
 # those that were not its own (the robust knobs and the geometric u_*/spin_* ranges: the union
 # nodes of the runs under execution noise, results/noise/).
-LEGACY_UNION_KEYS = {
-    "search": ("k1", "m1", "c_puct", "pw_c", "pw_alpha", "pool", "max_depth",
-               "samples", "schedule", "screen", "quantile", "k2", "target", "wave", "antithetic"),
-    "protocol": ("n_innings", "shots", "seeds", "cap"),
-    "proposer": ("checkpoints", "command", "power_low", "power_high", "u_low", "u_high", "spin_low", "spin_high"),
-}
-
-
 def upgrade(saved: dict) -> dict:
-    """A saved search config (a plain dict) in today's form: the other options' keys of the
-    old union nodes dropped (those options never read them), ``physics`` added for a
-    config saved before the presets (it played ``international``) and ``noise`` for one saved
-    before execution noise (it played exact shots: ``none``)."""
-    out = dict(saved)
-    for group, legacy in LEGACY_UNION_KEYS.items():
-        node = out.get(group)
-        if isinstance(node, dict):
-            own = {f.name for f in dataclasses.fields(option_schema(group, node))}
-            out[group] = {k: v for k, v in node.items() if k in own or k not in legacy}
-    out.setdefault("physics", {"preset": LEGACY_PHYSICS})
-    out.setdefault("noise", {"preset": "none"})
-    return out
+    """A saved search config (a plain dict) in today's form (:func:`billiards.compat.search_config`)."""
+    return compat.search_config(saved, lambda group, node: {f.name for f in dataclasses.fields(option_schema(group, node))})
 
 
 def saved_config(run_dir: str | Path) -> DictConfig:
