@@ -83,6 +83,13 @@ def test_the_safety_player_values_the_searchs_shot_and_its_candidates():
     assert np.all(value <= 1.0) and np.all(value >= -1.0 - agent.cfg.foul_penalty)
     agent.reseed(0)
     assert np.array_equal(agent.values(view)[1], value)  # the same draws from the same seed
+    # above its threshold the safety player plays the search's own shot
+    greedy = make_agent(CHEAP, X5, DEFAULT_PARAMS)
+    sure = make_agent(AgentConfig(kind="safety", search="h2", proposer="geometric", search_budget=60, threshold=-1.0,
+                                  overrides={"k1": 40, "m1": 2}), X5, DEFAULT_PARAMS)
+    greedy.reseed(3)
+    sure.reseed(3)
+    assert np.array_equal(sure.act(view), greedy.act(view))
 
 
 @pytest.mark.slow

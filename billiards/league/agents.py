@@ -12,13 +12,15 @@ takes. Three kinds:
   score, less ``foul_penalty`` times its chance to foul, less ``leave_weight`` times, over the
   replays that do not score, the opponent's best chance to score from the table it leaves (the opponent's own
   ``opp_k`` candidates from that leave, each replayed ``opp_replays`` times). It plays a safety
-  when a hard shot would hand the opponent an easy table.
+  when a hard shot would hand the opponent an easy table. With a ``threshold`` it plays the
+  search's shot whenever the search rates it at least that, and weighs leaves only below it.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 
@@ -46,6 +48,9 @@ class AgentConfig:
     opp_replays: int = 2
     foul_penalty: float = 1.0
     leave_weight: float = 1.0  # how much the opponent's chance from a leave costs (0: greedy over the candidates)
+    # play the search's shot when its own statistic (its chance to score less the foul penalty's
+    # share) is at least this; weigh the leaves only below it (None: always weigh them)
+    threshold: Optional[float] = None
     overrides: dict = field(default_factory=dict)  # further knobs of the search option, by name
 
     def errors(self, name: str) -> list[str]:
@@ -124,9 +129,9 @@ class SafetyAgent:
         rate, _, _ = _score_rates(tables, cands.reshape(-1, 4), self.cfg.opp_replays, self.noise, self.rng, self.params)
         return rate.reshape(len(leaves), self.cfg.opp_k).max(axis=1)
 
-    def values(self, view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The candidates (C, 4) (the search's shot first) and their values."""
-        best = self.actor.search(view[None]).actions[0]
+    def values(self, view: np.ndarray, best: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The candidates (C, 4) (the search's shot, or ``best``, first) and their values."""
+        best = self.actor.search(view[None]).actions[0] if best is None else best
         cands = np.concatenate([best[None], self.proposer.propose(view[None], self.cfg.k, self.rng)[0]])
         c, r = len(cands), self.cfg.replays
         score, foul, res = _score_rates(np.repeat(view[None], c, axis=0), cands, r, self.noise, self.rng, self.params)
@@ -137,7 +142,10 @@ class SafetyAgent:
         return cands, score - self.cfg.foul_penalty * foul - self.cfg.leave_weight * leave_cost
 
     def act(self, view: np.ndarray) -> np.ndarray:
-        cands, value = self.values(view)
+        result = self.actor.search(view[None])
+        if self.cfg.threshold is not None and result.r1[0] >= self.cfg.threshold:
+            return to_env_action(result.actions[0])
+        cands, value = self.values(view, result.actions[0])
         return to_env_action(cands[int(np.argmax(value))])
 
 
