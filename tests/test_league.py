@@ -102,3 +102,25 @@ def test_a_bad_match_config_fails_at_once_and_writes_nothing(tmp_path, args, mes
     proc = subprocess.run([sys.executable, str(REPO / "match.py"), *args, f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path,
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and message in proc.stderr + proc.stdout and not (tmp_path / "run").exists()
+
+
+@pytest.mark.slow
+def test_the_match_app_plays_a_league_resumes_it_with_its_own_settings_and_draws_a_match(tmp_path):
+    run = tmp_path / "run"
+    base = [sys.executable, str(REPO / "match.py"), "progress=false"]
+    first = subprocess.run([*base, "players=[greedy,random]", "matches=1", "target=1", f"hydra.run.dir={run}"], cwd=tmp_path,
+                           capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr[-2000:]
+    league = json.loads((run / "league.json").read_text())
+    assert league["command"].endswith(f"players=[greedy,random] matches=1 target=1 hydra.run.dir={run}")
+    assert [(p["a"], p["b"], p["matches"]) for p in league["pairs"]] == [("greedy", "random", 1), ("random", "greedy", 1)]
+    assert (run / "match.gif").read_bytes()[:6] == b"GIF89a"
+    lines = (run / MATCHES_FILE).read_text().splitlines()
+    (run / MATCHES_FILE).write_text(lines[0] + "\n")  # the second match lost
+    again = subprocess.run([*base, f"resume={run}", "target=5", "picture=false"], cwd=tmp_path, capture_output=True, text=True,
+                           timeout=300)
+    assert again.returncode == 0, again.stderr[-2000:]
+    resumed = json.loads((run / "league.json").read_text())
+    assert resumed["target"] == 1 and resumed["command"] == league["command"]  # the league's own settings
+    untimed = [{k: v for k, v in json.loads(x).items() if k != "cpu_s"} for x in (run / MATCHES_FILE).read_text().splitlines()]
+    assert untimed == [{k: v for k, v in json.loads(x).items() if k != "cpu_s"} for x in lines]  # the lost match replayed

@@ -18,17 +18,28 @@ def run(cfg, out_dir) -> dict:
     from billiards.provenance import git_commit
 
     from .agents import make_agent
-    from .config import agent_config, validate
-    from .play import run_league
+    from .config import MatchAppConfig, agent_config, validate
+    from .play import animate_match, play_match, run_league
 
-    import sys
-
+    if cfg.resume:  # the league's own settings, this command line's runtime keys
+        saved = OmegaConf.load(Path(cfg.resume) / ".hydra" / "config.yaml")
+        for key in ("threads", "progress", "picture", "resume"):
+            saved[key] = cfg[key]
+        cfg = OmegaConf.merge(OmegaConf.structured(MatchAppConfig), saved)
     validate(cfg)
     set_threads(cfg.threads)
     out_dir = Path(cfg.resume or out_dir)
     params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
     players = {name: make_agent(agent_config(cfg.agents[name]), noise, params) for name in cfg.players}
-    record = {"command": " ".join(recorded_command(["python", "match.py", *sys.argv[1:]])), "commit": git_commit(),
+    # the league's command: this one, or, continuing a league, the one that started it
+    if cfg.resume:
+        overrides = list(OmegaConf.load(out_dir / ".hydra" / "overrides.yaml"))
+    else:
+        from hydra.core.hydra_config import HydraConfig
+
+        overrides = list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else []
+    command = ["python", "match.py", *overrides, f"hydra.run.dir={display_path(out_dir)}"]
+    record = {"command": " ".join(recorded_command(command)), "commit": git_commit(),
               "noise": noise.describe(), "physics": params.describe(), "target": cfg.target, "start": cfg.start,
               "foul_penalty": cfg.foul_penalty, "max_innings": cfg.max_innings, "matches_per_ordered_pair": cfg.matches,
               "seed": cfg.seed, "agents": {n: OmegaConf.to_container(cfg.agents[n]) for n in cfg.players}}
@@ -41,4 +52,12 @@ def run(cfg, out_dir) -> dict:
         print(f"{p['a']} vs {p['b']}: {p['a_wins']}-{p['b_wins']} ({p['draws']} draws) of {p['matches']}, "
               f"{p['a']}'s score rate {p['a_score_rate']:.3f} [{p['ci95'][0]:.3f}, {p['ci95'][1]:.3f}]", flush=True)
     print("Elo: " + ", ".join(f"{n} {r:.0f}" for n, r in sorted(league["elo"].items(), key=lambda x: -x[1])), flush=True)
+    if cfg.picture:  # the league's first match again, shot by shot (the same seed: the same match)
+        a, b = cfg.players[0], cfg.players[1]
+        frames: list = []
+        play_match(players[a], players[b], seed=cfg.seed, first="white", frames=frames, target=cfg.target,
+                   max_innings=cfg.max_innings, start=cfg.start, foul_penalty=cfg.foul_penalty, noise=noise, physics=params)
+        captions = [f"W {a} {w:g} : Y {b} {y:g} | {mover} plays" for _, (w, y, mover) in frames]
+        gif = animate_match([f for f, _ in frames], captions, out_dir / "match.gif")
+        print(f"the first match, shot by shot: {display_path(gif)}", flush=True)
     return league

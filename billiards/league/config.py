@@ -31,7 +31,8 @@ class MatchAppConfig:
     seed: int = 0
     threads: int = 1
     progress: bool = True
-    resume: Optional[str] = None  # a league's run dir: play only its missing matches there
+    picture: bool = True  # match.gif: the league's first match replayed shot by shot
+    resume: Optional[str] = None  # a league's run dir: play only its missing matches there, with its own settings
 
 
 register_app("match_schema", MatchAppConfig, {})

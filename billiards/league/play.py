@@ -28,13 +28,21 @@ MATCHES_FILE, LEAGUE_FILE = "matches.jsonl", "league.json"
 
 def play_match(white, yellow, *, seed: int, first: str = "white", frames: list | None = None, **game) -> dict:
     """One match (``game``: :func:`billiards.envs.sagu_v0.raw_env`'s keywords); with ``frames`` a
-    list, the table after every shot is appended to it (rgb_array frames)."""
+    list, ``(rgb_array frame, (white's score, yellow's score, who plays next))`` of the table
+    before the first shot and after every shot is appended to it."""
     env = sagu_v0.raw_env(first=first, render_mode="rgb_array" if frames is not None else None, **game)
     env.reset(seed=seed)
     players = {"white": white, "yellow": yellow}
     for i, p in enumerate(AGENTS):
         players[p].reseed(seed * 2 + i)
     cpu, turns = {p: 0.0 for p in AGENTS}, {p: 0 for p in AGENTS}
+
+    def snapshot() -> None:
+        if frames is not None:
+            w, y = env.game.scores
+            frames.append((env.render(), (w, y, env.agent_selection)))
+
+    snapshot()
     for agent in env.agent_iter():
         _, _, terminated, truncated, _ = env.last()
         if terminated or truncated:
@@ -46,12 +54,28 @@ def play_match(white, yellow, *, seed: int, first: str = "white", frames: list |
         cpu[agent] += time.process_time() - t0
         turns[agent] += 1
         env.step(action)
-        if frames is not None:
-            frames.append(env.render())
+        snapshot()
     scores = dict(zip(AGENTS, env.game.scores))
     winner = None if scores["white"] == scores["yellow"] else max(scores, key=scores.get)
     return {"seed": seed, "first": first, "winner": winner, "scores": scores, "shots": env.game.shots,
             "innings": env.game.innings, "cpu_s": cpu, "turns": turns}
+
+
+def animate_match(frames: list, captions: list[str], path: Path, scale: int = 1, ms_per_frame: int = 700) -> Path:
+    """An animated GIF of a match: each table (an rgb_array frame) shrunk by ``scale``, its caption
+    (the score, who plays next) drawn over it."""
+    from PIL import Image, ImageDraw
+
+    images = []
+    for frame, caption in zip(frames, captions):
+        image = Image.fromarray(frame).reduce(scale).convert("RGB")
+        draw = ImageDraw.Draw(image)
+        draw.rectangle([0, 0, image.width, 14], fill=(0, 0, 0))
+        draw.text((3, 2), caption, fill=(255, 255, 255))
+        images.append(image.convert("P", palette=Image.Palette.ADAPTIVE))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images[0].save(path, save_all=True, append_images=images[1:], duration=ms_per_frame, loop=0, optimize=True)
+    return path
 
 
 def wilson(successes: float, n: int, z: float = 1.96) -> list[float]:
@@ -157,4 +181,4 @@ def run_league(players: dict, *, out_dir: Path, matches: int, seed: int, noise_n
     return league
 
 
-__all__ = ["LEAGUE_FILE", "MATCHES_FILE", "elo", "play_match", "read_matches", "run_league", "summarize", "wilson"]
+__all__ = ["LEAGUE_FILE", "MATCHES_FILE", "animate_match", "elo", "play_match", "read_matches", "run_league", "summarize", "wilson"]
