@@ -86,8 +86,8 @@ def test_option_groups_list_only_real_options():
     assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "h2", "puct",
                                        "robust"]
     assert group_options("protocol") == ["p1", "p3", "p3_paper"]
-    assert group_options("proposer") == ["base", "both", "forgiving", "gentle", "geometric", "near_miss", "policy",
-                                         "ranked"]
+    assert group_options("proposer") == ["base", "both", "for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "forgiving",
+                                         "gentle", "geometric", "near_miss", "policy", "ranked"]
     assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none"]
     assert group_options("algo") == ["ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
     assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name
@@ -320,3 +320,17 @@ def test_each_apps_help_lists_its_own_groups_and_fixed_choices():
     assert "env.paradigm: canonical_reset, canonical_continue, random_reset, random_continue" in train
     assert "\nprotocol:" not in train and "\nproposer:" not in train and "schema" not in train.split("== Config")[0]
     assert "proposer: " in search and "protocol: p1, p3" in search and "\nalgo:" not in search.split("== Config")[0]
+
+
+def test_under_noise_the_default_is_the_strongest_measured_configuration():
+    """``python search.py noise=<preset>`` with no proposer or search named plays the noise-aware
+    robust search over the shot ranker trained for that noise; without noise, h2 over geometric
+    draws, as before; either stays one override away."""
+    for noise, (proposer, ranker, search) in {"none": ("geometric", None, "h2"),
+                                              "fastfiz": ("ranked", "results/rankers/fastfiz/ranker.pt", "robust"),
+                                              "fastfiz_x5": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", "robust")}.items():
+        cfg = compose_search(f"noise={noise}")
+        assert (cfg.proposer.kind, cfg.proposer.get("ranker"), cfg.search.kind) == (proposer, ranker, search), noise
+        search_config.validate(cfg)  # the ranker files are there and load
+    older = compose_search("noise=fastfiz", "proposer=geometric", "search=h2")
+    assert (older.proposer.kind, older.search.kind) == ("geometric", "h2")

@@ -409,9 +409,22 @@ def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConf
             "policy": PolicyProposerConfig(name="policy", checkpoints=[]), "ranked": RankedProposerConfig()}
 
 
+# ``proposer=for_noise_<preset>``: the proposer ``conf/search.yaml`` picks under each execution-noise
+# preset (``proposer: for_noise_${noise}``, beside ``search: for_noise_${noise}``), the strongest
+# measured with the noise-aware search (results/noise/README.md): the geometric draws without
+# noise, the learned shot ranker trained for the preset's noise under it
+NOISE_DEFAULT_PROPOSERS = {
+    "none": GeometricProposerConfig(),
+    "fastfiz": RankedProposerConfig(),
+    "fastfiz_x5": RankedProposerConfig(ranker="results/rankers/fastfiz_x5/ranker.pt",
+                                       command=RANKER_COMMAND.format(out="results/rankers/fastfiz_x5/ranker.pt", noise="fastfiz_x5")),
+}
+
 _store = register_app("search_schema", SearchAppConfig, {group: schemas for group, (_, schemas) in OPTIONS.items()})
 for _name, _node in proposer_options().items():
     _store.store(group="proposer", name=_name, node=_node)
+for _preset, _node in NOISE_DEFAULT_PROPOSERS.items():
+    _store.store(group="proposer", name=f"for_noise_{_preset}", node=_node)
 
 
 class SearchConfigError(ValueError):
