@@ -92,6 +92,16 @@ def test_the_safety_player_values_the_searchs_shot_and_its_candidates():
     assert np.array_equal(sure.act(view), greedy.act(view))
 
 
+def test_a_trained_policy_plays_a_match():
+    """Table 5's base policy (seed 0) as a player: it beats a random player to 2 points from the
+    opening rack under fastfiz_x5 (either colour), and a missing policy file is named."""
+    policy = make_agent(AgentConfig(kind="policy", policy="results/policies/base/seed0.pt"), X5, DEFAULT_PARAMS)
+    rand = make_agent(AgentConfig(kind="random"), X5, DEFAULT_PARAMS)
+    assert play_match(policy, rand, seed=1, noise=X5, target=2)["winner"] == "white"
+    assert play_match(rand, policy, seed=2, noise=X5, target=2, first="yellow")["winner"] == "yellow"
+    assert "agents.p.policy: no trained policy at 'nowhere.pt'" in AgentConfig(kind="policy", policy="nowhere.pt").errors("p")[0]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("args, message", [
     (["players=[greedy,nobody]"], "players must name at least two different agents"),

@@ -5,6 +5,10 @@ shooter: :func:`billiards.envs.sagu.shooter_view`) and returns the normalised ac
 takes. Three kinds:
 
 * ``random``: uniform actions;
+* ``policy``: a trained single-player policy (``policy``: a training run dir, its checkpoint or an
+  exported policy file, e.g. ``results/policies/base/seed0.pt``), acting deterministically on the
+  single-player observation of its own view (with the aim constraint and features it was trained
+  with);
 * ``search`` (*greedy*): a search of :mod:`billiards.search` (by default the noise-aware robust
   search) maximising its own chance to score, blind to the leave;
 * ``safety`` (*safety-aware*): the same search's shot and ``k`` of its proposer's candidates,
@@ -29,7 +33,7 @@ from billiards.envs.sagu import SWAP
 from billiards.physics import PhysicsParams, simulate_batch
 from billiards.physics.noise import NoiseModel
 
-KINDS = ("random", "search", "safety")
+KINDS = ("random", "search", "safety", "policy")
 
 
 @dataclass
@@ -52,9 +56,15 @@ class AgentConfig:
     # share) is at least this; weigh the leaves only below it (None: always weigh them)
     threshold: Optional[float] = None
     overrides: dict = field(default_factory=dict)  # further knobs of the search option, by name
+    policy: Optional[str] = None  # kind=policy: the trained policy's file or run dir
 
     def errors(self, name: str) -> list[str]:
         errs = [] if self.kind in KINDS else [f"agents.{name}.kind must be one of {', '.join(KINDS)}, got {self.kind!r}"]
+        if self.kind == "policy":
+            from billiards.files import repo_path
+
+            if not self.policy or not repo_path(self.policy).exists():
+                errs.append(f"agents.{name}.policy: no trained policy at {self.policy!r} (a run dir or an exported policy file)")
         for key in ("search_budget", "k", "replays", "opp_k", "opp_replays"):
             if getattr(self, key) < 1:
                 errs.append(f"agents.{name}.{key} must be >= 1, got {getattr(self, key)}")
@@ -94,6 +104,32 @@ class SearchAgent:
     def act(self, view: np.ndarray) -> np.ndarray:
         result = self.actor.search(view[None])
         return to_env_action(result.actions[0])
+
+
+class PolicyAgent:
+    """A trained single-player policy as a player (deterministic)."""
+
+    def __init__(self, path: str, params: PhysicsParams):
+        from billiards.files import repo_path
+        from billiards.rl.policy import load_policy
+
+        self.policy, cfg = load_policy(repo_path(path))
+        self.constrain_aim, self.extra_features = bool(cfg.env.constrain_aim), bool(cfg.env.extra_features)
+        self.params = params
+
+    def reseed(self, seed: int) -> None:
+        pass  # deterministic
+
+    def act(self, view: np.ndarray) -> np.ndarray:
+        import torch
+        from tensordict import TensorDict
+        from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+        obs = torch.as_tensor(domain.observation(view[None], self.extra_features), dtype=torch.float32)
+        with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+            action = self.policy(TensorDict({"observation": obs}, batch_size=[1]))["action"].double().numpy()
+        raw = domain.raw_action(action, view[None], self.params.ball_radius, self.constrain_aim)
+        return to_env_action(raw[0])
 
 
 def _score_rates(tables: np.ndarray, actions: np.ndarray, replays: int, noise: NoiseModel, rng, params) -> tuple:
@@ -153,6 +189,8 @@ def make_agent(cfg: AgentConfig, noise: NoiseModel, params: PhysicsParams):
     """The player ``cfg`` describes, for the execution noise and table of the match."""
     if cfg.kind == "random":
         return RandomAgent()
+    if cfg.kind == "policy":
+        return PolicyAgent(cfg.policy, params)
     from billiards.search.config import OPTIONS, proposer_options
 
     proposer = proposer_options()[cfg.proposer].build(params)
@@ -164,4 +202,4 @@ def make_agent(cfg: AgentConfig, noise: NoiseModel, params: PhysicsParams):
     return SafetyAgent(actor, proposer, opponent, cfg, noise, params)
 
 
-__all__ = ["AgentConfig", "KINDS", "RandomAgent", "SafetyAgent", "SearchAgent", "make_agent", "to_env_action"]
+__all__ = ["AgentConfig", "KINDS", "PolicyAgent", "RandomAgent", "SafetyAgent", "SearchAgent", "make_agent", "to_env_action"]
