@@ -84,7 +84,7 @@ def wilson(successes: float, n: int, z: float = 1.96) -> list[float]:
         return [0.0, 1.0]
     p = successes / n
     centre, half = (p + z * z / (2 * n)) / (1 + z * z / n), z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [round(centre - half, 4), round(centre + half, 4)]
+    return [max(0.0, round(centre - half, 4)), min(1.0, round(centre + half, 4))]
 
 
 def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 2000) -> dict[str, float]:
