@@ -65,11 +65,29 @@ ROOTS: dict[str, type] = {}  # root schema name -> its dataclass (register_app f
 
 
 def _help_groups(*groups: str) -> str:
-    """``--help``: each of the app's option groups with its options, one line per group."""
+    """``--help``: each of the app's option groups with its options, one line per group; a
+    group's subgroups' options as ``sub/option`` (``variant=table4/aim``); ``experiment@<app>``:
+    the experiment presets of that app only (the paper tables' ``paper.app``, train by default)."""
     from hydra.core.global_hydra import GlobalHydra
 
     loader = GlobalHydra.instance().config_loader()
-    return "\n".join(f"{g}: {', '.join(loader.get_group_options(g))}" for g in groups)
+
+    def options(group: str) -> list[str]:
+        own = list(loader.get_group_options(group))
+        subs = [f"{sub}/{o}" for sub in sorted(loader.list_groups(group)) for o in options(f"{group}/{sub}")]
+        return own + subs
+
+    lines = []
+    for token in groups:
+        group, _, app = token.partition("@")
+        found = options(group)
+        if app:
+            from billiards.tables import paper_tables
+
+            tables = paper_tables()
+            found = [o for o in found if (tables[o].app if o in tables else "train") == app]
+        lines.append(f"{group}: {', '.join(found)}")
+    return "\n".join(lines)
 
 
 def _help_choices(root_name: str) -> str:

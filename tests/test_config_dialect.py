@@ -320,6 +320,24 @@ def test_each_apps_help_lists_its_own_groups_and_fixed_choices():
     assert "env.paradigm: canonical_reset, canonical_continue, random_reset, random_continue" in train
     assert "\nprotocol:" not in train and "\nproposer:" not in train and "schema" not in train.split("== Config")[0]
     assert "proposer: " in search and "protocol: p1, p3" in search and "\nalgo:" not in search.split("== Config")[0]
+    # each app's own paper-table presets; a table's rows as variant=<table>/<row>
+    def groups(text):
+        return {line.split(": ")[0]: line.split(": ", 1)[1].split(", ") for line in text.split("== Config")[0].splitlines()
+                if ": " in line and not line.startswith(" ")}
+
+    assert "table4" in groups(train)["experiment"] and "table6" not in groups(train)["experiment"]
+    assert "table4/aim_features" in groups(train)["variant"] and "table3/staged" in groups(train)["variant"]
+    assert groups(search)["experiment"] == ["table6"]
+
+
+def test_train_refuses_search_apps_preset_at_once(tmp_path):
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, str(REPO / "train.py"), "experiment=table6"], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode != 0 and "experiment=table6 is a search.py preset: python search.py -m experiment=table6" in out.stderr
+    assert not (tmp_path / "outputs").exists()
 
 
 def test_under_noise_the_default_is_the_strongest_measured_configuration():

@@ -442,6 +442,14 @@ def validate(cfg: DictConfig) -> None:
         raise ConfigError("invalid training config:\n  - " + "\n  - ".join(errs))
 
 
+def _refuse_other_apps_preset(config: DictConfig) -> None:
+    """``experiment=table6`` names search.py's preset: say so, before anything is composed or written."""
+    paper = config.get("paper")
+    if isinstance(paper, DictConfig) and paper.get("app", "train") != "train":
+        raise SystemExit(f"Error: experiment={config.get('table')} is a {paper.app}.py preset: "
+                         f"python {paper.app}.py -m experiment={config.get('table')}")
+
+
 class ValidateConfig(Callback):
     """Hydra callback (``hydra.callbacks`` in conf/config.yaml): validates the training config
     before Hydra creates any directory. For a multirun it composes and validates every job
@@ -452,12 +460,14 @@ class ValidateConfig(Callback):
     """
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        _refuse_other_apps_preset(config)
         try:
             validate(config)
         except Exception as err:  # Hydra would only warn and go on
             raise SystemExit(f"Error: {err}") from None
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        _refuse_other_apps_preset(config)
         print(f"sweep: {config.hydra.sweep.dir}", flush=True)
         if config.hydra.sweeper._target_ != BASIC_SWEEPER:
             self._check_fixed_part(config)
