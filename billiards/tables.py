@@ -64,6 +64,12 @@ class Table:
     def seeds(self) -> list[int]:
         return [int(s) for s in self.sweep.get("seed", ("0",))]
 
+    def search_cells(self) -> list[tuple[str, str, str]]:
+        """A search table's cells, (proposer, method, protocol) in sweep order; a protocol preset
+        named ``<protocol>_<variant>`` (``p3_paper``) is its protocol (its results say ``p3``)."""
+        return [(proposer, method, option.partition("_")[0]) for proposer in self.sweep["proposer"]
+                for method in self.sweep["search"] for option in self.sweep["protocol"]]
+
     def trained(self) -> list[str]:
         """The rows this table's own runs train (``variant=<table>/<row>`` in its sweep)."""
         return [v.split("/", 1)[1] for v in self.sweep.get("variant", ())]

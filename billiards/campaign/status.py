@@ -53,29 +53,26 @@ def stage_status(stage: Stage) -> StageStatus:
     table, status = paper_tables()[stage.table], StageStatus(stage)
     src = Sources("", stage.root, stage.root)
     if table.app == "search":
-        for proposer in table.sweep["proposer"]:
-            for method in table.sweep["search"]:
-                for option in table.sweep["protocol"]:
-                    run_dir = src.search_dir(proposer, method, option.partition("_")[0])
-                    key = str(run_dir.relative_to(stage.root))
-                    res = read_json(run_dir / "results.json")
-                    if res is None:
-                        (status.started if (run_dir / "config.yaml").is_file() else status.new).append(key)
-                        continue
-                    status.cpu_seconds += float(res.get("seconds", 0.0))
-                    (status.started if res.get("extra", {}).get("partial") else status.done).append(key)
+        for proposer, method, protocol in table.search_cells():
+            run_dir = src.search_dir(proposer, method, protocol)
+            key = str(run_dir.relative_to(stage.root))
+            res = read_json(run_dir / "results.json")
+            if res is None:
+                (status.started if (run_dir / "config.yaml").is_file() else status.new).append(key)
+                continue
+            status.cpu_seconds += float(res.get("seconds", 0.0))
+            (status.started if res.get("extra", {}).get("partial") else status.done).append(key)
         return status
     for row in table.trained():
         for seed in table.seeds:
             run_dir, key = src.train_dir(f"{table.name}/{row}", seed), f"{row}/seed{seed}"
-            done, cpu, _ = train_state(run_dir)
-            steps, measured = _progress(run_dir) if not done else (int(read_json(run_dir / "summary.json")["frames"]), cpu)
-            cpu = measured
+            state = train_state(run_dir)
+            steps, cpu = (state.frames, state.cpu_seconds) if state.done else _progress(run_dir)
             status.cpu_seconds += cpu
             status.steps_done += steps
-            status.steps_left += 0 if done else max(0, (table.steps or 0) - steps)
+            status.steps_left += 0 if state.done else max(0, (table.steps or 0) - steps)
             started = (run_dir / STARTS).is_file() or (run_dir / "checkpoint.pt").is_file()
-            (status.done if done else status.started if started else status.new).append(key)
+            (status.done if state.done else status.started if started else status.new).append(key)
     return status
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from pettingzoo import AECEnv
 from pettingzoo.utils import wrappers
 
-from .sagu import AGENTS, SaguEnv
+from .sagu import AGENTS, SaguEnv, shooter_view
 
 FIRST = ("white", "yellow")
 
@@ -109,9 +109,9 @@ class raw_env(AECEnv):  # noqa: N801  (PettingZoo's convention: a module's env()
             return None
         from billiards.render import table_rgb_array
 
-        last = self.game.last_shot
+        last = self.game.last_shot  # (table before the shot, the shot played, its player): drawn from the shooter's view
         return table_rgb_array(self.game.positions, self.game.params,
-                               last_shot=None if last is None else (last[0] if last[2] == 0 else last[0][[1, 0, 2, 3]], last[1]))
+                               last_shot=None if last is None else (shooter_view(last[0], last[2]), last[1]))
 
     def close(self) -> None:
         pass

@@ -137,12 +137,11 @@ def summarize(records: list[dict], names: list[str], noise: str) -> dict:
     return {"pairs": pairs, "elo": elo(names, results) if results else {}}
 
 
-def read_matches(path: Path) -> list[dict]:
-    """The finished matches of a league directory (a torn last line, from a kill, is dropped)."""
-    if not path.is_file():
-        return []
+def parse_matches(text: str) -> list[dict]:
+    """The finished matches of a league's ``matches.jsonl`` text (a torn last line, from a kill
+    mid-write, is left out)."""
     out = []
-    for line in path.read_text().splitlines():
+    for line in text.splitlines():
         try:
             out.append(json.loads(line))
         except ValueError:
@@ -159,8 +158,9 @@ def run_league(players: dict, *, out_dir: Path, matches: int, seed: int, noise_n
     names = list(players)
     out_dir.mkdir(parents=True, exist_ok=True)
     ledger = out_dir / MATCHES_FILE
-    done = read_matches(ledger)
-    if ledger.is_file() and not ledger.read_text().endswith("\n"):  # a torn last line (a kill mid-write): drop it
+    text = ledger.read_text() if ledger.is_file() else ""
+    done = parse_matches(text)
+    if text and not text.endswith("\n"):  # a torn last line: dropped, so that the next match starts its own line
         atomic_write_text(ledger, "".join(json.dumps(r) + "\n" for r in done))
     have = {(r["a"], r["b"], r["i"]) for r in done}
     todo = [(p, a, b, i) for p, (a, b) in enumerate((a, b) for a in names for b in names if a != b)
@@ -181,4 +181,4 @@ def run_league(players: dict, *, out_dir: Path, matches: int, seed: int, noise_n
     return league
 
 
-__all__ = ["LEAGUE_FILE", "MATCHES_FILE", "animate_match", "elo", "play_match", "read_matches", "run_league", "summarize", "wilson"]
+__all__ = ["LEAGUE_FILE", "MATCHES_FILE", "animate_match", "elo", "parse_matches", "play_match", "run_league", "summarize", "wilson"]

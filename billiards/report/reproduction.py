@@ -24,17 +24,19 @@ import shutil
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 from billiards.files import SUMMARY_FILE, atomic_write_text
+from billiards.provenance import STARTS_FILE
 from billiards.tables import Table, paper_tables
 
-from .markdown import COLUMN_TITLES, md_table
+from .markdown import COLUMN_TITLES, figure, md_table
 from .runs import SMALL_RUN_FILES, aggregate, read_curve, read_run
 
 # the command that rebuilds results/reproduction.json, .md and the figures from committed files
 REGENERATE = "python -m billiards.campaign report paper"
 EXTRA = "extra"  # the rows beside the tables
-STARTS = "starts.jsonl"  # a training run's start records (billiards.provenance.record_start)
+STARTS = STARTS_FILE  # a training run's start records (billiards.provenance.record_start)
 OUR_KEYS = ("mean", "std", "max", "foul_inn", "foul_sh", "succ_sh", "canonical", "rand_eval")
 SEARCH_FILES = ("results.json", "chains.jsonl", "config.yaml", "search.log")
 
@@ -79,16 +81,22 @@ class Sources:
                     shutil.copy2(f, dest / f.name)
 
 
-def train_state(run_dir: Path) -> tuple[bool, float, list[str]]:
-    """(finished, CPU seconds, commits) of a training run directory (a missing one: not started)."""
-    summary = read_json(run_dir / SUMMARY_FILE)
-    done = summary is not None and (run_dir / "eval.json").is_file()
-    cpu = float(summary.get("cpu_seconds", 0.0)) if summary else 0.0
+class TrainState(NamedTuple):
+    done: bool  # eval.json and summary.json written
+    cpu_seconds: float  # summary.json's (0 before the run finished)
+    frames: int  # summary.json's (0 before the run finished)
+    commits: list[str]  # of every start (starts.jsonl)
+
+
+def train_state(run_dir: Path) -> TrainState:
+    """What a training run directory's summary and start records say (a missing one: not started)."""
+    summary = read_json(run_dir / SUMMARY_FILE) or {}
     commits: list[str] = []
     if (starts := run_dir / STARTS).is_file():
         records = [json.loads(line) for line in starts.read_text().splitlines() if line.strip()]
         commits = list(dict.fromkeys(r["commit"] for r in records if r.get("commit")))
-    return done, cpu, commits
+    return TrainState(bool(summary) and (run_dir / "eval.json").is_file(), float(summary.get("cpu_seconds", 0.0)),
+                      int(summary.get("frames", 0)), commits)
 
 
 def training_rows(src: Sources, tables: list[Table], spent: dict[str, float]) -> list[dict]:
@@ -103,9 +111,9 @@ def training_rows(src: Sources, tables: list[Table], spent: dict[str, float]) ->
             done, cpu_s, commits = [], 0.0, []
             for seed in table.seeds:
                 run_dir = src.train_dir(source, seed)
-                finished, cpu, ran = train_state(run_dir)
-                cpu_s, commits = cpu_s + cpu, commits + ran
-                if finished:
+                state = train_state(run_dir)
+                cpu_s, commits = cpu_s + state.cpu_seconds, commits + state.commits
+                if state.done:
                     done.append(read_run(run_dir))
                     src.copy(run_dir, "training", SMALL_RUN_FILES + (STARTS, "train.log"))
             compared = spec.compared_with.partition("/")[2] if spec.compared_with else None
@@ -137,38 +145,35 @@ def search_rows(src: Sources, table: Table, spent: dict[str, float]) -> list[dic
     """One row per Table 6 cell (proposer x method x protocol); a P3 row carries the 95 %
     bootstrap interval of its mean chain (:func:`chain_interval`)."""
     rows = []
-    for proposer in table.sweep["proposer"]:
+    for proposer, method, protocol in table.search_cells():
         spec = table.rows.get(proposer)
         trained = spec.trained_from if spec else None
         steps = paper_tables()[trained.partition("/")[0]].steps if trained else 0
-        for method in table.sweep["search"]:
-            for option in table.sweep["protocol"]:
-                protocol = option.partition("_")[0]  # p3_paper: a P3 preset (its results say p3)
-                run_dir = src.search_dir(proposer, method, protocol)
-                res = read_json(run_dir / "results.json")
-                cpu = float(res.get("seconds", 0.0)) if res else 0.0
-                spent[table.name] += cpu
-                if res is not None and res.get("extra", {}).get("partial"):
-                    res = None
-                row = {"table": 6, "proposer": proposer, "method": method, "protocol": protocol,
-                       "complete": res is not None, "cpu_hours": round(cpu / 3600, 3),
-                       "commits": [c for c in [(res or {}).get("commit")] if c], "proposer_steps": steps}
-                paper = (spec.figures if spec else {}).get(f"{protocol}_{method}")
-                if protocol == "p1":
-                    row["paper"] = None if paper is None else {"mean": paper}
-                else:
-                    row["paper"] = None if paper is None else {"mean": paper[0], "max": paper[1]}
-                if res is not None:
-                    extra = res.get("extra", {})
-                    if protocol == "p1":
-                        row.update(innings=extra.get("n_innings"), shots=extra.get("shots_per_inning"))
-                    else:
-                        row.update(cap=extra.get("cap"), seeds=extra.get("seeds"), reached_cap=extra.get("reached_cap"),
-                                   ci95=chain_interval(res["values"]))
-                    row.update(mean=_round(res["mean"]), max=res["max"], physics=res.get("physics"),
-                               sims_per_decision=res.get("sims_per_decision"))
-                    src.copy(run_dir, "search", SEARCH_FILES)
-                rows.append(row)
+        run_dir = src.search_dir(proposer, method, protocol)
+        res = read_json(run_dir / "results.json")
+        cpu = float(res.get("seconds", 0.0)) if res else 0.0
+        spent[table.name] += cpu
+        if res is not None and res.get("extra", {}).get("partial"):
+            res = None
+        row = {"table": 6, "proposer": proposer, "method": method, "protocol": protocol,
+               "complete": res is not None, "cpu_hours": round(cpu / 3600, 3),
+               "commits": [c for c in [(res or {}).get("commit")] if c], "proposer_steps": steps}
+        paper = (spec.figures if spec else {}).get(f"{protocol}_{method}")
+        if protocol == "p1":
+            row["paper"] = None if paper is None else {"mean": paper}
+        else:
+            row["paper"] = None if paper is None else {"mean": paper[0], "max": paper[1]}
+        if res is not None:
+            extra = res.get("extra", {})
+            if protocol == "p1":
+                row.update(innings=extra.get("n_innings"), shots=extra.get("shots_per_inning"))
+            else:
+                row.update(cap=extra.get("cap"), seeds=extra.get("seeds"), reached_cap=extra.get("reached_cap"),
+                           ci95=chain_interval(res["values"]))
+            row.update(mean=_round(res["mean"]), max=res["max"], physics=res.get("physics"),
+                       sims_per_decision=res.get("sims_per_decision"))
+            src.copy(run_dir, "search", SEARCH_FILES)
+        rows.append(row)
     return rows
 
 
@@ -195,7 +200,7 @@ def curve_figures(src: Sources, tables: list[Table], extra: list[Table], out: Pa
     from .plots import plot_seed_bands
 
     def curves(key: str, seeds: list[int]) -> list:
-        found = [read_curve(src.train_dir(key, s)) for s in seeds if train_state(src.train_dir(key, s))[0]]
+        found = [read_curve(src.train_dir(key, s)) for s in seeds if train_state(src.train_dir(key, s)).done]
         return [c for c in found if c is not None]
 
     series, titles = defaultdict(list), {}
@@ -236,27 +241,8 @@ def reproduction(src: Sources, out: Path | None = None) -> dict:
 
 # ----------------------------------------------------------------------------- Markdown
 
-def _fig(v, key: str) -> str:
-    if v is None:
-        return "–"
-    if key == "max":
-        return f"{v:.0f}"
-    if key in ("mean", "std", "rand_eval"):
-        return f"{v:.3f}"
-    return f"{v:.2f}" if key == "canonical" else f"{v:.1f}"
-
-
-def _cell(figs: dict | None, col: str) -> str:
-    figs = figs or {}
-    if col != "mean":
-        return _fig(figs.get(col), col)
-    if figs.get("mean") is None:
-        return "–"
-    return f"{_fig(figs['mean'], 'mean')} ± {_fig(figs['std'], 'std')}" if figs.get("std") is not None else _fig(figs["mean"], "mean")
-
-
 def _run_cells(r: dict, cols: list[str]) -> list[str]:
-    return [f"{len(r['seeds'])}/{len(r['seeds_planned'])}", f"{r['steps']:,}", *[_cell(r["ours"], c) for c in cols],
+    return [f"{len(r['seeds'])}/{len(r['seeds_planned'])}", f"{r['steps']:,}", *[figure(c, r["ours"]) for c in cols],
             f"{r['cpu_hours']:.2f}", ", ".join(r["commits"]) or "–"]
 
 
@@ -274,12 +260,12 @@ def markdown(data: dict) -> str:
         cols = list(spec.columns)
         body = [[r["variant"] + (f" (= {', '.join(r['shared_with'])})" if r.get("shared_with") else ""),
                  f"{len(r['seeds'])}/{len(r['seeds_planned'])}", f"{r['steps']:,}",
-                 *[f"{_cell(r['ours'], c)} \\| {_cell(r['paper'], c)}" for c in cols],
+                 *[f"{figure(c, r['ours'])} \\| {figure(c, r['paper'])}" for c in cols],
                  f"{r['cpu_hours']:.2f}", ", ".join(r["commits"]) or "–"] for r in table]
         parts += [f"## {spec.title}", "",
                   md_table(["variant", "seeds", "steps", *[COLUMN_TITLES[c] for c in cols], "CPU-h", "commits"], body), ""]
-        if figure := data.get("figures", {}).get(f"table{number}"):
-            parts += [f"![Table {number}: learning curves of the finished seeds, the paper's figure beside them]({figure})", ""]
+        if picture := data.get("figures", {}).get(f"table{number}"):
+            parts += [f"![Table {number}: learning curves of the finished seeds, the paper's figure beside them]({picture})", ""]
     if t6 := [r for r in rows if r["table"] == 6]:
         body = []
         for r in t6:
@@ -303,12 +289,12 @@ def markdown(data: dict) -> str:
         body = [[r["variant"], *_run_cells(r, cols)]]
         if base is not None:
             body.append([f"Table {r['table']} `{base['variant']}` (project CPU settings)", *_run_cells(base, cols)])
-        body.append([f"the paper's `{r['compared_with']}`", "", "", *[_cell(r["paper"], c) for c in cols], "", ""])
+        body.append([f"the paper's `{r['compared_with']}`", "", "", *[figure(c, r["paper"]) for c in cols], "", ""])
         parts += [f"## {tables[EXTRA].title}", "",
                   md_table(["run", "seeds", "steps", *[COLUMN_TITLES[c] for c in cols], "CPU-h", "commits"], body), ""]
-        if figure := data.get("figures", {}).get(f"extra_table{r['table']}"):
+        if picture := data.get("figures", {}).get(f"extra_table{r['table']}"):
             parts += [f"![Table {r['table']}'s task: learning curves of the authors' SAC settings and ours, "
-                      f"the paper's figure beside them]({figure})", ""]
+                      f"the paper's figure beside them]({picture})", ""]
     hours = data["cpu_hours_by_table"]
     parts += ["## CPU-hours per table", "",
               md_table(["table", "CPU-h"], [[t, f"{h:.2f}"] for t, h in hours.items()] + [["total", f"{sum(hours.values()):.2f}"]])]
