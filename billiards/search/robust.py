@@ -162,12 +162,19 @@ def _errors(noise: NoiseModel, counts: np.ndarray, antithetic: bool, rng) -> np.
 
 
 def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.random.Generator,
-                  params: PhysicsParams = DEFAULT_PARAMS, noise: NoiseModel | None = None) -> SearchResult:
+                  params: PhysicsParams = DEFAULT_PARAMS, noise: NoiseModel | None = None,
+                  levels: np.ndarray | None = None) -> SearchResult:
     """Choose one action for each of S table states (positions (S, 4, 2)), each candidate scored
-    by noisy replays drawn from ``noise`` with ``rng`` (see the module docstring)."""
+    by noisy replays drawn from ``noise`` with ``rng`` (see the module docstring). ``levels``
+    (S,), optional: each state's multiplier of ``noise``'s sigmas (variable noise: the level
+    drawn for the shot and told to the player); without it every state plays ``noise`` itself."""
     noise = noise if noise is not None else NoiseModel()
     positions = np.asarray(positions, dtype=np.float64)
     S, K = positions.shape[0], cfg.k1
+    if levels is not None:
+        levels = np.asarray(levels, dtype=np.float64).reshape(-1)
+        if levels.shape != (S,) or not (np.isfinite(levels).all() and (levels >= 0).all()):
+            raise ValueError(f"levels must be {S} finite multipliers >= 0 (one per state), got {levels!r}")
     n_sims = 0
     if cfg.screen:
         a1, exact, leave, screened = _screen(positions, proposer, cfg, rng, params)
@@ -200,7 +207,10 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
             left[s] -= int(per.sum())
         counts = np.asarray(counts)
         s_idx, k_idx = np.repeat(rows_s, counts), np.repeat(rows_k, counts)
-        played = noise.apply(a1[s_idx, k_idx], _errors(noise, counts, cfg.antithetic, rng), params)
+        z = _errors(noise, counts, cfg.antithetic, rng)
+        if levels is not None:  # sigma * (level * z): the state's own noise level
+            z *= levels[s_idx][:, None]
+        played = noise.apply(a1[s_idx, k_idx], z, params)
         res = simulate_batch(positions[s_idx], played, params)
         reward = verifier_reward(res, cfg.foul_penalty)
         n_sims += len(s_idx)
