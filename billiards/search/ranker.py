@@ -27,6 +27,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass
+from typing import ClassVar
 from pathlib import Path
 
 import numpy as np
@@ -103,39 +104,57 @@ class RankerFileError(ValueError):
 
 
 @dataclass
-class ShotRanker:
-    """An MLP (Linear/ReLU, one logit out) over standardised :func:`shot_features`, computed by
-    :func:`billiards.numerics.mlp` (float32, the same bits on every CPU).
-
-    ``score`` is the logit of the predicted probability that the shot scores under the noise
-    the ranker was trained for (``meta["noise"]``); ``meta`` also records the table
-    (``physics_params``), the training command and its figures.
-    """
+class TaggedMLP:
+    """An MLP (Linear/ReLU, one logit out) over standardised features, computed by
+    :func:`billiards.numerics.mlp` (float32, the same bits on every CPU), saved as a sealed
+    tagged torch file of tensors and plain values (``weights_only``: loading executes nothing).
+    Subclasses name their file format, feature count and error (class attributes)."""
 
     weights: list  # per layer (in, out) float32
     biases: list  # per layer (out,) float32
-    mean: np.ndarray  # (N_FEATURES,) feature standardisation
+    mean: np.ndarray  # (n_features,) feature standardisation
     std: np.ndarray
     meta: dict
 
+    FORMAT: ClassVar[str] = ""
+    N_FEATURES: ClassVar[int] = 0
+    ERROR: ClassVar[type] = ValueError
+    WHAT: ClassVar[str] = "model"
+
     def __post_init__(self):
+        n = self.N_FEATURES
         shapes = [w.shape for w in self.weights]
-        if (not shapes or len(self.biases) != len(shapes) or shapes[0][0] != N_FEATURES or shapes[-1][1] != 1
+        if (not shapes or len(self.biases) != len(shapes) or shapes[0][0] != n or shapes[-1][1] != 1
                 or any(a[1] != b[0] for a, b in zip(shapes, shapes[1:]))
                 or any(b.shape != (w.shape[1],) for w, b in zip(self.weights, self.biases))
-                or self.mean.shape != (N_FEATURES,) or self.std.shape != (N_FEATURES,)):
-            raise RankerFileError(f"ranker layers do not chain from {N_FEATURES} features to one logit: {shapes}")
-
-    def score(self, positions: np.ndarray, actions: np.ndarray, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
-        """Logits (...,) for shots ``actions`` (..., 4) on tables ``positions`` (..., 4, 2)."""
-        return self.logits(shot_features(positions, actions, params))
+                or self.mean.shape != (n,) or self.std.shape != (n,)):
+            raise self.ERROR(f"{self.WHAT} layers do not chain from {n} features to one logit: {shapes}")
 
     def logits(self, features: np.ndarray) -> np.ndarray:
-        """Logits (...,) of :func:`shot_features` rows (..., N_FEATURES)."""
+        """Logits (...,) of feature rows (..., N_FEATURES)."""
         x = (np.asarray(features, dtype=np.float32) - self.mean) / self.std
         lead = x.shape[:-1]
         x = numerics.mlp(x.reshape(1, -1, x.shape[-1]), [w[None] for w in self.weights], [b[None] for b in self.biases])
         return x[0, :, 0].reshape(lead)
+
+    def save(self, path) -> Path:
+        import torch
+
+        t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
+        return save_tagged(path, {"format": self.FORMAT, "weights": [t(w) for w in self.weights],
+                                  "biases": [t(b) for b in self.biases], "mean": t(self.mean), "std": t(self.std),
+                                  "meta": json.dumps(self.meta)})
+
+    @classmethod
+    def load(cls, path):
+        """Read a file of this kind (tensors and plain values only: nothing in it is executed)."""
+        payload = load_tagged(path, cls.FORMAT, cls.ERROR, cls.WHAT)
+        try:
+            arr = lambda x: x.numpy().astype(np.float32)
+            return cls([arr(w) for w in payload["weights"]], [arr(b) for b in payload["biases"]],
+                       arr(payload["mean"]), arr(payload["std"]), json.loads(payload["meta"]))
+        except (KeyError, TypeError, AttributeError, ValueError) as err:
+            raise cls.ERROR(f"{path}: not a complete {cls.WHAT} ({type(err).__name__}: {err})") from None
 
     @property
     def params(self) -> PhysicsParams:
@@ -145,24 +164,23 @@ class ShotRanker:
     def noise(self) -> NoiseModel:
         return NoiseModel(**self.meta["noise"])
 
-    def save(self, path) -> Path:
 
-        import torch
+class ShotRanker(TaggedMLP):
+    """The shot ranker: a :class:`TaggedMLP` over :func:`shot_features`.
 
-        t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
-        return save_tagged(path, {"format": FORMAT, "weights": [t(w) for w in self.weights], "biases": [t(b) for b in self.biases],
-                                  "mean": t(self.mean), "std": t(self.std), "meta": json.dumps(self.meta)})
+    ``score`` is the logit of the predicted probability that the shot scores under the noise
+    the ranker was trained for (``meta["noise"]``); ``meta`` also records the table
+    (``physics_params``), the training command and its figures.
+    """
 
-    @classmethod
-    def load(cls, path) -> "ShotRanker":
-        """Read a ranker file (tensors and plain values only: nothing in it is executed)."""
-        payload = load_tagged(path, FORMAT, RankerFileError, "shot ranker")
-        try:
-            arr = lambda x: x.numpy().astype(np.float32)
-            return cls([arr(w) for w in payload["weights"]], [arr(b) for b in payload["biases"]],
-                       arr(payload["mean"]), arr(payload["std"]), json.loads(payload["meta"]))
-        except (KeyError, TypeError, AttributeError, ValueError) as err:
-            raise RankerFileError(f"{path}: not a complete shot ranker ({type(err).__name__}: {err})") from None
+    FORMAT = FORMAT
+    N_FEATURES = N_FEATURES
+    ERROR = RankerFileError
+    WHAT = "shot ranker"
+
+    def score(self, positions: np.ndarray, actions: np.ndarray, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
+        """Logits (...,) for shots ``actions`` (..., 4) on tables ``positions`` (..., 4, 2)."""
+        return self.logits(shot_features(positions, actions, params))
 
 
 class RankedProposer:
@@ -230,14 +248,22 @@ def make_dataset(n_racks: int, candidates: int, samples: int, noise: NoiseModel,
 
 def fit(X: np.ndarray, y: np.ndarray, hidden: int = 256, layers: int = 3, epochs: int = 12, batch: int = 4096,
         lr: float = 2e-3, seed: int = 0, log=print) -> ShotRanker:
-    """Train the MLP on (features, target share) by binary cross-entropy, Adam with a one-cycle
-    learning rate, on the CPU in one thread (deterministic for a seed)."""
+    """Train the ranker on (features, target share): :func:`fit_mlp`."""
+    return ShotRanker(*fit_mlp(X, y, hidden, layers, epochs, batch, lr, seed, log), {})
+
+
+def fit_mlp(X: np.ndarray, y: np.ndarray, hidden: int = 256, layers: int = 3, epochs: int = 12, batch: int = 4096,
+            lr: float = 2e-3, seed: int = 0, log=print) -> tuple[list, list, np.ndarray, np.ndarray]:
+    """Train an MLP (``layers`` hidden layers of ``hidden``) on (features, target share in
+    [0, 1]) by binary cross-entropy, Adam with a one-cycle learning rate, on the CPU in one
+    thread (deterministic for a seed): (weights (in, out), biases, feature mean, feature std),
+    float32, the :class:`TaggedMLP` layout."""
     import torch
 
     torch.manual_seed(seed)
     Xt, yt = torch.from_numpy(X), torch.from_numpy(y)
     mean, std = Xt.mean(0), Xt.std(0) + 1e-6
-    sizes = [N_FEATURES] + [hidden] * layers + [1]
+    sizes = [X.shape[1]] + [hidden] * layers + [1]
     mods = []
     for a, b in zip(sizes, sizes[1:]):
         mods += [torch.nn.Linear(a, b), torch.nn.ReLU()]
@@ -261,7 +287,7 @@ def fit(X: np.ndarray, y: np.ndarray, hidden: int = 256, layers: int = 3, epochs
         log(f"epoch {epoch + 1}/{epochs}: loss {total / len(Xt):.4f} ({time.time() - t0:.0f} s)")
     linear = [m for m in net if isinstance(m, torch.nn.Linear)]
     f32 = lambda t: t.detach().numpy().astype(np.float32).copy()
-    return ShotRanker([f32(m.weight).T.copy() for m in linear], [f32(m.bias) for m in linear], f32(mean), f32(std), {})
+    return [f32(m.weight).T.copy() for m in linear], [f32(m.bias) for m in linear], f32(mean), f32(std)
 
 
 def ranking_report(ranker: ShotRanker, X: np.ndarray, y: np.ndarray, per_rack: int, top: int = 50) -> dict:
@@ -332,5 +358,6 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-__all__ = ["N_FEATURES", "POOL_DRAWS", "RankedProposer", "RankerFileError", "ShotRanker", "fit", "make_dataset",
+__all__ = ["N_FEATURES", "POOL_DRAWS", "RankedProposer", "RankerFileError", "ShotRanker", "TaggedMLP", "fit", "fit_mlp",
+           "make_dataset",
            "noise_mismatch", "ranking_report", "shot_features"]

@@ -1,0 +1,232 @@
+"""A learned value of a table under execution noise: how likely the next shot scores.
+
+Under noise the search picks each shot for its own chance of scoring; a strong player also
+picks the shot whose *leave* offers an easy next one. The table value ``V(table, level)`` is a
+small network, trained offline on simulated play, that predicts the probability that the
+noise-aware search's next shot scores from a table when the cue errs with ``level`` times the
+``fastfiz`` sigmas (level 1: ``noise=fastfiz``, 5: ``fastfiz_x5``, 0: exact play). The
+robust search (:mod:`billiards.search.robust`) uses it on the noisy replays it already
+simulates: a replay that scores is worth ``1 + position * V(leave)`` (position play), and, in a
+two-player match, a replay that misses costs ``leave * V(the opponent's view of the leave)``
+(safety play).
+
+* :func:`table_features` -- the input, one place (training and search).
+* :class:`TableValue` -- the network (a :class:`~billiards.search.ranker.TaggedMLP`: float32,
+  the same bits on every CPU; a sealed tagged file, loading executes nothing).
+* :func:`make_dataset` / ``python -m billiards.search.value`` -- how a value is made: chains of
+  play from random racks, each state labelled by the share of ``check`` fresh noisy replays
+  that score of the shot a small noise-aware search (ranked candidates, noisy replays) picks
+  there; the chain goes on from one of those replays' leaves. See ``--help``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+from billiards import numerics
+from billiards.physics import DEFAULT_PARAMS, PhysicsParams, random_racks, simulate_batch
+from billiards.physics.core import RED1, RED2, WHITE, YELLOW
+from billiards.physics.noise import NOISE_PRESETS, NoiseModel
+
+from .ranker import RankedProposer, ShotRanker, TaggedMLP, fit_mlp
+
+FORMAT = "billiards-table-value-1"
+N_FEATURES = 20
+BASE_NOISE = NOISE_PRESETS["fastfiz"]  # level 1
+MAX_LEVEL = 5.0
+
+
+class ValueFileError(ValueError):
+    """A table-value file that is missing, corrupt or not a table value."""
+
+
+def noise_level(noise: NoiseModel) -> float:
+    """A noise model's level: its aim sigma in units of fastfiz's (0 for exact play)."""
+    return float(noise.sigma_aim_deg / BASE_NOISE.sigma_aim_deg)
+
+
+def table_features(positions: np.ndarray, levels, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
+    """The value's input for tables ``positions`` (..., 4, 2) (the shooter's cue ball in slot
+    0) at noise ``levels`` (broadcast to ...): (..., :data:`N_FEATURES`) float32.
+
+    The table's two mirror symmetries are folded away (the cue ball is reflected into the
+    lower-left quarter) and the reds are ordered nearer / farther from the cue ball. Per ball
+    (cue, yellow, near red, far red) its centre as fractions of the table and its distance to
+    the nearest rail; the six centre distances; the level and its square.
+    """
+    pos = np.array(positions, dtype=np.float64)
+    W, L = params.table_width, params.table_length
+    flip_x = pos[..., WHITE, 0] > W / 2
+    flip_y = pos[..., WHITE, 1] > L / 2
+    pos[..., 0] = np.where(flip_x[..., None], W - pos[..., 0], pos[..., 0])
+    pos[..., 1] = np.where(flip_y[..., None], L - pos[..., 1], pos[..., 1])
+    d = lambda a, b: np.hypot(pos[..., a, 0] - pos[..., b, 0], pos[..., a, 1] - pos[..., b, 1])
+    swap = d(WHITE, RED2) < d(WHITE, RED1)
+    near = np.where(swap[..., None], pos[..., RED2, :], pos[..., RED1, :])
+    far = np.where(swap[..., None], pos[..., RED1, :], pos[..., RED2, :])
+    balls = (pos[..., WHITE, :], pos[..., YELLOW, :], near, far)
+    cols = []
+    for p in balls:
+        cols += [p[..., 0] / W, p[..., 1] / L,
+                 np.minimum.reduce([p[..., 0], W - p[..., 0], p[..., 1], L - p[..., 1]]) / W]
+    for i in range(4):
+        for j in range(i + 1, 4):
+            cols.append(np.hypot(balls[i][..., 0] - balls[j][..., 0], balls[i][..., 1] - balls[j][..., 1]) / L)
+    level = np.broadcast_to(np.asarray(levels, dtype=np.float64), pos.shape[:-2])
+    cols += [level, level * level]
+    out = np.stack(cols, axis=-1).astype(np.float32)
+    assert out.shape[-1] == N_FEATURES
+    return out
+
+
+class TableValue(TaggedMLP):
+    """The table value: a :class:`~billiards.search.ranker.TaggedMLP` over
+    :func:`table_features`; :meth:`predict` is the probability that the next shot scores.
+    ``meta`` records the table (``physics_params``), the base noise (``noise``: level 1), the
+    training command, its held-out check and its cost."""
+
+    FORMAT = FORMAT
+    N_FEATURES = N_FEATURES
+    ERROR = ValueFileError
+    WHAT = "table value"
+
+    def predict(self, positions: np.ndarray, levels, params: PhysicsParams | None = None) -> np.ndarray:
+        """P(the next shot scores) (...,) float64 for tables (..., 4, 2) at noise ``levels``."""
+        logit = self.logits(table_features(positions, levels, params or self.params)).astype(np.float64)
+        return 1.0 / (1.0 + numerics.exp(-logit))
+
+
+# ----------------------------------------------------------------------------- making a value
+
+
+def draw_levels(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Noise levels for training chains: 40 % at 1 (fastfiz), 30 % at 5 (fastfiz_x5), 30 %
+    uniform in [0, 5] (the variable preset's range)."""
+    u = rng.random(n)
+    return np.where(u < 0.4, 1.0, np.where(u < 0.7, MAX_LEVEL, rng.uniform(0.0, MAX_LEVEL, n)))
+
+
+def make_dataset(n_states: int, ranker: ShotRanker, rng: np.random.Generator, params: PhysicsParams = DEFAULT_PARAMS,
+                 chains: int = 256, pool: int = 300, top: int = 16, samples: int = 16, check: int = 16,
+                 restart: float = 0.2, log=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``n_states`` labelled tables: (features (n, N_FEATURES), targets (n,), positions (n, 4, 2),
+    levels (n,)).
+
+    ``chains`` chains of play advance together. At each table (the chain's level ``l``, drawn
+    by :func:`draw_levels` when the chain starts): the ``top`` of ``pool`` ranked candidates
+    each get ``samples`` noisy replays (sigmas ``l`` x fastfiz's), the best by its share that
+    scores is the search's shot, and the target is the share of ``check`` fresh replays of it
+    that score (an unbiased estimate of that shot's chance). The chain goes on from the first
+    fresh replay's leave, or (with probability ``restart``) from a new random rack."""
+    proposer = RankedProposer(ranker, pool=pool, params=params)
+    C = chains
+    pos, lev = random_racks(rng, C, params), draw_levels(C, rng)
+    X, y, P, Lv = [], [], [], []
+    done, t0 = 0, time.time()
+    while done < n_states:
+        cand = proposer.propose(pos, top, rng)  # (C, top, 4)
+        z = BASE_NOISE.draw((C, top, samples), rng) * lev[:, None, None, None]
+        shots = BASE_NOISE.apply(np.repeat(cand[:, :, None], samples, axis=2), z, params)
+        share = simulate_batch(np.repeat(pos, top * samples, axis=0), shots.reshape(-1, 4), params).score
+        best = np.argmax(share.reshape(C, top, samples).mean(axis=2), axis=1)
+        chosen = cand[np.arange(C), best]
+        z = BASE_NOISE.draw((C, check), rng) * lev[:, None, None]
+        res = simulate_batch(np.repeat(pos, check, axis=0),
+                             BASE_NOISE.apply(np.repeat(chosen[:, None], check, axis=1), z, params).reshape(-1, 4), params)
+        X.append(table_features(pos, lev, params))
+        y.append(res.score.reshape(C, check).mean(axis=1).astype(np.float32))
+        P.append(pos.copy())
+        Lv.append(lev.copy())
+        done += C
+        pos = res.positions.reshape(C, check, 4, 2)[:, 0].copy()
+        new = rng.random(C) < restart
+        if new.any():
+            pos[new], lev[new] = random_racks(rng, int(new.sum()), params), draw_levels(int(new.sum()), rng)
+        if log is not None:
+            log(f"{done:,} / {n_states:,} tables ({time.time() - t0:.0f} s)")
+    cut = lambda parts: np.concatenate(parts)[:n_states]
+    return cut(X), cut(y), cut(P), cut(Lv)
+
+
+def held_out_report(value: TableValue, X: np.ndarray, y: np.ndarray, levels: np.ndarray) -> dict:
+    """Brier scores of the value's predictions against the held-out targets, beside the best
+    constant per level band, overall and per band (exact-ish < 0.5, fastfiz [0.5, 2), high >= 2)."""
+    p = 1.0 / (1.0 + np.exp(-value.logits(X).astype(np.float64)))
+    out = {"tables": int(len(y))}
+    bands = {"all": np.ones(len(y), bool), "level<0.5": levels < 0.5,
+             "0.5<=level<2": (levels >= 0.5) & (levels < 2), "level>=2": levels >= 2}
+    for name, m in bands.items():
+        if m.any():
+            out[name] = {"tables": int(m.sum()), "mean_target": round(float(y[m].mean()), 4),
+                         "brier": round(float(np.mean((p[m] - y[m]) ** 2)), 4),
+                         "brier_constant": round(float(np.var(y[m])), 4),
+                         "corr": round(float(np.corrcoef(p[m], y[m])[0, 1]), 4) if m.sum() > 2 else None}
+    return out
+
+
+def main(argv=None) -> int:
+    from billiards.files import repo_path
+    from billiards.physics import PRESETS
+    from billiards.physics.config import physics_record
+    from billiards.provenance import git_commit
+
+    ap = argparse.ArgumentParser(prog="python -m billiards.search.value",
+                                 description="Train a table value for the position-aware search (see the module docstring).")
+    ap.add_argument("--out", required=True, help="the value file to write (e.g. results/values/value.pt)")
+    ap.add_argument("--physics", default="korean_medium", choices=sorted(PRESETS))
+    ap.add_argument("--ranker", default="results/rankers/fastfiz/ranker.pt", help="the shot ranker the labelling search uses")
+    ap.add_argument("--states", type=int, default=60000, help="training tables")
+    ap.add_argument("--test-states", type=int, default=4096, help="held-out tables")
+    ap.add_argument("--pool", type=int, default=300)
+    ap.add_argument("--top", type=int, default=16)
+    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--check", type=int, default=16)
+    ap.add_argument("--hidden", type=int, default=128)
+    ap.add_argument("--layers", type=int, default=2)
+    ap.add_argument("--epochs", type=int, default=30)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    for key in ("states", "test_states", "pool", "top", "samples", "check", "hidden", "layers", "epochs"):
+        if getattr(args, key) < 1:
+            ap.error(f"--{key.replace('_', '-')} must be >= 1")
+    import torch
+
+    from billiards.device import start_numba_threads
+
+    start_numba_threads()
+    torch.set_num_threads(1)
+    commit = git_commit()
+    params = PRESETS[args.physics]
+    ranker = ShotRanker.load(repo_path(args.ranker) if not repo_path(args.ranker).is_absolute() else args.ranker)
+    rng = np.random.default_rng(args.seed)
+    t0 = time.time()
+    say = lambda m: print(m, flush=True)
+    X, y, _, _ = make_dataset(args.states, ranker, rng, params, pool=args.pool, top=args.top, samples=args.samples,
+                              check=args.check, log=say)
+    Xt, yt, _, lt = make_dataset(args.test_states, ranker, np.random.default_rng(args.seed + 10_000), params,
+                                 pool=args.pool, top=args.top, samples=args.samples, check=args.check)
+    say(f"data: {len(y):,} training tables (mean target {y.mean():.3f}), {time.time() - t0:.0f} s")
+    value = TableValue(*fit_mlp(X, y, hidden=args.hidden, layers=args.layers, epochs=args.epochs, batch=1024,
+                                seed=args.seed, log=say), {})
+    report = held_out_report(value, Xt, yt, lt)
+    value.meta = {**physics_record(params), "noise": {k: getattr(BASE_NOISE, k) for k in
+                                                      ("sigma_aim_deg", "sigma_speed", "sigma_tip_mm")},
+                  "command": "python -m billiards.search.value " + " ".join(sys.argv[1:] if argv is None else argv),
+                  "commit": commit, "args": vars(args), "held_out": report, "cpu_seconds": round(time.process_time(), 1)}
+    value.save(args.out)
+    say(json.dumps(report))
+    say(f"wrote {args.out} ({time.time() - t0:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
+
+
+__all__ = ["BASE_NOISE", "MAX_LEVEL", "N_FEATURES", "TableValue", "ValueFileError", "draw_levels", "held_out_report",
+           "make_dataset", "noise_level", "table_features"]
