@@ -77,12 +77,13 @@ class PUCTActor(SearchActor):
 class RobustActor(SearchActor):
     """Candidates scored over noisy replays of their shot (:mod:`billiards.search.robust`)."""
 
-    def __init__(self, proposer, cfg: RobustConfig, noise, seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
-        self.noise = noise
+    def __init__(self, proposer, cfg: RobustConfig, noise, seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS,
+                 value=None):
+        self.noise, self.value = noise, value  # value: a TableValue pricing leaves (cfg.position, cfg.leave)
         super().__init__(proposer, cfg, seed, params)
 
     def search(self, positions):
-        return robust_search(positions, self.proposer, self.cfg, self.rng, self.params, self.noise)
+        return robust_search(positions, self.proposer, self.cfg, self.rng, self.params, self.noise, value=self.value)
 
 
 class NoisyPUCTActor(SearchActor):

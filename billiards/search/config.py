@@ -146,12 +146,47 @@ class RobustSearchConfig(_SearchOption):
     antithetic: bool = False  # noisy samples in antithetic pairs (z, -z)
     gamma: float = 0.99
     foul_penalty: float = 1.0
+    position: float = 0.0  # position play: a replay that scores is worth 1 + position * V(its leave)
+    leave: float = 0.0  # safety play (two-player): a replay that misses costs leave * V(the opponent's table)
+    value: Optional[str] = None  # the table value file (billiards.search.value) that prices the leaves
 
     def settings(self):
         """The :class:`~billiards.search.robust.RobustConfig` (ValueError if a knob is out of range)."""
         from .robust import RobustConfig
 
-        return RobustConfig(**{f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "kind"})
+        return RobustConfig(**{f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                               if f.name not in ("kind", "value")})
+
+    def errors(self) -> list[str]:
+        """The knobs, and the table value file (loaded and checked now) where the leaves are priced."""
+        errs = super().errors()
+        if errs or not (self.position or self.leave):
+            return errs
+        if self.value is None:
+            return [f"search.position={self.position} / search.leave={self.leave} price the leaves with a table "
+                    f"value: name its file, search.value=<file> (made by: {VALUE_COMMAND})"]
+        if not Path(str(repo_path(self.value))).is_file():
+            return [f"search.value: no table value file at {self.value} (made by: {VALUE_COMMAND})"]
+        from .value import TableValue, ValueFileError
+
+        try:
+            TableValue.load(repo_path(self.value))
+        except ValueFileError as err:
+            return [f"search.value: {err}"]
+        return []
+
+    def table_value(self, params):
+        """The table value pricing the leaves (None where no weight is set); one trained on
+        another table warns (PhysicsMismatchWarning)."""
+        if not (self.position or self.leave):
+            return None
+        from billiards.physics.config import warn_physics_mismatch
+
+        from .value import TableValue
+
+        value = TableValue.load(repo_path(self.value))
+        warn_physics_mismatch(f"search.value ({self.value})", value.params, params)
+        return value
 
     def actor(self, proposer, seed: int, params, noise=None):
         """The actor, sampling ``noise`` (a NoiseModel; :func:`errors` refuses robust without noise)."""
@@ -159,7 +194,8 @@ class RobustSearchConfig(_SearchOption):
 
         from .actors import RobustActor
 
-        return RobustActor(proposer, self.settings(), get_noise(noise), seed=seed, params=params)
+        return RobustActor(proposer, self.settings(), get_noise(noise), seed=seed, params=params,
+                           value=self.table_value(params))
 
 
 # ----------------------------------------------------------------------------- protocols
@@ -241,6 +277,7 @@ FORGIVING = dict(name="forgiving", power_low=0.5, power_high=1.0, u_low=0.3, u_h
 
 
 RANKER_COMMAND = "python -m billiards.search.ranker --out {out} --noise {noise}"
+VALUE_COMMAND = "python -m billiards.search.value --out results/values/value.pt --states 100000 --pool 500 --top 24"
 
 
 @dataclass

@@ -29,6 +29,12 @@ exact or noisy, counts in the budget. At each of S states:
    the candidate leaves (its exact outcome when screened, else its first noisy one) and
    simulated exactly -- and valued ``stat + gamma * max r2``.
 
+With a table value (:mod:`billiards.search.value`) the replays' leaves are priced too
+(:func:`leave_terms`): ``position`` > 0 plays position (a replay that scores is worth ``1 +
+position * V(leave)``: the chance that the next shot scores from there), ``leave`` > 0 plays
+safe in a two-player match (a replay that misses costs ``leave * V`` of the table the opponent
+is left). The statistic is then over reward plus term; the noisy replays are the same ones.
+
 The played action is the best by value; ties go to the higher statistic, then proposer order.
 Simulations per decision: at most ``budget`` (exactly ``budget`` whenever a candidate is left
 after the screen).
@@ -44,9 +50,13 @@ import numpy as np
 
 from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, simulate_batch
+from billiards.physics.core import RED1, RED2, WHITE, YELLOW
 from billiards.physics.noise import NoiseModel
 
 from .lookahead import VERIFIER_FOUL_PENALTY, SearchResult, verifier_reward
+from .value import noise_level
+
+OPPONENT_VIEW = [YELLOW, WHITE, RED1, RED2]  # the table seen by the other cue ball's player
 
 SCHEDULES = ("uniform", "halving")
 
@@ -67,8 +77,13 @@ class RobustConfig:
     k2: int = 0
     gamma: float = 0.99
     foul_penalty: float = VERIFIER_FOUL_PENALTY
+    position: float = 0.0  # a replay that scores is worth 1 + position * V(its leave) (needs a table value)
+    leave: float = 0.0  # two-player: a replay that misses costs leave * V(the opponent's view of its leave)
 
     def __post_init__(self):
+        if not (math.isfinite(self.position) and self.position >= 0 and math.isfinite(self.leave) and self.leave >= 0):
+            raise ValueError(f"position and leave must be finite weights >= 0; got position={self.position}, "
+                             f"leave={self.leave}")
         if self.schedule not in SCHEDULES:
             raise ValueError(f"robust search schedule must be one of {', '.join(SCHEDULES)}; got {self.schedule!r}")
         if self.target < 0 or self.wave < 1:
@@ -161,13 +176,34 @@ def _errors(noise: NoiseModel, counts: np.ndarray, antithetic: bool, rng) -> np.
     return z
 
 
+def leave_terms(res, cfg: RobustConfig, value, levels: np.ndarray) -> np.ndarray:
+    """The position and leave terms of simulated replays ``res`` (rows at noise ``levels``,
+    multiples of fastfiz's): ``position * V(leave)`` where a replay scores (the shooter plays
+    on), ``-leave * V(the leave with the cue balls swapped)`` where it does not (the opponent
+    plays on, two-player); 0 without a ``value``."""
+    terms = np.zeros(len(res.score))
+    if value is None:
+        return terms
+    scored = res.score.astype(bool)
+    for rows, weight, table in ((np.flatnonzero(scored), cfg.position, res.positions),
+                                (np.flatnonzero(~scored), -cfg.leave, res.positions[:, OPPONENT_VIEW])):
+        if weight and len(rows):
+            terms[rows] = weight * value.predict(table[rows], levels[rows])
+    return terms
+
+
 def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.random.Generator,
                   params: PhysicsParams = DEFAULT_PARAMS, noise: NoiseModel | None = None,
-                  levels: np.ndarray | None = None) -> SearchResult:
+                  levels: np.ndarray | None = None, value=None) -> SearchResult:
     """Choose one action for each of S table states (positions (S, 4, 2)), each candidate scored
     by noisy replays drawn from ``noise`` with ``rng`` (see the module docstring). ``levels``
     (S,), optional: each state's multiplier of ``noise``'s sigmas (variable noise: the level
-    drawn for the shot and told to the player); without it every state plays ``noise`` itself."""
+    drawn for the shot and told to the player); without it every state plays ``noise`` itself.
+    ``value`` (a :class:`~billiards.search.value.TableValue`) prices the replays' leaves by
+    ``cfg.position`` and ``cfg.leave`` (:func:`leave_terms`); the statistic is then over the
+    replays' reward plus that term, ``r1`` stays the mean verifier reward."""
+    if (cfg.position or cfg.leave) and value is None:
+        raise ValueError("robust search with position or leave weights needs a table value (search.value=<file>)")
     noise = noise if noise is not None else NoiseModel()
     positions = np.asarray(positions, dtype=np.float64)
     S, K = positions.shape[0], cfg.k1
@@ -187,7 +223,9 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
         leave = np.repeat(positions[:, None], K, axis=1).copy()  # the table each candidate leaves
         has_leave = np.zeros((S, K), dtype=bool)
         alive = [list(range(K)) for _ in range(S)]
-    samples = [[[] for _ in range(K)] for _ in range(S)]
+    samples = [[[] for _ in range(K)] for _ in range(S)]  # the statistic's: reward + leave term
+    rewards = [[[] for _ in range(K)] for _ in range(S)]  # the verifier reward alone (r1)
+    state_level = (levels if levels is not None else np.ones(S)) * (noise_level(noise) if value is not None else 0.0)
     left = [cfg.budget - cfg.m1 * cfg.k2 - int(screened[s]) if alive[s] else 0 for s in range(S)]
     rounds = [1 if cfg.schedule == "uniform" else max(1, math.ceil(math.log2(max(len(a), 1))) + 1) for a in alive]
     r = 0
@@ -213,10 +251,12 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
         played = noise.apply(a1[s_idx, k_idx], z, params)
         res = simulate_batch(positions[s_idx], played, params)
         reward = verifier_reward(res, cfg.foul_penalty)
+        total = reward + leave_terms(res, cfg, value, state_level[s_idx]) if value is not None else reward
         n_sims += len(s_idx)
         for i in range(len(s_idx)):
             s, k = s_idx[i], k_idx[i]
-            samples[s][k].append(reward[i])
+            samples[s][k].append(total[i])
+            rewards[s][k].append(reward[i])
             if not has_leave[s, k]:
                 leave[s, k], has_leave[s, k] = res.positions[i], True
         for s in set(rows_s):  # rank by the statistic (ties: exact reward, proposer order); halve
@@ -235,7 +275,7 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
     stat = np.where(scored[:, None], stat, exact)  # nothing sampled (no candidate scored): exact reward
     order = np.argsort(-stat, axis=1, kind="stable")
     best = order[:, 0].copy()
-    value = stat[np.arange(S), best].copy()
+    chosen_value = stat[np.arange(S), best].copy()
     if cfg.m1 and cfg.k2:
         top = order[:, : cfg.m1]  # (S, M1)
         rows = np.arange(S)[:, None]
@@ -248,9 +288,13 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
         total = first + cfg.gamma * r2.max(axis=-1)
         pick = np.lexsort((np.arange(cfg.m1)[None].repeat(S, 0), -first, -total), axis=-1)[:, 0]
         best = top[np.arange(S), pick]
-        value = total[np.arange(S), pick]
+        chosen_value = total[np.arange(S), pick]
     rows = np.arange(S)
-    return SearchResult(a1[rows, best], value, stat[rows, best], leave[rows, best], n_sims)
+    r1 = stat[rows, best].copy()
+    for s in range(S) if value is not None else ():  # the verifier reward alone where leaves were priced
+        if rewards[s][best[s]]:
+            r1[s] = float(np.mean(rewards[s][best[s]]))
+    return SearchResult(a1[rows, best], chosen_value, r1, leave[rows, best], n_sims)
 
 
-__all__ = ["RobustConfig", "SCHEDULES", "robust_search"]
+__all__ = ["OPPONENT_VIEW", "RobustConfig", "SCHEDULES", "leave_terms", "robust_search"]
