@@ -83,12 +83,12 @@ def test_appended_keys_and_contradicting_kinds_fail_validation():
 def test_option_groups_list_only_real_options():
     """The schemas live under schema/, outside the option groups (no ``search_schema`` option)."""
     # for_noise_<noise>: the default search per execution noise (h2 without noise, robust with it)
-    assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "h2", "puct",
-                                       "robust"]
+    assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "for_noise_variable", "h2",
+                                       "puct", "robust"]
     assert group_options("protocol") == ["p1", "p3", "p3_paper"]
-    assert group_options("proposer") == ["base", "both", "for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "forgiving",
-                                         "gentle", "geometric", "near_miss", "policy", "ranked"]
-    assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none"]
+    assert group_options("proposer") == ["base", "both", "for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none",
+                                         "for_noise_variable", "forgiving", "gentle", "geometric", "near_miss", "policy", "ranked"]
+    assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none", "variable"]
     assert group_options("algo") == ["ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
     assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name
 

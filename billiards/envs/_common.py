@@ -94,6 +94,25 @@ def terminated_truncated(score: np.ndarray, shot: np.ndarray, on_miss: str, max_
     return terminated, truncated
 
 
+def next_levels(noise: NoiseModel, rng, n: int) -> np.ndarray | None:
+    """The noise levels of the next shots of ``n`` innings (n,) float64 under variable noise,
+    drawn from ``rng`` (a Generator, or a sequence of n of them, one per inning); None for
+    fixed noise (nothing is drawn)."""
+    if not noise.is_variable:
+        return None
+    if isinstance(rng, np.random.Generator):
+        return noise.draw_levels((n,), rng)
+    return np.concatenate([noise.draw_levels((1,), r) for r in rng]) if n else np.zeros(0)
+
+
+def with_levels(obs: np.ndarray, levels: np.ndarray | None) -> np.ndarray:
+    """Observations (..., n) with each shot's noise level appended last (variable noise): (..., n
+    + 1) float32; unchanged without levels."""
+    if levels is None:
+        return obs
+    return np.concatenate([obs, np.asarray(levels, dtype=np.float32)[..., None]], axis=-1)
+
+
 def check_flag(name: str, value) -> bool:
     """A boolean option as a bool, or a TypeError: ``constrain_aim="no"`` is not a boolean
     (``bool("no")`` would be True)."""
@@ -154,16 +173,20 @@ class Shots(NamedTuple):
 
 
 def play_shots(positions: np.ndarray, commanded: np.ndarray, shots_before: np.ndarray, *, params: PhysicsParams,
-               noise: NoiseModel, rng, on_miss: str, max_shots: int) -> Shots:
+               noise: NoiseModel, rng, on_miss: str, max_shots: int, levels: np.ndarray | None = None) -> Shots:
     """One step of B innings, the step of both envs: the commanded raw shots (B, 4) perturbed
     by the execution noise (its draws from ``rng``, a Generator, or a sequence of B of them,
     one per inning, each perturbing its own shot as a batch of one; an exact model draws
-    nothing and plays them bit for bit), simulated from the tables ``positions`` (B, 4, 2) in
-    one ``simulate_batch`` call, and each inning's end (:func:`terminated_truncated`) after it."""
+    nothing and plays them bit for bit; ``levels`` (B,): each shot's noise level under
+    variable noise, :meth:`~billiards.physics.noise.NoiseModel.perturb`), simulated from the
+    tables ``positions`` (B, 4, 2) in one ``simulate_batch`` call, and each inning's end
+    (:func:`terminated_truncated`) after it."""
     if noise.is_exact or isinstance(rng, np.random.Generator):
-        played = noise.perturb(commanded, rng, params)
+        played = noise.perturb(commanded, rng, params, levels=levels)
     else:
-        played = np.concatenate([noise.perturb(shot[None], r, params) for shot, r in zip(commanded, rng, strict=True)])
+        each = [None] * len(commanded) if levels is None else np.asarray(levels)[:, None]
+        played = np.concatenate([noise.perturb(shot[None], r, params, levels=lv)
+                                 for shot, r, lv in zip(commanded, rng, each, strict=True)])
     result = simulate_batch(positions, played, params)
     shot = np.asarray(shots_before) + 1
     terminated, truncated = terminated_truncated(result.score, shot, on_miss, max_shots)

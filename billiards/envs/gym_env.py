@@ -32,9 +32,11 @@ from ._common import (
     check_flag,
     check_inning_options,
     initial_racks,
+    next_levels,
     play_shots,
     unnormalize_checked,
     validate_action,
+    with_levels,
 )
 
 
@@ -58,7 +60,9 @@ class Billiards4BallInningEnv(gym.Env):
     Observation (float32): the 28 floats of :func:`billiards.domain.rest_observation`
     (4 balls x (x, y, vx, vy, wx, wy, wz) in ball order white, yellow, red1, red2; the velocity
     and spin slots are 0 at rest), then with ``extra_features`` the 4 carom features
-    (d1, d2, sin phi, cos phi) of :func:`billiards.domain.carom_features` (32 floats).
+    (d1, d2, sin phi, cos phi) of :func:`billiards.domain.carom_features` (32 floats), then
+    under variable noise (``noise="variable"``) the next shot's noise level, last (29 or 33
+    floats).
 
     Action (float32, 4): by default (``normalize_actions=True``) the normalised x in [-1, 1]^4,
     played as theta = pi (x0 + 1), p = (x1 + 1) / 2, a = x2, b = x3
@@ -99,6 +103,10 @@ class Billiards4BallInningEnv(gym.Env):
     ``"fastfiz_x5"``), a :class:`~billiards.physics.noise.NoiseModel` or a dict of sigmas
     (:func:`billiards.physics.noise.get_noise`); the played shot is the commanded one perturbed
     by it, drawn from the env's ``np_random`` (``reset(seed=s)`` replays the same noisy inning).
+    Under variable noise (``"variable"``: fastfiz's sigmas times a level drawn per shot from
+    [0, 5]) the level of the next shot is drawn from ``np_random`` as its observation is made
+    (on reset, after the rack, and after each step) and told as the observation's last entry
+    (also :attr:`noise_level`); the shot is played at that level.
     """
 
     # "human" is listed only where its optional renderer (pygame, the [render] extra) is installed,
@@ -142,16 +150,30 @@ class Billiards4BallInningEnv(gym.Env):
         low, high = domain.action_bounds(self.constrain_aim, self.normalize_actions)
         self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
         low, high = domain.observation_bounds(params, self.extra_features)
+        if self.noise.is_variable:  # the next shot's noise level, last
+            low, high = (np.append(b, np.float32(v)) for b, v in zip((low, high), self.noise.level_range))
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
 
         self._positions = initial_racks(np.random.default_rng(0), "canonical", 1, params)[0]
+        self._levels = np.zeros(1) if self.noise.is_variable else None  # variable noise: the next shot's level
         self._shot = 0
         self._finished = False  # the inning ended (terminated or truncated): step needs a reset first
 
     # ------------------------------------------------------------------ helpers
 
+    def observe(self, positions: np.ndarray, levels: np.ndarray | None) -> np.ndarray:
+        """Observations (N, obs dim) float32 of tables (N, 4, 2) whose next shots play at noise
+        ``levels`` (N,) (variable noise; None otherwise)."""
+        return with_levels(domain.observation(positions, self.extra_features), levels)
+
     def _obs(self) -> np.ndarray:
-        return domain.observation(self._positions[None], self.extra_features)[0]
+        return self.observe(self._positions[None], self._levels)[0]
+
+    @property
+    def noise_level(self) -> float | None:
+        """Under variable noise the level of the next shot (its multiplier of the noise's sigmas,
+        the observation's last entry); None otherwise."""
+        return None if self._levels is None else float(self._levels[0])
 
     @property
     def spec(self):
@@ -189,6 +211,7 @@ class Billiards4BallInningEnv(gym.Env):
             self._positions = pos.copy()
         else:
             self._positions = initial_racks(self.np_random, self.start, 1, self.params)[0]
+        self._levels = next_levels(self.noise, self.np_random, 1)
         self._shot, self._last_shot, self._finished = 0, None, False
         if self.render_mode == "human":
             self.render()
@@ -237,7 +260,9 @@ class Billiards4BallInningEnv(gym.Env):
             raise gym.error.ResetNeeded("the inning has ended (terminated or truncated): call reset() before step()")
         commanded = self._raw_action(action)
         shots = play_shots(self._positions[None], commanded, np.array([self._shot]), params=self.params,
-                           noise=self.noise, rng=self.np_random, on_miss=self.on_miss, max_shots=self.max_shots)
+                           noise=self.noise, rng=self.np_random, on_miss=self.on_miss, max_shots=self.max_shots,
+                           levels=self._levels)
+        self._levels = next_levels(self.noise, self.np_random, 1)
         self._last_shot = (self._positions, shots.played[0])
         self._positions = shots.result.positions[0]
         self._shot = int(shots.shot[0])

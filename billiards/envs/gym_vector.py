@@ -29,7 +29,7 @@ from billiards import domain
 from billiards.physics import check_positions
 from billiards.physics.api import random_racks_each
 
-from ._common import initial_racks, play_shots, unnormalize_checked, validate_action
+from ._common import initial_racks, next_levels, play_shots, unnormalize_checked, validate_action
 from .gym_env import INFO_KEYS, RESET_OPTIONS, Billiards4BallInningEnv
 
 
@@ -56,7 +56,8 @@ class Billiards4BallVectorEnv(VectorEnv):
         self._positions = np.broadcast_to(one.positions, (B, 4, 2)).copy()
         self._shot = np.zeros(B, dtype=np.int64)
         self._autoreset = np.zeros(B, dtype=bool)
-        self._obs = domain.observation(self._positions, one.extra_features)
+        self._levels = np.zeros(B) if one.noise.is_variable else None  # variable noise: each inning's next level
+        self._obs = one.observe(self._positions, self._levels)
 
     def _rng(self, i: int) -> np.random.Generator:
         if self._rngs[i] is None:  # gymnasium's Env.np_random: seeded from entropy on first use
@@ -71,8 +72,18 @@ class Billiards4BallVectorEnv(VectorEnv):
             self._positions[rows] = random_racks_each([self._rng(i) for i in rows], self.one.params)
         else:
             self._positions[rows] = initial_racks(None, "canonical", rows.size, self.one.params)
+        self._next_levels(rows)
         self._shot[rows] = 0
-        self._obs[rows] = domain.observation(self._positions[rows], self.one.extra_features)
+        self._obs[rows] = self.one.observe(self._positions[rows], self._level_rows(rows))
+
+    def _next_levels(self, rows: np.ndarray) -> None:
+        """Under variable noise the next shot's level of the innings in ``rows``, each from its own
+        generator (as each single env draws it)."""
+        if self._levels is not None:
+            self._levels[rows] = next_levels(self.one.noise, [self._rng(i) for i in rows], rows.size)
+
+    def _level_rows(self, rows: np.ndarray) -> np.ndarray | None:
+        return None if self._levels is None else self._levels[rows]
 
     def reset(self, *, seed: int | list | None = None, options: dict | None = None):
         B = self.num_envs
@@ -116,10 +127,11 @@ class Billiards4BallVectorEnv(VectorEnv):
             commanded = domain.raw_action(act, self._positions[rows], one.params.ball_radius, one.constrain_aim)
             rng = None if one.noise.is_exact else [self._rng(i) for i in rows]  # each inning's own noise
             shots = play_shots(self._positions[rows], commanded, self._shot[rows], params=one.params, noise=one.noise,
-                               rng=rng, on_miss=one.on_miss, max_shots=one.max_shots)
+                               rng=rng, on_miss=one.on_miss, max_shots=one.max_shots, levels=self._level_rows(rows))
+            self._next_levels(rows)
             self._positions[rows] = shots.result.positions
             self._shot[rows] = shots.shot
-            self._obs[rows] = domain.observation(shots.result.positions, one.extra_features)
+            self._obs[rows] = one.observe(shots.result.positions, self._level_rows(rows))
             rewards[rows] = one.shaping.reward(shots)
             terminated[rows], truncated[rows] = shots.terminated, shots.truncated
         started = np.flatnonzero(resetting)

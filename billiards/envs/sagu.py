@@ -18,7 +18,10 @@ terminates); after ``max_innings`` innings it is truncated (a draw unless the sc
 **Observation** of each player, from their own point of view (own cue ball first): the
 single-player observation of that view (:func:`billiards.domain.observation`: 28 floats, 32 with
 ``extra_features``), then own score / target, the opponent's score / target, and the execution
-noise's level (its aim sigma over fastfiz's: 0 exact, 1 fastfiz, 5 fastfiz_x5).
+noise's level (its aim sigma over fastfiz's: 0 exact, 1 fastfiz, 5 fastfiz_x5). Under variable
+noise (``noise="variable"``) it is the level of the next shot (fastfiz's sigmas times a level
+drawn per shot from [0, 5]), drawn from the match's generator as the table is set (on reset and
+after each shot) and played by that shot.
 
 **Action**: the normalised x in [-1, 1]^4 of the gymnasium env (theta, power, tip a, b; with
 ``constrain_aim`` the first coordinate is u, the aim relative to the shooter's nearest red).
@@ -53,7 +56,8 @@ def shooter_view(positions: np.ndarray, shooter: int) -> np.ndarray:
 
 
 def noise_level(noise) -> float:
-    """The execution noise's aim sigma in units of fastfiz's (0 for exact play)."""
+    """The execution noise's aim sigma in units of fastfiz's (0 for exact play); of variable
+    noise, that of its level 1 (a shot's level is this times the shot's multiplier)."""
     base = NOISE_PRESETS["fastfiz"].sigma_aim_deg
     return float(noise.sigma_aim_deg / base) if base else 0.0
 
@@ -81,16 +85,30 @@ class SaguEnv:
         self.observation_space = gymnasium.spaces.Box(
             np.concatenate([low, np.zeros(EXTRA_OBS, np.float32)]),
             np.concatenate([high, np.array([1.0, 1.0, MAX_NOISE_LEVEL], np.float32)]), dtype=np.float32)
-        self.level = noise_level(self.noise)
-        if self.level > MAX_NOISE_LEVEL:
-            raise ValueError(f"noise: at most {MAX_NOISE_LEVEL:g} times fastfiz's aim sigma, got {self.level:g}")
+        self.base_level = noise_level(self.noise)
+        top = self.base_level * (self.noise.level_range[1] if self.noise.is_variable else 1.0)
+        if top > MAX_NOISE_LEVEL:
+            raise ValueError(f"noise: at most {MAX_NOISE_LEVEL:g} times fastfiz's aim sigma, got {top:g}")
+        # variable noise: the next shot's multiplier of the noise's sigmas (None for fixed noise)
+        self.shot_level = 0.0 if self.noise.is_variable else None
         self.positions = initial_racks(np.random.default_rng(0), "canonical", 1, self.params)[0]
         self.scores = [0.0, 0.0]
         self.mover, self.innings, self.shots = 0, 1, 0
         self.last_shot = None
 
+    @property
+    def level(self) -> float:
+        """The noise level the observations tell (fastfiz's aim sigma = 1): of the next shot under
+        variable noise."""
+        return self.base_level * (1.0 if self.shot_level is None else self.shot_level)
+
+    def _draw_level(self, rng: np.random.Generator) -> None:
+        if self.noise.is_variable:
+            self.shot_level = float(self.noise.draw_levels((1,), rng)[0])
+
     def reset(self, rng: np.random.Generator, first: int = 0) -> None:
         self.positions = initial_racks(rng, self.start, 1, self.params)[0]
+        self._draw_level(rng)
         self.scores, self.mover, self.innings, self.shots, self.last_shot = [0.0, 0.0], int(first), 1, 0, None
 
     def observe(self, player: int) -> np.ndarray:
@@ -107,7 +125,9 @@ class SaguEnv:
         act = unnormalize_checked(validate_action(action, (domain.ACTION_DIM,))[None], self.constrain_aim)
         commanded = domain.raw_action(act, view[None], self.params.ball_radius, self.constrain_aim)
         shots = play_shots(view[None], commanded, np.array([0]), params=self.params, noise=self.noise, rng=rng,
-                           on_miss="continue", max_shots=2)
+                           on_miss="continue", max_shots=2,
+                           levels=None if self.shot_level is None else np.array([self.shot_level]))
+        self._draw_level(rng)
         res = shots.result
         score, foul = bool(res.score[0]), bool(res.foul[0])
         before = self.scores[player]

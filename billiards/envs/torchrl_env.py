@@ -27,6 +27,9 @@ second_red         (1,) i64     the red (2, 3) the white touched second, -1 unle
 hits               (3,) bool    the white touched (yellow, red1, red2)
 closest            (2,) f32     the white's closest surface gap to red1, red2 (m), 0 if hit
 n_events           (1,) i64     physical events of the shot
+played_action      (4,) f64     under execution noise: the shot the simulator played
+noise_level        (1,) f32     under variable noise: the next shot's level (its multiplier of
+                                the noise's sigmas), drawn as the observation is made; state
 =================  ===========  ===========================================================
 
 After a reset the per-shot entries are "no shot yet": False, first_contact -1, zeros.
@@ -56,7 +59,7 @@ from billiards.domain import ACTION_DIM, OBS_DIM, action_bounds, observation
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, check_positions, get_params
 from billiards.physics.noise import NoiseModel, get_noise
 
-from ._common import check_inning_options, initial_racks, play_shots, validate_action
+from ._common import check_inning_options, initial_racks, next_levels, play_shots, validate_action
 
 BITS_KEY = "positions_bits"
 INFO_KEYS = ("score", "foul", "miss", "first_contact", "second_red", "hits", "closest", "n_events")
@@ -132,6 +135,10 @@ class BilliardsEnv(EnvBase):
             NoiseModel or a dict of sigmas perturb it). With noise the output also holds
             ``"played_action"`` (4,) float64, the shot the simulator played; its random draws
             come from a generator of their own, seeded with the rack seed (racks are unchanged).
+            Under variable noise (``"variable"``) each inning's next shot plays at its own level,
+            drawn from that generator on reset and after each step and carried as
+            ``"noise_level"`` (B, 1) float32: a step plays the level its input holds (the
+            env is stateless; a level of 0 plays the commanded shot exactly).
 
     Reset to a given table (``set_state=True`` is TorchRL's explicit form; without it
     TorchRL 0.14 still honours the state with a FutureWarning)::
@@ -198,6 +205,10 @@ class BilliardsEnv(EnvBase):
         if not self.noise.is_exact:
             self.observation_spec["played_action"] = Unbounded(shape=(*B, ACTION_DIM), dtype=torch.float64)
         self.state_spec = Composite(positions=positions.clone(), positions_bits=bits.clone(), shot=shot.clone(), shape=B)
+        if self.noise.is_variable:  # the next shot's noise level: an output, and the input of the step that plays it
+            low, high = self.noise.level_range
+            level = Bounded(low, high, shape=(*B, 1), dtype=torch.float32)
+            self.observation_spec["noise_level"], self.state_spec["noise_level"] = level, level.clone()
         low, high = action_bounds()
         self.action_spec = Bounded(
             torch.as_tensor(low, dtype=torch.float32).expand(*B, ACTION_DIM),
@@ -236,10 +247,13 @@ class BilliardsEnv(EnvBase):
             bad = np.flatnonzero(ended)[:8].tolist()
             raise ValueError(f'"shot" must lie in [0, max_shots - 1 = {self.max_shots - 1}] (an inning that has not '
                              f'ended); innings {bad} have {shot[bad].tolist()}: call env.reset() (or reset those innings)')
+        levels = self._input_levels(tensordict)
         shots = play_shots(positions, action, shot, params=self.params, noise=self.noise,
-                           rng=self.noise_rng, on_miss=self.on_miss, max_shots=self.max_shots)
+                           rng=self.noise_rng, on_miss=self.on_miss, max_shots=self.max_shots, levels=levels)
         result = shots.result
         noisy = {} if self.noise.is_exact else {"played_action": shots.played}
+        if levels is not None:
+            noisy["noise_level"] = next_levels(self.noise, self.noise_rng, B).astype(np.float32)
         return self._output(
             positions=result.positions,
             shot=shots.shot,
@@ -256,6 +270,19 @@ class BilliardsEnv(EnvBase):
             n_events=result.n_events,
             **noisy,
         )
+
+    def _input_levels(self, tensordict: TensorDictBase) -> np.ndarray | None:
+        """Under variable noise the levels (B,) float64 the input's shots play at (``"noise_level"``)."""
+        if not self.noise.is_variable:
+            return None
+        levels = tensordict.get("noise_level", None)
+        if levels is None:
+            raise KeyError('BilliardsEnv.step under variable noise needs "noise_level" in the input (the level '
+                           'env.reset() or the last step drew for each inning)')
+        levels = levels.detach().cpu().to(torch.float64).numpy().reshape(self.batch_size[0])
+        if not (np.isfinite(levels).all() and (levels >= 0).all()):
+            raise ValueError(f'"noise_level" must hold finite levels >= 0 (multipliers of the noise\'s sigmas), got {levels}')
+        return levels
 
     def _output(self, *, positions, shot, reward=None, terminated, truncated, **info) -> TensorDictBase:
         B = self.batch_size[0]
@@ -295,6 +322,11 @@ class BilliardsEnv(EnvBase):
             positions[mask] = initial_racks(self.rng, self.start, int(mask.sum()), self.params)
 
         no = np.zeros(B, dtype=bool)
+        noisy = {} if self.noise.is_exact else {"played_action": np.zeros((B, ACTION_DIM))}
+        if self.noise.is_variable:  # rows outside the mask: a placeholder, as for the table
+            levels = np.zeros(B, dtype=np.float32)
+            levels[mask] = next_levels(self.noise, self.noise_rng, int(mask.sum()))
+            noisy["noise_level"] = levels
         return self._output(
             positions=positions,
             shot=np.zeros(B, dtype=np.int64),
@@ -308,7 +340,7 @@ class BilliardsEnv(EnvBase):
             hits=np.zeros((B, 3), dtype=bool),
             closest=np.zeros((B, 2), dtype=np.float32),
             n_events=np.zeros(B, dtype=np.int64),
-            **({} if self.noise.is_exact else {"played_action": np.zeros((B, ACTION_DIM))}),
+            **noisy,
         )
 
 

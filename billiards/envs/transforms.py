@@ -10,6 +10,8 @@ this module only moves tensors in and out of tensordicts and specs.
   :func:`billiards.domain.unnormalize_action` (opt-in; the training env keeps the raw box).
 * :class:`CaromFeatures` -- appends (d1, d2, sin phi, cos phi) to ``"observation"``
   (:func:`billiards.domain.carom_features`), 28 -> 32 floats.
+* :class:`NoiseLevelFeature` -- under variable noise, appends the next shot's noise level
+  ``"noise_level"`` to ``"observation"``, last (as the gymnasium env does).
 * :class:`FoulPenalty` -- reward += ``-c * foul``.
 * :class:`GentleShotBonus` -- on a score, reward += ``beta * exp(-(d - 0.2)^2 / (2 0.1^2))``,
   d the white's rest distance to the second red it hit (the paper's leave-position bonus), or
@@ -166,6 +168,28 @@ class CaromFeatures(Transform):
         return observation_spec
 
 
+class NoiseLevelFeature(Transform):
+    """Appends the next shot's noise level (``"noise_level"``, which :class:`BilliardsEnv` carries
+    under variable noise) to ``"observation"``, last: 28 -> 29 floats (32 -> 33 after
+    :class:`CaromFeatures`), the layout of the gymnasium env's observation, on reset and on
+    every step. :func:`make_env` adds it whenever the noise is variable."""
+
+    def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
+        obs = next_tensordict.get("observation")
+        level = next_tensordict.get("noise_level").to(obs.dtype)
+        next_tensordict.set("observation", torch.cat([obs, level], dim=-1))
+        return next_tensordict
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        return self._call(tensordict_reset)
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        spec = observation_spec["observation"]
+        shape = (*spec.shape[:-1], spec.shape[-1] + 1)
+        observation_spec["observation"] = Unbounded(shape=shape, dtype=spec.dtype, device=spec.device)
+        return observation_spec
+
+
 class _RewardTerm(Transform):
     """Adds ``term(tensordict_t, tensordict_t+1)`` to ``"reward"`` after each step."""
 
@@ -283,7 +307,9 @@ def make_env(batch_size: int = 1, options: EnvOptions | None = None, *, seed: in
         rm: beta of :class:`RewardModelBonus` (reward += beta * V_rm(s, a)); 0 disables it.
         rm_model: the reward model (a :class:`billiards.rm.RewardModel` or a path), needed if rm.
         seed: seed of the rack generator (``env.set_seed`` re-seeds it).
-        noise: execution noise of the played shots (:class:`BilliardsEnv`; default none).
+        noise: execution noise of the played shots (:class:`BilliardsEnv`; default none);
+            under variable noise (``"variable"``) the next shot's level is the observation's
+            last entry (:class:`NoiseLevelFeature`).
         params: the physics: a preset name (``"korean_medium"``, the default, or
             ``"international"``), a :class:`~billiards.physics.PhysicsParams`, or a dict of fields
             (:func:`billiards.physics.get_params`).
@@ -321,6 +347,8 @@ def _build(batch_size: int, o: EnvOptions, seed: int | None) -> TransformedEnv:
         transforms.append(NormalizedActions(constrain_aim))
     if extra_features:
         transforms.append(CaromFeatures())
+    if base.noise.is_variable:
+        transforms.append(NoiseLevelFeature())
     if shaping.foul_penalty:
         transforms.append(FoulPenalty(shaping.foul_penalty))
     if shaping.gentle:
@@ -334,5 +362,5 @@ def _build(batch_size: int, o: EnvOptions, seed: int | None) -> TransformedEnv:
     return TransformedEnv(base, Compose(*transforms))
 
 
-__all__ = ["AimConstraint", "CaromFeatures", "NormalizedActions",
+__all__ = ["AimConstraint", "CaromFeatures", "NoiseLevelFeature", "NormalizedActions",
            "FoulPenalty", "GentleShotBonus", "NearMissBonus", "RewardModelBonus", "make_env"]

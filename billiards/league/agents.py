@@ -88,7 +88,7 @@ class RandomAgent:
     def reseed(self, seed: int) -> None:
         self.rng = np.random.default_rng(seed)
 
-    def act(self, view: np.ndarray) -> np.ndarray:
+    def act(self, view: np.ndarray, level: float | None = None) -> np.ndarray:
         return self.rng.uniform(-1.0, 1.0, 4).astype(np.float32)
 
 
@@ -101,8 +101,8 @@ class SearchAgent:
     def reseed(self, seed: int) -> None:
         self.actor.reseed(seed)
 
-    def act(self, view: np.ndarray) -> np.ndarray:
-        result = self.actor.search(view[None])
+    def act(self, view: np.ndarray, level: float | None = None) -> np.ndarray:
+        result = self.actor.search(view[None], None if level is None else np.array([level]))  # variable noise: the shot's level
         return to_env_action(result.actions[0])
 
 
@@ -120,7 +120,7 @@ class PolicyAgent:
     def reseed(self, seed: int) -> None:
         pass  # deterministic
 
-    def act(self, view: np.ndarray) -> np.ndarray:
+    def act(self, view: np.ndarray, level: float | None = None) -> np.ndarray:
         import torch
         from tensordict import TensorDict
         from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -132,12 +132,12 @@ class PolicyAgent:
         return to_env_action(raw[0])
 
 
-def _score_rates(tables: np.ndarray, actions: np.ndarray, replays: int, noise: NoiseModel, rng, params) -> tuple:
+def _score_rates(tables: np.ndarray, actions: np.ndarray, replays: int, noise: NoiseModel, rng, params, level=None) -> tuple:
     """Each (table, action) replayed ``replays`` times under ``noise``: (score rate, foul rate,
     the result of every replay), tables (N, 4, 2) and actions (N, 4)."""
     n = len(tables)
     t, a = np.repeat(tables, replays, axis=0), np.repeat(actions, replays, axis=0)
-    played = noise.perturb(a, rng, params)
+    played = noise.perturb(a, rng, params, levels=level)  # variable noise without a level: each replay draws one
     res = simulate_batch(t, played, params)
     score, foul = res.score.reshape(n, replays), res.foul.reshape(n, replays)
     return score.mean(axis=1), foul.mean(axis=1), res
@@ -165,23 +165,23 @@ class SafetyAgent:
         rate, _, _ = _score_rates(tables, cands.reshape(-1, 4), self.cfg.opp_replays, self.noise, self.rng, self.params)
         return rate.reshape(len(leaves), self.cfg.opp_k).max(axis=1)
 
-    def values(self, view: np.ndarray, best: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def values(self, view: np.ndarray, best: np.ndarray | None = None, level: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The candidates (C, 4) (the search's shot, or ``best``, first) and their values."""
-        best = self.actor.search(view[None]).actions[0] if best is None else best
+        best = self.actor.search(view[None], None if level is None else np.array([level])).actions[0] if best is None else best
         cands = np.concatenate([best[None], self.proposer.propose(view[None], self.cfg.k, self.rng)[0]])
         c, r = len(cands), self.cfg.replays
-        score, foul, res = _score_rates(np.repeat(view[None], c, axis=0), cands, r, self.noise, self.rng, self.params)
+        score, foul, res = _score_rates(np.repeat(view[None], c, axis=0), cands, r, self.noise, self.rng, self.params, level)
         missed = ~res.score
         q = np.zeros(c * r)
         q[missed] = self.opponent_chance(res.positions[missed])
         leave_cost = (q * missed).reshape(c, r).sum(axis=1) / r  # over all replays: (1 - p) x mean q of the misses
         return cands, score - self.cfg.foul_penalty * foul - self.cfg.leave_weight * leave_cost
 
-    def act(self, view: np.ndarray) -> np.ndarray:
-        result = self.actor.search(view[None])
+    def act(self, view: np.ndarray, level: float | None = None) -> np.ndarray:
+        result = self.actor.search(view[None], None if level is None else np.array([level]))
         if self.cfg.threshold is not None and result.r1[0] >= self.cfg.threshold:
             return to_env_action(result.actions[0])
-        cands, value = self.values(view, result.actions[0])
+        cands, value = self.values(view, result.actions[0], level)
         return to_env_action(cands[int(np.argmax(value))])
 
 

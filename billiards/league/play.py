@@ -50,7 +50,8 @@ def play_match(white, yellow, *, seed: int, first: str = "white", frames: list |
             continue
         view = shooter_view(env.game.positions, AGENTS.index(agent))
         t0 = time.process_time()
-        action = players[agent].act(view)
+        level = env.game.shot_level  # variable noise: the level this shot plays at, told to the player
+        action = players[agent].act(view) if level is None else players[agent].act(view, level)
         cpu[agent] += time.process_time() - t0
         turns[agent] += 1
         env.step(action)

@@ -13,52 +13,106 @@ deterministic: noise only changes which shot it is asked to play.
   and is projected back onto the disk of radius ``max_english * R`` (no miscue model).
 
 Presets (:data:`NOISE_PRESETS`): ``none`` (the default: no draw is made and actions pass
-through unchanged, bit for bit), ``fastfiz`` (0.125 deg, 0.075 m/s, 0.5 mm) and ``fastfiz_x5``
-(five times each). Pure NumPy; the random numbers come from the caller's generator.
+through unchanged, bit for bit), ``fastfiz`` (0.125 deg, 0.075 m/s, 0.5 mm), ``fastfiz_x5``
+(five times each) and ``variable`` (the tournaments' variable noise: each shot plays fastfiz's
+sigmas times its own *level*, drawn uniformly from [0, 5] and told to the player before it
+shoots). Pure NumPy; the random numbers come from the caller's generator.
+
+Variable noise is a model with a ``level_range``: the env draws each shot's level
+(:meth:`NoiseModel.draw_levels`, from its own noise generator, when it produces the observation
+for that shot) and plays ``apply(actions, level * z)`` (:meth:`NoiseModel.perturb` with
+``levels``): level 0 plays the commanded shot exactly, level 1 the model's sigmas.
 
 The apps' ``noise`` config node (:class:`NoiseConfig`, ``conf/noise/<preset>.yaml``) is a preset
-plus optional per-sigma overrides (``noise.aim_deg=0.3``), turned into a model by
-:func:`noise_from_config` and recorded in result files by :func:`noise_record`.
+plus optional per-sigma overrides (``noise.aim_deg=0.3``), a multiplier of all sigmas
+(``noise.scale=2``; 1 leaves the preset as it is, bit for bit) and, for variable noise, the
+levels' range (``noise.level_range=[0,5]``), turned into a model by :func:`noise_from_config`
+and recorded in result files by :func:`noise_record`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Optional
+from typing import Any, List, Optional
 
 import numpy as np
 
 from .params import DEFAULT_PARAMS, PhysicsParams
 
 
+SIGMA_FIELDS = ("sigma_aim_deg", "sigma_speed", "sigma_tip_mm")
+
+
+def _is_level(value) -> bool:
+    """A finite real number >= 0 (a standard deviation, a multiplier of one)."""
+    return isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= 0
+
+
 @dataclasses.dataclass(frozen=True)
 class NoiseModel:
-    """Standard deviations of the execution errors, in physical units (0 = exact)."""
+    """Standard deviations of the execution errors, in physical units (0 = exact). With a
+    ``level_range`` (low, high) the noise is *variable*: each shot plays these sigmas times its
+    own level, drawn uniformly from [low, high] (:meth:`draw_levels`) and told to the player."""
 
     sigma_aim_deg: float = 0.0  # aim angle (degrees)
     sigma_speed: float = 0.0  # cue speed (m/s)
     sigma_tip_mm: float = 0.0  # each tip offset coordinate (mm)
+    level_range: Optional[tuple[float, float]] = None  # variable noise: the per-shot level's range (None: fixed)
+    # (preset, scale) a config's noise.scale made these sigmas of (noise_from_config): labels the
+    # model (describe) and is recorded (noise_record); neither compared nor applied again
+    origin: Optional[tuple[str, float]] = dataclasses.field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"NoiseModel.{f.name} must be a finite number >= 0, got {value!r}")
+        for name in SIGMA_FIELDS:
+            value = getattr(self, name)
+            if not _is_level(value):
+                raise ValueError(f"NoiseModel.{name} must be a finite number >= 0, got {value!r}")
+        if self.level_range is not None:
+            levels = tuple(self.level_range) if isinstance(self.level_range, (tuple, list)) else ()
+            if not (len(levels) == 2 and all(map(_is_level, levels)) and levels[0] <= levels[1]):
+                raise ValueError(f"NoiseModel.level_range must be (low, high), finite numbers with 0 <= low <= high, "
+                                 f"got {self.level_range!r}")
+            object.__setattr__(self, "level_range", (float(levels[0]), float(levels[1])))
+
+    @property
+    def is_variable(self) -> bool:
+        """Whether each shot draws its own level (:attr:`level_range`)."""
+        return self.level_range is not None
 
     @property
     def is_exact(self) -> bool:
-        return self.sigma_aim_deg == 0 and self.sigma_speed == 0 and self.sigma_tip_mm == 0
+        """Whether every shot is played as commanded (no sigma, or every level 0)."""
+        no_sigma = self.sigma_aim_deg == 0 and self.sigma_speed == 0 and self.sigma_tip_mm == 0
+        return no_sigma or (self.is_variable and self.level_range[1] == 0)
 
     def scaled(self, factor: float) -> "NoiseModel":
-        return NoiseModel(*(factor * getattr(self, f.name) for f in dataclasses.fields(self)))
+        """Every sigma times ``factor`` (a variable model keeps its levels' range)."""
+        return NoiseModel(*(factor * getattr(self, name) for name in SIGMA_FIELDS), level_range=self.level_range)
 
     def describe(self) -> str:
-        """The preset's name when the sigmas are a preset's, else the sigmas themselves."""
+        """The preset's name when the model is a preset's (``fastfiz*2`` for a preset scaled by
+        ``noise.scale=2``), else the sigmas themselves (and the levels' range)."""
+        if self.origin is not None:
+            name, scale = self.origin
+            base = NOISE_PRESETS.get(name)
+            if base is not None and not base.is_exact and scale != 1 and base.scaled(scale) == self:
+                return f"{name}*{scale:g}"
         for name, model in NOISE_PRESETS.items():
             if model == self:
                 return name
-        return f"custom(aim_deg={self.sigma_aim_deg:g}, speed={self.sigma_speed:g}, tip_mm={self.sigma_tip_mm:g})"
+        levels = f", levels={self.level_range[0]:g}-{self.level_range[1]:g}" if self.is_variable else ""
+        return (f"custom(aim_deg={self.sigma_aim_deg:g}, speed={self.sigma_speed:g}, "
+                f"tip_mm={self.sigma_tip_mm:g}{levels})")
+
+    def draw_levels(self, shape, rng: np.random.Generator) -> np.ndarray:
+        """Levels of the next shots (``shape``, float64) of a variable model: uniform on
+        :attr:`level_range`, from ``rng``, each rounded to float32 (so that the level a float32
+        observation tells is the level played) within the range."""
+        if not self.is_variable:
+            raise ValueError(f"noise {self.describe()} has no per-shot levels (it is not variable)")
+        low, high = self.level_range
+        return np.clip(rng.uniform(low, high, shape).astype(np.float32).astype(np.float64), low, high)
 
     def draw(self, shape, rng: np.random.Generator) -> np.ndarray:
         """Standard normal errors ``z`` (``shape`` + (4,): aim, speed, tip a, tip b) for
@@ -92,19 +146,38 @@ class NoiseModel:
         played[..., 2:4] = ab
         return played
 
-    def perturb(self, actions, rng: np.random.Generator, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
+    def perturb(self, actions, rng: np.random.Generator, params: PhysicsParams = DEFAULT_PARAMS,
+                levels=None) -> np.ndarray:
         """The played actions for commanded ``actions`` (..., 4): a new float64 array. With an
-        exact model the actions come back unchanged and ``rng`` is not touched."""
+        exact model the actions come back unchanged and ``rng`` is not touched.
+
+        ``levels`` (broadcast to ...), optional: each shot's multiplier of the sigmas (variable
+        noise: the level the env drew and told); the errors are ``level * z``, and a shot at
+        level 0 is played exactly as commanded. A variable model given no levels draws each
+        shot's level after its errors (:meth:`draw_levels`: a shot whose level nobody was told)."""
         actions = np.array(actions, dtype=np.float64)
         if self.is_exact:
             return actions
-        return self.apply(actions, self.draw(actions.shape[:-1], rng), params)
+        z = self.draw(actions.shape[:-1], rng)
+        if levels is None and self.is_variable:
+            levels = self.draw_levels(actions.shape[:-1], rng)
+        if levels is None:
+            return self.apply(actions, z, params)
+        levels = np.broadcast_to(np.asarray(levels, dtype=np.float64), actions.shape[:-1])
+        if not (np.isfinite(levels).all() and (levels >= 0).all()):
+            raise ValueError(f"noise levels must be finite multipliers >= 0, got {levels!r}")
+        played = self.apply(actions, z * levels[..., None], params)
+        exact = levels == 0
+        played[exact] = actions[exact]  # level 0: the commanded shot, bit for bit
+        return played
 
 
 NOISE_PRESETS: dict[str, NoiseModel] = {
     "none": NoiseModel(),
     "fastfiz": NoiseModel(sigma_aim_deg=0.125, sigma_speed=0.075, sigma_tip_mm=0.5),
     "fastfiz_x5": NoiseModel(sigma_aim_deg=0.625, sigma_speed=0.375, sigma_tip_mm=2.5),
+    # the tournaments' variable noise: fastfiz's sigmas times a level drawn per shot from [0, 5]
+    "variable": NoiseModel(sigma_aim_deg=0.125, sigma_speed=0.075, sigma_tip_mm=0.5, level_range=(0.0, 5.0)),
 }
 
 
@@ -119,7 +192,7 @@ def get_noise(noise=None) -> NoiseModel:
             raise ValueError(f"unknown noise preset {noise!r}; presets: {sorted(NOISE_PRESETS)}")
         return NOISE_PRESETS[noise]
     if isinstance(noise, dict):
-        known = {f.name for f in dataclasses.fields(NoiseModel)}
+        known = {*SIGMA_FIELDS, "level_range"}
         unknown = sorted(set(noise) - known)
         if unknown:
             raise ValueError(f"unknown noise field(s) {unknown}; known: {sorted(known)}")
@@ -135,14 +208,19 @@ CONFIG_FIELDS = {"aim_deg": "sigma_aim_deg", "speed": "sigma_speed", "tip_mm": "
 
 @dataclasses.dataclass
 class NoiseConfig:
-    """The ``noise`` node of ``train.py`` and ``search.py``: a preset (``noise=fastfiz``) and
-    optional overrides of its sigmas (null: the preset's value): ``noise.aim_deg`` (degrees),
-    ``noise.speed`` (m/s), ``noise.tip_mm`` (mm)."""
+    """The ``noise`` node of ``train.py``, ``search.py`` and ``match.py``: a preset
+    (``noise=fastfiz``) and optional overrides of its sigmas (null: the preset's value):
+    ``noise.aim_deg`` (degrees), ``noise.speed`` (m/s), ``noise.tip_mm`` (mm); ``noise.scale``
+    multiplies every sigma (after the overrides; 1, the default, leaves them as they are);
+    ``noise.level_range`` ([low, high]; null: the preset's) makes the noise variable, each shot
+    at its own level drawn from that range."""
 
     preset: str = "none"
     aim_deg: Optional[float] = None
     speed: Optional[float] = None
     tip_mm: Optional[float] = None
+    scale: float = 1.0
+    level_range: Optional[List[float]] = None
 
 
 def noise_from_config(node: Any | None) -> NoiseModel:
@@ -150,9 +228,16 @@ def noise_from_config(node: Any | None) -> NoiseModel:
     node existed: exact play)."""
     if node is None:
         return NOISE_PRESETS["none"]
-    base = get_noise(str(node["preset"]))
+    preset = str(node["preset"])
+    base = get_noise(preset)
     overrides = {field: node[key] for key, field in CONFIG_FIELDS.items() if node.get(key) is not None}
-    return dataclasses.replace(base, **overrides) if overrides else base
+    if node.get("level_range") is not None:
+        overrides["level_range"] = tuple(node["level_range"])
+    model = dataclasses.replace(base, **overrides) if overrides else base
+    scale = node.get("scale", 1.0)  # absent from a node saved before it existed: 1
+    if scale is not None and scale != 1:
+        model = dataclasses.replace(model.scaled(scale), origin=(preset, float(scale)))
+    return model
 
 
 def noise_errors(node: Any) -> list[str]:
@@ -164,15 +249,30 @@ def noise_errors(node: Any) -> list[str]:
         value = node.get(key)
         if value is not None and not (math.isfinite(value) and value >= 0):
             return [f"noise.{key} must be a finite number >= 0 (a standard deviation), got {value!r}"]
+    scale = node.get("scale")
+    if scale is not None and not _is_level(scale):
+        return [f"noise.scale must be a finite number >= 0 (a multiplier of the preset's sigmas; 1 keeps them), "
+                f"got {scale!r}"]
+    levels = node.get("level_range")
+    if levels is not None:
+        levels = list(levels)
+        if not (len(levels) == 2 and all(map(_is_level, levels)) and levels[0] <= levels[1]):
+            return [f"noise.level_range must be [low, high], finite numbers with 0 <= low <= high (each shot's "
+                    f"multiplier of the sigmas is drawn uniformly from it), got {levels!r}"]
     return []
 
 
 def noise_record(model: NoiseModel) -> dict:
     """What a result file records of its execution noise: ``{"noise": label, "noise_sigmas":
-    {"aim_deg", "speed", "tip_mm"}}``."""
-    return {"noise": model.describe(),
-            "noise_sigmas": {key: getattr(model, field) for key, field in CONFIG_FIELDS.items()}}
+    {"aim_deg", "speed", "tip_mm"}, "noise_scale": the config's noise.scale}`` (the sigmas
+    played, the scale already in them), and for variable noise ``"noise_levels": [low, high]``."""
+    record = {"noise": model.describe(),
+              "noise_sigmas": {key: getattr(model, field) for key, field in CONFIG_FIELDS.items()},
+              "noise_scale": model.origin[1] if model.origin is not None else 1.0}
+    if model.is_variable:
+        record["noise_levels"] = list(model.level_range)
+    return record
 
 
-__all__ = ["CONFIG_FIELDS", "NOISE_PRESETS", "NoiseConfig", "NoiseModel", "get_noise", "noise_errors",
+__all__ = ["CONFIG_FIELDS", "NOISE_PRESETS", "SIGMA_FIELDS", "NoiseConfig", "NoiseModel", "get_noise", "noise_errors",
            "noise_from_config", "noise_record"]

@@ -33,9 +33,13 @@ def _build_agent(config: dict):
 
     from .agents import make_agent
 
+    from billiards.physics.noise import noise_from_config
+
     cfg = OmegaConf.create(config)
-    # only the observation and action layout matter here (no shaping, e.g. no reward model)
-    env = make_env(1, constrain_aim=bool(cfg.env.constrain_aim), extra_features=bool(cfg.env.extra_features))
+    # only the observation and action layout matter here (no shaping, e.g. no reward model); the
+    # noise adds the level to the observation when it is variable
+    env = make_env(1, constrain_aim=bool(cfg.env.constrain_aim), extra_features=bool(cfg.env.extra_features),
+                   noise=noise_from_config(cfg.get("noise")))
     obs_dim = env.observation_spec_unbatched["observation"].shape[-1]
     return make_agent(cfg.algo, obs_dim, env.action_spec_unbatched), cfg
 

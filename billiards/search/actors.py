@@ -5,6 +5,10 @@ simulator as verifier, and write the chosen raw action ``"action"`` (theta, p, a
 so the environment plays exactly the shot that was verified. Use them on a bare
 :class:`billiards.envs.BilliardsEnv` (raw actions); the proposers apply their own aim
 constraint and features.
+
+Under variable execution noise the env carries each shot's level as ``"noise_level"``; the
+actors read it with the table and the noise-aware ones (robust, noisy PUCT) search at that level
+(it is refused to search a variable noise blind: a ``ValueError`` names the missing level).
 """
 
 from __future__ import annotations
@@ -23,8 +27,9 @@ from .robust import RobustConfig, robust_search
 
 
 class SearchActor(TensorDictModuleBase):
-    """Base class: ``positions`` in; ``action`` and ``search_r1`` (the verified reward of the
-    chosen shot, which P1 checks against what the env played) out."""
+    """Base class: ``positions`` (and under variable noise ``noise_level``) in; ``action`` and
+    ``search_r1`` (the verified reward of the chosen shot, which P1 checks against what the env
+    played) out."""
 
     in_keys = ["positions"]
     out_keys = ["action", "search_r1"]
@@ -40,13 +45,18 @@ class SearchActor(TensorDictModuleBase):
         self.n_sims = 0
         self.n_decisions = 0
 
-    def search(self, positions: np.ndarray):
+    def search(self, positions: np.ndarray, levels: np.ndarray | None = None):
+        """The search's result for tables (S, 4, 2) whose shots play at noise ``levels`` (S,)
+        (variable noise: multipliers of the noise's sigmas; ignored by the exact searches)."""
         raise NotImplementedError
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         positions = tensordict.get("positions").detach().cpu().numpy().astype(np.float64, copy=False)
         batch = positions.shape[:-2]
-        result = self.search(positions.reshape(-1, 4, 2))
+        levels = tensordict.get("noise_level", None)
+        levels = None if levels is None else levels.detach().cpu().to(torch.float64).numpy().reshape(-1)
+        positions = positions.reshape(-1, 4, 2)
+        result = self.search(positions) if levels is None else self.search(positions, levels)
         self.n_sims += result.n_sims
         self.n_decisions += int(np.prod(batch))
         tensordict.set("action", torch.from_numpy(result.actions.reshape(*batch, 4)))
@@ -60,7 +70,7 @@ class LookaheadActor(SearchActor):
     def __init__(self, proposer, cfg: H2Config = H2Config(), seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
         super().__init__(proposer, cfg, seed, params)
 
-    def search(self, positions):
+    def search(self, positions, levels=None):
         return h2_search(positions, self.proposer, self.cfg, self.rng, self.params)
 
 
@@ -70,7 +80,7 @@ class PUCTActor(SearchActor):
     def __init__(self, proposer, cfg: PUCTConfig = PUCTConfig(), seed: int = 0, params: PhysicsParams = DEFAULT_PARAMS):
         super().__init__(proposer, cfg, seed, params)
 
-    def search(self, positions):
+    def search(self, positions, levels=None):
         return puct_search(positions, self.proposer, self.cfg, self.rng, self.params)
 
 
@@ -82,8 +92,9 @@ class RobustActor(SearchActor):
         self.noise, self.value = noise, value  # value: a TableValue pricing leaves (cfg.position, cfg.leave)
         super().__init__(proposer, cfg, seed, params)
 
-    def search(self, positions):
-        return robust_search(positions, self.proposer, self.cfg, self.rng, self.params, self.noise, value=self.value)
+    def search(self, positions, levels=None):
+        return robust_search(positions, self.proposer, self.cfg, self.rng, self.params, self.noise,
+                             levels=shot_levels(self.noise, levels), value=self.value)
 
 
 class NoisyPUCTActor(SearchActor):
@@ -93,8 +104,18 @@ class NoisyPUCTActor(SearchActor):
         self.noise = noise
         super().__init__(proposer, cfg, seed, params)
 
-    def search(self, positions):
-        return noisy_puct_search(positions, self.proposer, self.cfg, self.rng, self.params, self.noise)
+    def search(self, positions, levels=None):
+        return noisy_puct_search(positions, self.proposer, self.cfg, self.rng, self.params, self.noise,
+                                 levels=shot_levels(self.noise, levels))
+
+
+def shot_levels(noise, levels):
+    """The shots' noise levels a noise-aware search plays at: ``levels`` as given; under variable
+    noise they must be given (the level told with each shot)."""
+    if levels is None and noise is not None and noise.is_variable:
+        raise ValueError(f"noise {noise.describe()} is variable: the search needs each shot's level, the env's "
+                         f'"noise_level" (or search(positions, levels=...))')
+    return levels
 
 
 def make_search_collector(env, actor: SearchActor, frames_per_batch: int, total_frames: int):

@@ -9,7 +9,7 @@ the options live at ``schema/<group>/<option>``, outside the option groups:
 
 * ``search``: ``h2`` (:class:`H2SearchConfig`) | ``puct`` (:class:`PUCTSearchConfig`) |
   ``robust`` (:class:`RobustSearchConfig`, needs execution noise), ``conf/search/*.yaml``; the
-  default is ``for_noise_${noise}``: h2 without noise, robust under ``noise=fastfiz|fastfiz_x5``
+  default is ``for_noise_${noise}``: h2 without noise, robust under ``noise=fastfiz|fastfiz_x5|variable``
   (an explicit ``search=`` wins);
 * ``protocol``: ``p1`` (:class:`P1Config`) | ``p3`` (:class:`P3Config`), ``conf/protocol/*.yaml``;
 * ``noise``: the execution noise (:class:`~billiards.physics.noise.NoiseConfig`, ``conf/noise/*.yaml``,
@@ -129,7 +129,8 @@ class PUCTSearchConfig(_SearchOption):
 class RobustSearchConfig(_SearchOption):
     """Noise-aware search (:mod:`billiards.search.robust`): each candidate scored by its verifier
     reward over noisy replays; ``budget`` = [k1 exact screen] + noisy samples + m1 * k2
-    simulations per shot. Needs execution noise (``noise=fastfiz|fastfiz_x5``). The knobs are
+    simulations per shot. Needs execution noise (``noise=fastfiz|fastfiz_x5|variable``; under
+    variable noise it replays each shot at the level the env told with it). The knobs are
     those of :class:`billiards.search.robust.RobustConfig`, by name."""
 
     kind: str = "robust"
@@ -410,7 +411,7 @@ class SearchAppConfig:
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
     search: Any = MISSING  # H2SearchConfig | PUCTSearchConfig | RobustSearchConfig, chosen by search=
     protocol: Any = MISSING  # P1Config | P3Config, chosen by protocol=
-    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise: noise=none|fastfiz|fastfiz_x5
+    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise: noise=none|fastfiz|fastfiz_x5|variable
     seed: int = 0
     threads: Optional[int] = None  # threads for the simulator's batches (numba) and the proposer networks (torch); default: all cores
     progress: bool = True
@@ -449,12 +450,15 @@ def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConf
 # ``proposer=for_noise_<preset>``: the proposer ``conf/search.yaml`` picks under each execution-noise
 # preset (``proposer: for_noise_${noise}``, beside ``search: for_noise_${noise}``), the strongest
 # measured with the noise-aware search (results/noise/README.md): the geometric draws without
-# noise, the learned shot ranker trained for the preset's noise under it
+# noise, the learned shot ranker trained for the preset's noise under it; under variable noise
+# (levels 0-5) the fastfiz_x5 one (docs/noise.md: ahead of the fastfiz ranker and of forgiving)
+_RANKED_X5 = RankedProposerConfig(ranker="results/rankers/fastfiz_x5/ranker.pt",
+                                  command=RANKER_COMMAND.format(out="results/rankers/fastfiz_x5/ranker.pt", noise="fastfiz_x5"))
 NOISE_DEFAULT_PROPOSERS = {
     "none": GeometricProposerConfig(),
     "fastfiz": RankedProposerConfig(),
-    "fastfiz_x5": RankedProposerConfig(ranker="results/rankers/fastfiz_x5/ranker.pt",
-                                       command=RANKER_COMMAND.format(out="results/rankers/fastfiz_x5/ranker.pt", noise="fastfiz_x5")),
+    "fastfiz_x5": _RANKED_X5,
+    "variable": _RANKED_X5,
 }
 
 _store = register_app("search_schema", SearchAppConfig, {group: schemas for group, (_, schemas) in OPTIONS.items()})
@@ -587,7 +591,7 @@ def errors(cfg) -> list[str]:
     errs.extend(noise_errs)
     if isinstance(search, RobustSearchConfig) and not noise_errs and noise_from_config(noise).is_exact:
         errs.append("search=robust scores candidates over noisy replays: it needs execution noise "
-                    "(noise=fastfiz|fastfiz_x5 or noise.aim_deg=...); without noise use search=h2")
+                    "(noise=fastfiz|fastfiz_x5|variable or noise.aim_deg=...); without noise use search=h2")
     return errs
 
 

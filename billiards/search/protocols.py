@@ -10,7 +10,9 @@
 Under execution noise (``noise=``, :mod:`billiards.physics.noise`) the env plays the commanded
 shot perturbed by its own generator, seeded from the protocol's seed (P1: ``seed``; P3: each
 chain's seed), so the same seed replays the same noisy innings and chains. P3 records the
-commanded and the played action of each kept shot.
+commanded and the played action of each kept shot. Under variable noise (``noise=variable``)
+the env draws each shot's level from that generator and hands it to the search with the table
+(``"noise_level"``).
 """
 
 from __future__ import annotations
@@ -133,7 +135,7 @@ def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int =
             bar.set_postfix(seed=seed, chain=length, refresh=False)
         if length >= cap:
             break
-        td = nxt.select("positions", "shot", "observation").clone()
+        td = nxt.select("positions", "shot", "observation", *(["noise_level"] if noise.is_variable else [])).clone()
     return length, history
 
 

@@ -34,9 +34,11 @@ from .puct import PUCTConfig
 
 
 def noisy_puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random.Generator,
-                      params: PhysicsParams = DEFAULT_PARAMS, noise: NoiseModel | None = None) -> SearchResult:
+                      params: PhysicsParams = DEFAULT_PARAMS, noise: NoiseModel | None = None,
+                      levels: np.ndarray | None = None) -> SearchResult:
     """Choose one action for each of S table states (positions (S, 4, 2)) by root-level PUCT
-    whose visits are noisy replays (see the module docstring)."""
+    whose visits are noisy replays (see the module docstring); ``levels`` (S,), optional: each
+    state's multiplier of ``noise``'s sigmas (variable noise: the level told with the shot)."""
     noise = noise if noise is not None else NoiseModel()
     positions = np.asarray(positions, dtype=np.float64)
     S, B, P = positions.shape[0], cfg.budget, cfg.pool
@@ -60,7 +62,7 @@ def noisy_puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.
             score = q + cfg.c_puct * (1.0 / n) * math.sqrt(total) / (1 + visits[s, :n])
             choice[s] = int(np.argmax(score))
         acts = np.stack([pool[s][choice[s]] for s in range(S)])
-        res = simulate_batch(positions, noise.perturb(acts, rng, params), params)
+        res = simulate_batch(positions, noise.perturb(acts, rng, params, levels=levels), params)
         reward = verifier_reward(res, cfg.foul_penalty)
         rows = np.arange(S)
         visits[rows, choice] += 1

@@ -36,7 +36,7 @@ from billiards import numerics
 from billiards.files import load_tagged, repo_path, save_tagged
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, random_racks, simulate_batch
 from billiards.physics.core import RED1, RED2, WHITE, YELLOW
-from billiards.physics.noise import NOISE_PRESETS, NoiseModel
+from billiards.physics.noise import NOISE_PRESETS, SIGMA_FIELDS, NoiseModel
 
 from .proposers import GeometricProposer
 
@@ -207,8 +207,10 @@ class RankedProposer:
 
 def noise_mismatch(proposer, noise: NoiseModel) -> str | None:
     """If ``proposer`` is a :class:`RankedProposer` whose ranker was trained for another noise
-    than ``noise``, what to say (naming the shipped ranker for that noise, if there is one)."""
-    if not isinstance(proposer, RankedProposer) or proposer.ranker.noise == noise:
+    than ``noise``, what to say (naming the shipped ranker for that noise, if there is one). A
+    ranker trained for a level that variable ``noise`` plays (fastfiz's or fastfiz_x5's under
+    ``noise=variable``) fits it."""
+    if not isinstance(proposer, RankedProposer) or proposer.ranker.noise == noise or _plays_at_a_level(noise, proposer.ranker.noise):
         return None
     trained = proposer.ranker.meta.get("noise_preset") or proposer.ranker.noise.describe()
     msg = (f"proposer {proposer.name!r}: its ranker was trained for noise {trained}, this run plays "
@@ -217,6 +219,16 @@ def noise_mismatch(proposer, noise: NoiseModel) -> str | None:
     if name in NOISE_PRESETS and repo_path(f"results/rankers/{name}/ranker.pt").is_file():
         msg += f" (the ranker for {name}: proposer.ranker=results/rankers/{name}/ranker.pt)"
     return msg
+
+
+def _plays_at_a_level(noise: NoiseModel, trained: NoiseModel) -> bool:
+    """Whether variable ``noise`` plays ``trained``'s sigmas at one of its levels."""
+    if not noise.is_variable or noise.sigma_aim_deg == 0:
+        return False
+    level = trained.sigma_aim_deg / noise.sigma_aim_deg
+    at_level = noise.scaled(level)
+    return (noise.level_range[0] <= level <= noise.level_range[1]
+            and np.allclose([getattr(at_level, f) for f in SIGMA_FIELDS], [getattr(trained, f) for f in SIGMA_FIELDS]))
 
 
 # ----------------------------------------------------------------------------- making a ranker
@@ -313,7 +325,7 @@ def main(argv=None) -> int:
                                  description="Train a shot ranker for proposer=ranked (see the module docstring).")
     ap.add_argument("--out", required=True, help="the ranker file to write (e.g. results/rankers/fastfiz/ranker.pt)")
     ap.add_argument("--physics", default="korean_medium", choices=sorted(PRESETS))
-    ap.add_argument("--noise", default="fastfiz", choices=[n for n in NOISE_PRESETS if n != "none"])
+    ap.add_argument("--noise", default="fastfiz", choices=[n for n, m in NOISE_PRESETS.items() if not (m.is_exact or m.is_variable)])
     ap.add_argument("--racks", type=int, default=12000, help="training racks")
     ap.add_argument("--candidates", type=int, default=500, help="candidates per rack")
     ap.add_argument("--samples", type=int, default=16, help="noisy replays of each candidate that scores exactly")
