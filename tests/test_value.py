@@ -179,3 +179,16 @@ def test_the_search_option_checks_its_value_file_before_anything_runs(tmp_path):
     actor = RobustSearchConfig(position=1.0, value=str(good)).actor(GeometricProposer(R=K.ball_radius), 0, K, FASTFIZ)
     assert isinstance(actor.value, TableValue)
     assert RobustSearchConfig().actor(GeometricProposer(R=K.ball_radius), 0, K, FASTFIZ).value is None
+
+
+def test_the_shipped_value_loads_and_records_how_it_was_made():
+    from billiards.search.config import VALUE_COMMAND
+
+    value = TableValue.load(ROOT / "results/values/value.pt")
+    assert value.params == K and value.meta["command"] == VALUE_COMMAND and len(value.meta["commit"]) >= 7
+    held = value.meta["held_out"]
+    for band in ("all", "0.5<=level<2", "level>=2"):  # better than the best constant where the noise matters
+        assert held[band]["brier"] < 0.8 * held[band]["brier_constant"]
+    # easy tables are worth more than hard ones, and more noise is worth less
+    p = value.predict(racks(200, seed=7), 1.0)
+    assert p.std() > 0.05 and value.predict(racks(200, seed=7), 5.0).mean() < p.mean() - 0.1

@@ -39,8 +39,11 @@ KINDS = ("random", "search", "safety", "policy")
 @dataclass
 class AgentConfig:
     """One player. ``search`` and ``proposer``: options of ``search.py`` (``conf/search/``, the
-    ``proposer=`` names); ``search_budget``: simulations per decision of that search; the safety
-    knobs (``kind=safety``) as in the module docstring."""
+    ``proposer=`` names; ``proposer: for_noise``: the one ``search.py`` plays under the match's
+    noise preset, e.g. the shot ranker trained for it); ``search_budget``: simulations per
+    decision of that search; ``overrides``: further knobs of the search option (e.g. a table
+    value's position and leave weights, ``{position: 1, leave: 1, value: results/values/value.pt}``);
+    the safety knobs (``kind=safety``) as in the module docstring."""
 
     kind: str = "search"
     search: str = "robust"
@@ -71,7 +74,28 @@ class AgentConfig:
         for key in ("foul_penalty", "leave_weight"):
             if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0):
                 errs.append(f"agents.{name}.{key} must be >= 0, got {getattr(self, key)}")
+        if self.kind in ("search", "safety") and not errs:
+            errs += [f"agents.{name}: {e}" for e in self.search_option_errors()]
         return errs
+
+    def search_option(self):
+        """The search option (``search.py``'s schema) this player plays."""
+        from billiards.search.config import OPTIONS
+
+        return OPTIONS["search"][1][self.search](budget=self.search_budget, **self.overrides)
+
+    def search_option_errors(self) -> list[str]:
+        from billiards.search.config import OPTIONS, proposer_options
+
+        if self.search not in OPTIONS["search"][1]:
+            return [f"search must be one of {', '.join(OPTIONS['search'][1])}, got {self.search!r}"]
+        if self.proposer != "for_noise" and self.proposer not in proposer_options():
+            return [f"proposer must be for_noise or one of {', '.join(proposer_options())}, got {self.proposer!r}"]
+        try:
+            option = self.search_option()
+        except TypeError as err:
+            return [f"overrides: {err}"]
+        return option.errors()
 
 
 def to_env_action(raw: np.ndarray) -> np.ndarray:
@@ -191,11 +215,17 @@ def make_agent(cfg: AgentConfig, noise: NoiseModel, params: PhysicsParams):
         return RandomAgent()
     if cfg.kind == "policy":
         return PolicyAgent(cfg.policy, params)
-    from billiards.search.config import OPTIONS, proposer_options
+    from billiards.search.config import NOISE_DEFAULT_PROPOSERS, proposer_options
 
-    proposer = proposer_options()[cfg.proposer].build(params)
-    search = OPTIONS["search"][1][cfg.search](budget=cfg.search_budget, **cfg.overrides)
-    actor = search.actor(proposer, 0, params, noise=noise)
+    if cfg.proposer == "for_noise":
+        preset = noise.describe()
+        if preset not in NOISE_DEFAULT_PROPOSERS:
+            raise ValueError(f"proposer: for_noise needs a noise preset ({', '.join(NOISE_DEFAULT_PROPOSERS)}); "
+                             f"this match plays {preset}")
+        proposer = NOISE_DEFAULT_PROPOSERS[preset].build(params)
+    else:
+        proposer = proposer_options()[cfg.proposer].build(params)
+    actor = cfg.search_option().actor(proposer, 0, params, noise=noise)
     if cfg.kind == "search":
         return SearchAgent(actor)
     opponent = proposer_options()["geometric"].build(params)

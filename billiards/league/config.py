@@ -45,7 +45,7 @@ class MatchConfigError(ValueError):
 def errors(cfg: DictConfig) -> list[str]:
     errs = numeric_bound_errors(cfg) + physics_errors(cfg.physics) + noise_errors(cfg.noise)
     for name, agent in cfg.agents.items():
-        errs += AgentConfig.errors(agent, name)
+        errs += agent_config(agent).errors(name)
     unknown = [p for p in cfg.players if p not in cfg.agents]
     if unknown or len(set(cfg.players)) != len(cfg.players) or len(cfg.players) < 2:
         errs.append(f"players must name at least two different agents of {sorted(cfg.agents)}; got {list(cfg.players)}")
