@@ -341,14 +341,23 @@ def test_train_refuses_search_apps_preset_at_once(tmp_path):
 
 
 def test_under_noise_the_default_is_the_strongest_measured_configuration():
-    """``python search.py noise=<preset>`` with no proposer or search named plays the noise-aware
-    robust search over the shot ranker trained for that noise; without noise, h2 over geometric
-    draws, as before; either stays one override away."""
-    for noise, (proposer, ranker, search) in {"none": ("geometric", None, "h2"),
-                                              "fastfiz": ("ranked", "results/rankers/fastfiz/ranker.pt", "robust"),
-                                              "fastfiz_x5": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", "robust")}.items():
+    """``python search.py noise=<preset>`` with no proposer or search named plays the
+    position-aware robust search (the shipped table value) over the shot ranker trained for
+    that noise, from a pool of 500; without noise, h2 over geometric draws, as before; either
+    stays one override away."""
+    value = "results/values/value.pt"
+    for noise, (proposer, ranker, pool, search, position) in {
+            "none": ("geometric", None, None, "h2", None),
+            "fastfiz": ("ranked", "results/rankers/fastfiz/ranker.pt", 500, "robust", 8.0),
+            "fastfiz_x5": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 3.0),
+            "variable": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 5.0)}.items():
         cfg = compose_search(f"noise={noise}")
-        assert (cfg.proposer.kind, cfg.proposer.get("ranker"), cfg.search.kind) == (proposer, ranker, search), noise
-        search_config.validate(cfg)  # the ranker files are there and load
+        got = (cfg.proposer.kind, cfg.proposer.get("ranker"), cfg.proposer.get("pool"), cfg.search.kind,
+               cfg.search.get("position"))
+        assert got == (proposer, ranker, pool, search, position), noise
+        assert cfg.search.get("value") == (value if position else None)
+        search_config.validate(cfg)  # the ranker and value files are there and load
+    blind = compose_search("noise=fastfiz", "search=robust", "proposer=ranked")  # the recorded commands' search
+    assert (blind.search.position, blind.search.value, blind.proposer.pool) == (0.0, None, 2000)
     older = compose_search("noise=fastfiz", "proposer=geometric", "search=h2")
     assert (older.proposer.kind, older.search.kind) == ("geometric", "h2")
