@@ -192,3 +192,34 @@ def test_the_shipped_value_loads_and_records_how_it_was_made():
     # easy tables are worth more than hard ones, and more noise is worth less
     p = value.predict(racks(200, seed=7), 1.0)
     assert p.std() > 0.05 and value.predict(racks(200, seed=7), 5.0).mean() < p.mean() - 0.1
+
+
+def test_safety_shots_are_screened_misses_weighed_beside_the_attempts(monkeypatch):
+    calls = []
+
+    def recording(positions, actions, params=K):
+        calls.append(len(actions))
+        return simulate_batch(positions, actions, params)
+
+    monkeypatch.setattr(robust_mod, "simulate_batch", recording)
+    pos = racks(6, seed=6)
+    prop = GeometricProposer(R=K.ball_radius)
+    value = small_value()
+    cfg = RobustConfig(budget=300, k1=150, leave=1.0, safeties=4)
+    res = robust_search(pos, prop, cfg, np.random.default_rng(0), K, FASTFIZ, value=value)
+    assert res.n_sims == sum(calls) == 6 * 300
+
+    class Dead:  # no shot reaches a ball: nothing scores, every candidate is a (feeble) safety
+        name = "dead"
+
+        def propose(self, positions, k, rng):
+            return np.zeros((len(positions), k, 4))
+
+    calls[:] = []
+    res = robust_search(pos, Dead(), cfg, np.random.default_rng(0), K, FASTFIZ, value=value)
+    assert res.n_sims == sum(calls) == 6 * 300  # the budget goes to the safeties (without them: the screen only)
+    alive = robust_mod._with_safeties([[] for _ in pos], np.where(np.arange(10) < 3, 1.0, 0.0)[None].repeat(6, 0),
+                                      np.repeat(pos[:, None], 10, axis=1), 2, value, np.ones(6))
+    assert all(len(a) == 2 and min(a) >= 3 for a in alive)  # only misses, the two the value rates lowest
+    with pytest.raises(ValueError, match="safeties"):
+        RobustConfig(safeties=2)  # safety shots need the leave weight

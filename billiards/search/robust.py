@@ -33,7 +33,9 @@ With a table value (:mod:`billiards.search.value`) the replays' leaves are price
 (:func:`leave_terms`): ``position`` > 0 plays position (a replay that scores is worth ``1 +
 position * V(leave)``: the chance that the next shot scores from there), ``leave`` > 0 plays
 safe in a two-player match (a replay that misses costs ``leave * V`` of the table the opponent
-is left). The statistic is then over reward plus term; the noisy replays are the same ones.
+is left), and with ``safeties`` > 0 the noisy rounds also weigh that many safety shots: screened
+candidates that neither score nor foul, those whose exact leave the value rates hardest for the
+opponent. The statistic is then over reward plus term; the noisy replays are the same ones.
 
 The played action is the best by value; ties go to the higher statistic, then proposer order.
 Simulations per decision: at most ``budget`` (exactly ``budget`` whenever a candidate is left
@@ -79,11 +81,15 @@ class RobustConfig:
     foul_penalty: float = VERIFIER_FOUL_PENALTY
     position: float = 0.0  # a replay that scores is worth 1 + position * V(its leave) (needs a table value)
     leave: float = 0.0  # two-player: a replay that misses costs leave * V(the opponent's view of its leave)
+    safeties: int = 0  # two-player: also replay the screened misses whose exact leave V rates hardest for the opponent
 
     def __post_init__(self):
         if not (math.isfinite(self.position) and self.position >= 0 and math.isfinite(self.leave) and self.leave >= 0):
             raise ValueError(f"position and leave must be finite weights >= 0; got position={self.position}, "
                              f"leave={self.leave}")
+        if self.safeties < 0 or (self.safeties and not (self.leave and self.screen)):
+            raise ValueError(f"safeties (safety shots replayed beside the scoring ones) must be >= 0 and need leave > 0 "
+                             f"and the exact screen; got safeties={self.safeties}, leave={self.leave}, screen={self.screen}")
         if self.schedule not in SCHEDULES:
             raise ValueError(f"robust search schedule must be one of {', '.join(SCHEDULES)}; got {self.schedule!r}")
         if self.target < 0 or self.wave < 1:
@@ -192,6 +198,17 @@ def leave_terms(res, cfg: RobustConfig, value, levels: np.ndarray) -> np.ndarray
     return terms
 
 
+def _with_safeties(alive: list, exact: np.ndarray, leave: np.ndarray, n: int, value, levels: np.ndarray) -> list:
+    """``alive`` (per state, the scoring candidates) and, after them, the ``n`` screened
+    candidates that neither score nor foul whose exact leave the value rates lowest for the
+    opponent: the safety shots the noisy rounds weigh against the attempts."""
+    rows, cols = np.nonzero(exact == 0)  # screened (drawn: not -inf), no score, no foul
+    if not len(rows):
+        return alive
+    theirs = value.predict(leave[rows, cols][:, OPPONENT_VIEW], levels[rows])
+    return [a + cols[rows == s][np.argsort(theirs[rows == s], kind="stable")[:n]].tolist() for s, a in enumerate(alive)]
+
+
 def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.random.Generator,
                   params: PhysicsParams = DEFAULT_PARAMS, noise: NoiseModel | None = None,
                   levels: np.ndarray | None = None, value=None) -> SearchResult:
@@ -212,11 +229,14 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
         if levels.shape != (S,) or not (np.isfinite(levels).all() and (levels >= 0).all()):
             raise ValueError(f"levels must be {S} finite multipliers >= 0 (one per state), got {levels!r}")
     n_sims = 0
+    state_level = (levels if levels is not None else np.ones(S)) * (noise_level(noise) if value is not None else 0.0)
     if cfg.screen:
         a1, exact, leave, screened = _screen(positions, proposer, cfg, rng, params)
         has_leave = np.ones((S, K), dtype=bool)
         n_sims += int(screened.sum())
         alive = [list(np.flatnonzero(exact[s] > 0)) for s in range(S)]
+        if cfg.safeties:
+            alive = _with_safeties(alive, exact, leave, cfg.safeties, value, state_level)
     else:
         a1 = proposer.propose(positions, K, rng)
         exact, screened = np.zeros((S, K)), np.zeros(S, dtype=np.int64)
@@ -225,7 +245,6 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
         alive = [list(range(K)) for _ in range(S)]
     samples = [[[] for _ in range(K)] for _ in range(S)]  # the statistic's: reward + leave term
     rewards = [[[] for _ in range(K)] for _ in range(S)]  # the verifier reward alone (r1)
-    state_level = (levels if levels is not None else np.ones(S)) * (noise_level(noise) if value is not None else 0.0)
     left = [cfg.budget - cfg.m1 * cfg.k2 - int(screened[s]) if alive[s] else 0 for s in range(S)]
     rounds = [1 if cfg.schedule == "uniform" else max(1, math.ceil(math.log2(max(len(a), 1))) + 1) for a in alive]
     r = 0
