@@ -135,3 +135,21 @@ def test_the_match_app_plays_a_league_resumes_it_with_its_own_settings_and_draws
     assert resumed["target"] == 1 and resumed["command"] == league["command"]  # the league's own settings
     untimed = [{k: v for k, v in json.loads(x).items() if k != "cpu_s"} for x in (run / MATCHES_FILE).read_text().splitlines()]
     assert untimed == [{k: v for k, v in json.loads(x).items() if k != "cpu_s"} for x in lines]  # the lost match replayed
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["noise=variable", "noise.scale=3"], "noise: at most 10 times fastfiz's aim sigma, got 15"),
+    (["+agents.greedy.overrides={bogus: 1}"], "agents.greedy: overrides: "),
+    (["agents.greedy.proposer=nope"], "agents.greedy: proposer must be for_noise or one of"),
+    (["+agents.greedy.overrides={position: 2.0}"], "agents.greedy: search.position=2.0"),
+])
+def test_the_match_config_checks_the_noise_cap_and_each_players_search_before_anything_runs(overrides, message):
+    from hydra import compose, initialize_config_dir
+
+    from billiards.league.config import errors
+
+    with initialize_config_dir(str(REPO / "conf"), version_base=None):
+        cfg = compose("match", overrides=overrides)
+    assert any(message in e for e in errors(cfg)), errors(cfg)
+    with initialize_config_dir(str(REPO / "conf"), version_base=None):
+        assert errors(compose("match", overrides=["players=[greedy_v,safety_v]"])) == []

@@ -55,6 +55,13 @@ def shooter_view(positions: np.ndarray, shooter: int) -> np.ndarray:
     return positions if shooter == 0 else positions[..., SWAP, :]
 
 
+def noise_cap_error(noise) -> str | None:
+    """What is wrong with a match's noise (a noise model) if its highest level passes the
+    observation's bound (:data:`MAX_NOISE_LEVEL` times fastfiz's aim sigma), else None."""
+    top = noise_level(noise) * (noise.level_range[1] if noise.is_variable else 1.0)
+    return f"noise: at most {MAX_NOISE_LEVEL:g} times fastfiz's aim sigma, got {top:g}" if top > MAX_NOISE_LEVEL else None
+
+
 def noise_level(noise) -> float:
     """The execution noise's aim sigma in units of fastfiz's (0 for exact play); of variable
     noise, that of its level 1 (a shot's level is this times the shot's multiplier)."""
@@ -86,9 +93,8 @@ class SaguEnv:
             np.concatenate([low, np.zeros(EXTRA_OBS, np.float32)]),
             np.concatenate([high, np.array([1.0, 1.0, MAX_NOISE_LEVEL], np.float32)]), dtype=np.float32)
         self.base_level = noise_level(self.noise)
-        top = self.base_level * (self.noise.level_range[1] if self.noise.is_variable else 1.0)
-        if top > MAX_NOISE_LEVEL:
-            raise ValueError(f"noise: at most {MAX_NOISE_LEVEL:g} times fastfiz's aim sigma, got {top:g}")
+        if err := noise_cap_error(self.noise):
+            raise ValueError(err)
         # variable noise: the next shot's multiplier of the noise's sigmas (None for fixed noise)
         self.shot_level = 0.0 if self.noise.is_variable else None
         self.positions = initial_racks(np.random.default_rng(0), "canonical", 1, self.params)[0]
@@ -149,4 +155,4 @@ class SaguEnv:
                 "commanded_action": commanded[0].astype(np.float64)}
 
 
-__all__ = ["AGENTS", "SWAP", "SaguEnv", "noise_level", "shooter_view"]
+__all__ = ["AGENTS", "MAX_NOISE_LEVEL", "SWAP", "SaguEnv", "noise_cap_error", "noise_level", "shooter_view"]

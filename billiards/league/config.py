@@ -44,6 +44,12 @@ class MatchConfigError(ValueError):
 
 def errors(cfg: DictConfig) -> list[str]:
     errs = numeric_bound_errors(cfg) + physics_errors(cfg.physics) + noise_errors(cfg.noise)
+    if not errs:
+        from billiards.envs.sagu import noise_cap_error
+        from billiards.physics.noise import noise_from_config
+
+        if err := noise_cap_error(noise_from_config(cfg.noise)):
+            errs.append(err)
     for name, agent in cfg.agents.items():
         errs += agent_config(agent).errors(name)
     unknown = [p for p in cfg.players if p not in cfg.agents]
