@@ -15,7 +15,7 @@ rack, the points before the first miss, capped at ``--cap``). Two tables:
 
 Every cell's command is recorded; a recorded cell is skipped unless ``--redo``.
 
-    python benchmarks/noisy_track.py --out results/noisy_track --table --figure
+    python benchmarks/noisy_track.py --out results/noisy_track --table --figure --seed 3
     python benchmarks/noisy_track.py --out /tmp/t --table --only ranked --innings 2 --shots 5 --chains 3
 """
 
@@ -44,6 +44,7 @@ AGENTS = {
     "position": [],
 }
 TABLE_NOISES = {"fastfiz": ["noise=fastfiz"], "fastfiz_x5": ["noise=fastfiz_x5"], "variable": ["noise=variable"]}
+P3_SEEDS = 10_000  # P3's chains: seeds P3_SEEDS + seed, ... (apart from every P1 seed and the tuning chains 0-99)
 EXACT_ONLY = ("h2",)  # the searches that plan without noise: the only ones at multiplier 0 (robust refuses exact play)
 
 
@@ -74,11 +75,12 @@ def noise_of(noise_over: list[str]):
 
 
 def search_cell(agent: str, noise: str, noise_over: list[str], args, out: Path) -> dict:
-    base = search_overrides(agent, noise, noise_over) + [f"seed={args.seed}", "threads=1", "progress=false",
-                                                          "picture=false"]
+    base = search_overrides(agent, noise, noise_over) + ["threads=1", "progress=false", "picture=false"]
     rec = {}
-    for proto, extra in (("p1", ["protocol=p1", f"protocol.n_innings={args.innings}", f"protocol.shots={args.shots}"]),
-                         ("p3", ["protocol=p3", f"protocol.seeds={args.chains}", f"protocol.cap={args.cap}"])):
+    for proto, extra in (("p1", ["protocol=p1", f"protocol.n_innings={args.innings}", f"protocol.shots={args.shots}",
+                                 f"seed={args.seed}"]),
+                         ("p3", ["protocol=p3", f"protocol.seeds={args.chains}", f"protocol.cap={args.cap}",
+                                 f"seed={P3_SEEDS + args.seed}"])):
         o = base + extra
         res = run_search(o, out / "runs" / f"{agent}_{noise}_{proto}")
         rec[f"{proto}_command"] = "python search.py " + " ".join(o)
@@ -116,14 +118,14 @@ def sac_cell(noise: str, noise_over: list[str], args) -> dict:
             policy = blind(policy)
         kw = dict(constrain_aim=bool(cfg.env.constrain_aim), extra_features=bool(cfg.env.extra_features), noise=model)
         p1 = evaluate(policy, n_innings=args.innings, max_shots=args.shots, start="random", seed=args.seed, **kw)
-        p3 = evaluate(policy, n_innings=args.chains, max_shots=args.cap, start="canonical", seed=args.seed + 1000, **kw)
+        p3 = evaluate(policy, n_innings=args.chains, max_shots=args.cap, start="canonical", seed=P3_SEEDS + args.seed, **kw)
         success.append(p1.success_per_shot_pct / 100.0)
         shots += args.innings * args.shots
         chains += list(p3.first_miss_points)
     return {"success": float(np.mean(success)), "shots": shots, "p3_values": chains, "runs": list(args.sac),
             "command": f"billiards.evaluation.evaluate(policy of each run, n_innings={args.innings}, max_shots="
                        f"{args.shots}, random start, seed={args.seed}) and (n_innings={args.chains}, max_shots={args.cap}, "
-                       f"canonical start, seed={args.seed + 1000}) under {' '.join(noise_over)}"}
+                       f"canonical start, seed={P3_SEEDS + args.seed}) under {' '.join(noise_over)}"}
 
 
 def finish(rec: dict) -> dict:
