@@ -117,6 +117,7 @@ SHIPPED = {
     "policy": "results/policies/base/seed0.pt",
     "ranker": "results/rankers/fastfiz/ranker.pt",
     "reward model": "results/rm/model.pt",
+    "table value": "results/values/value.pt",
 }
 
 
@@ -125,9 +126,10 @@ def _loader(kind):
     from billiards.rl.policy import load_policy
     from billiards.rm.model import RewardModelError, load_model
     from billiards.search.ranker import RankerFileError, ShotRanker
+    from billiards.search.value import TableValue, ValueFileError
 
     return {"policy": (load_policy, CheckpointError), "ranker": (ShotRanker.load, RankerFileError),
-            "reward model": (load_model, RewardModelError)}[kind]
+            "reward model": (load_model, RewardModelError), "table value": (TableValue.load, ValueFileError)}[kind]
 
 
 def _largest_tensor(payload):
