@@ -14,7 +14,7 @@ def run(cfg, out_dir) -> dict:
     from billiards.device import set_threads
     from billiards.files import display_path, recorded_command
     from billiards.physics.config import params_from_config
-    from billiards.physics.noise import noise_from_config
+    from billiards.physics.noise import noise_from_config, noise_record
     from billiards.provenance import git_commit
 
     from .agents import make_agent
@@ -40,7 +40,7 @@ def run(cfg, out_dir) -> dict:
         overrides = list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else []
     command = ["python", "match.py", *overrides, f"hydra.run.dir={display_path(out_dir)}"]
     record = {"command": " ".join(recorded_command(command)), "commit": git_commit(),
-              "noise": noise.describe(), "physics": params.describe(), "target": cfg.target, "start": cfg.start,
+              **noise_record(noise), "physics": params.describe(), "target": cfg.target, "start": cfg.start,
               "foul_penalty": cfg.foul_penalty, "max_innings": cfg.max_innings, "matches_per_ordered_pair": cfg.matches,
               "seed": cfg.seed, "agents": {n: OmegaConf.to_container(cfg.agents[n]) for n in cfg.players}}
     print(f"league of {', '.join(cfg.players)}: {cfg.matches} matches per ordered pair to {cfg.target} points, "
