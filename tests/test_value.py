@@ -223,3 +223,20 @@ def test_safety_shots_are_screened_misses_weighed_beside_the_attempts(monkeypatc
     assert all(len(a) == 2 and min(a) >= 3 for a in alive)  # only misses, the two the value rates lowest
     with pytest.raises(ValueError, match="safeties"):
         RobustConfig(safeties=2)  # safety shots need the leave weight
+
+
+def test_the_training_command_writes_a_value_the_search_plays(tmp_path, capsys):
+    from billiards.search.value import main
+
+    out = tmp_path / "v.pt"
+    args = ["--out", str(out), "--states", "64", "--test-states", "64", "--pool", "20", "--top", "2", "--samples", "2",
+            "--check", "4", "--hidden", "4", "--layers", "1", "--epochs", "1"]
+    assert main(args) == 0
+    value = TableValue.load(out)
+    assert value.meta["command"] == "python -m billiards.search.value " + " ".join(args)
+    assert value.meta["held_out"]["tables"] == 64 and value.params == K
+    res = robust_search(racks(2), GeometricProposer(R=K.ball_radius), RobustConfig(budget=100, k1=50, position=1.0),
+                        np.random.default_rng(0), K, FASTFIZ, value=value)
+    assert res.n_sims == 200
+    with pytest.raises(SystemExit):
+        main(["--out", str(out), "--states", "0"])

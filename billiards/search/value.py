@@ -202,7 +202,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     commit = git_commit()
     params = PRESETS[args.physics]
-    ranker = ShotRanker.load(repo_path(args.ranker) if not repo_path(args.ranker).is_absolute() else args.ranker)
+    ranker = ShotRanker.load(repo_path(args.ranker))
     rng = np.random.default_rng(args.seed)
     t0 = time.time()
     say = lambda m: print(m, flush=True)
