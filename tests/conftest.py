@@ -23,6 +23,15 @@ def _patient_popen_init(self, *args, **kwargs):
 
 subprocess.Popen.__init__ = _patient_popen_init
 
+
+def pytest_configure(config):
+    """Under pytest-xdist (``-n N``) the controller compiles the simulator once before the workers
+    start, so that they load its kernels from numba's cache instead of all compiling at once."""
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        from billiards.physics.warmup import warm_up
+
+        warm_up(log=lambda message: None)
+
 SHIPPED_BASE = Path(__file__).resolve().parents[1] / "results" / "policies" / "base" / "seed0.pt"
 
 
