@@ -1014,3 +1014,24 @@ def test_a_stopped_run_resumes_to_the_uninterrupted_runs_result(tmp_path, algo, 
             assert same(a[key], b[key]), (how, key)
         summaries = [json.loads((d / "summary.json").read_text()) for d in (whole, run_dir)]
         assert summaries[0]["eval"] == summaries[1]["eval"] and summaries[0]["updates"] == summaries[1]["updates"]
+
+
+def test_a_new_run_into_a_dir_holding_another_run_is_refused_before_anything_is_written(tmp_path):
+    """A fresh run (no resume=) whose dir already holds a run's checkpoint, metrics or evaluation
+    -- even a run still going -- would truncate its files: refused, naming resume=; an empty
+    dir, or resume=auto over a dir without a checkpoint, starts as before."""
+    from billiards.rl.config import ConfigError
+    from billiards.rl.train import load_run_config
+
+    cfg = compose_cfg("budget=smoke")
+    for held in ("metrics.csv", "checkpoint.pt", "eval.json"):
+        run_dir = tmp_path / held.split(".")[0]
+        run_dir.mkdir()
+        (run_dir / held).write_text("step\n1\n")
+        with pytest.raises(ConfigError, match=f"already holds a training run \\({held}\\).*resume="):
+            load_run_config(cfg.copy(), run_dir)
+        assert (run_dir / held).read_text() == "step\n1\n" and sorted(p.name for p in run_dir.iterdir()) == [held]
+    (tmp_path / "empty").mkdir()
+    assert load_run_config(cfg.copy(), tmp_path / "empty")[2] is None
+    # resume=auto (the campaign's jobs) over a job killed before its first checkpoint starts it again
+    assert load_run_config(OmegaConf.merge(cfg, {"resume": "auto"}), tmp_path / "metrics")[2] is None

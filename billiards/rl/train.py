@@ -60,6 +60,7 @@ from .config import (
     CONFIG_FILE,
     EVAL_FILE,
     EVAL_HISTORY_FILE,
+    METRICS_FILE,
     Config,
     ConfigError,
     env_options,
@@ -309,9 +310,11 @@ def write_eval_history(run_dir: Path, history: list[dict]) -> None:
 def load_run_config(cfg: DictConfig, run_dir: Path) -> tuple[DictConfig, Path, dict | None]:
     """``(config, run dir, checkpoint or None)`` of the run ``cfg`` asks for: a new run in
     ``run_dir``, or with ``resume=<dir>`` that run's checkpointed config (see
-    :func:`resume_config`), dir and checkpoint. The config is validated (ConfigError)."""
-    ckpt = None
-    if cfg.resume == RESUME_AUTO:  # this job's own dir: continue what an earlier attempt left there
+    :func:`resume_config`), dir and checkpoint. The config is validated (ConfigError); a new
+    run into a dir that holds another run's checkpoint, metrics or evaluation is refused
+    (ConfigError naming ``resume=``), before anything is written there."""
+    ckpt, auto = None, cfg.resume == RESUME_AUTO
+    if auto:  # this job's own dir: continue what an earlier attempt left there (or start it again)
         cfg.resume = str(run_dir) if (Path(run_dir) / CHECKPOINT_FILE).is_file() else None
     if cfg.resume:
         ckpt = load_checkpoint(cfg.resume)
@@ -319,6 +322,10 @@ def load_run_config(cfg: DictConfig, run_dir: Path) -> tuple[DictConfig, Path, d
             log.info("resume: continuing %s (this invocation's own dir is %s)", cfg.resume, run_dir)
             run_dir = Path(cfg.resume)
         cfg = resume_config(ckpt["config"], cfg)
+    elif not auto and (held := [f for f in (CHECKPOINT_FILE, METRICS_FILE, EVAL_FILE) if (Path(run_dir) / f).exists()]):
+        # a new run there would truncate another run's files (even a live one's)
+        raise ConfigError(f"{display_path(run_dir)} already holds a training run ({', '.join(held)}): continue it "
+                          f"with resume={display_path(run_dir)} (or resume=auto), or give another hydra.run.dir")
     validate(cfg)
     return cfg, Path(run_dir), ckpt
 
