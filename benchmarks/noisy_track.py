@@ -48,10 +48,6 @@ P3_SEEDS = 10_000  # P3's chains: seeds P3_SEEDS + seed, ... (apart from every P
 EXACT_ONLY = ("h2",)  # the searches that plan without noise: the only ones at multiplier 0 (robust refuses exact play)
 
 
-def search_overrides(agent: str, noise: str, noise_over: list[str]) -> list[str]:
-    return AGENTS[agent] + noise_over
-
-
 def run_search(overrides: list[str], out_dir: Path) -> dict:
     from hydra import compose, initialize_config_dir
 
@@ -75,7 +71,7 @@ def noise_of(noise_over: list[str]):
 
 
 def search_cell(agent: str, noise: str, noise_over: list[str], args, out: Path) -> dict:
-    base = search_overrides(agent, noise, noise_over) + ["threads=1", "progress=false", "picture=false"]
+    base = AGENTS[agent] + noise_over + ["threads=1", "progress=false", "picture=false"]
     rec = {}
     for proto, extra in (("p1", ["protocol=p1", f"protocol.n_innings={args.innings}", f"protocol.shots={args.shots}",
                                  f"seed={args.seed}"]),

@@ -36,6 +36,27 @@ SHIPPED_BASE = Path(__file__).resolve().parents[1] / "results" / "policies" / "b
 
 
 @pytest.fixture
+def recorded(monkeypatch):
+    """Every (start tables, played actions) batch the noise-aware searches (robust, noisy PUCT)
+    simulate, in order; the searches still simulate them."""
+    import numpy as np
+
+    import billiards.search.puct_noise as puct_noise_mod
+    import billiards.search.robust as robust_mod
+    from billiards.physics import simulate_batch
+
+    calls = []
+
+    def recording(positions, actions, *params):
+        calls.append((np.array(positions), np.array(actions)))
+        return simulate_batch(positions, actions, *params)
+
+    monkeypatch.setattr(robust_mod, "simulate_batch", recording)
+    monkeypatch.setattr(puct_noise_mod, "simulate_batch", recording)
+    return calls
+
+
+@pytest.fixture
 def international_policy(tmp_path) -> Path:
     """The shipped ``base`` seed 0 (trained on korean_medium, the default table), saved again as
     if it had been trained on the international table: a policy from another table."""

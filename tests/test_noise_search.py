@@ -9,8 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import billiards.search.puct_noise as puct_noise_mod
-import billiards.search.robust as robust_mod
 from billiards.physics import PRESETS, random_racks, simulate_batch
 from billiards.physics.noise import NOISE_PRESETS, NoiseModel, noise_from_config, noise_record
 from billiards.search import (GeometricProposer, H2Config, LookaheadActor, PUCTConfig, RobustConfig, h2_search,
@@ -20,20 +18,6 @@ from billiards.search.protocols import run_chain, run_p1
 ROOT = Path(__file__).resolve().parent.parent
 K = PRESETS["korean_medium"]
 FASTFIZ, X5 = NOISE_PRESETS["fastfiz"], NOISE_PRESETS["fastfiz_x5"]
-
-
-@pytest.fixture
-def recorded(monkeypatch):
-    """Every (start tables, played actions) batch the noise-aware searches simulate."""
-    calls = []
-
-    def recording(positions, actions, params=K):
-        calls.append((np.array(positions), np.array(actions)))
-        return simulate_batch(positions, actions, params)
-
-    monkeypatch.setattr(robust_mod, "simulate_batch", recording)
-    monkeypatch.setattr(puct_noise_mod, "simulate_batch", recording)
-    return calls
 
 
 def racks(n, seed=0):

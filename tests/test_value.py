@@ -13,8 +13,10 @@ from billiards.search import GeometricProposer
 from billiards.search import robust as robust_mod
 from billiards.search.config import RobustSearchConfig
 from billiards.search.ranker import RankerFileError, ShotRanker, fit_mlp
-from billiards.search.robust import OPPONENT_VIEW, RobustConfig, leave_terms, robust_search
-from billiards.search.value import (N_FEATURES, TableValue, ValueFileError, draw_levels, make_dataset, noise_level,
+from billiards.envs.sagu import SWAP
+from billiards.search.robust import RobustConfig, leave_terms, robust_search
+from billiards.physics.noise import noise_level
+from billiards.search.value import (N_FEATURES, TableValue, ValueFileError, draw_levels, make_dataset,
                                     table_features)
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -53,7 +55,7 @@ def test_features_fold_the_tables_symmetries_and_the_reds_names():
     for other in (mirrored, flipped, pos[:, [0, 1, 3, 2]]):
         np.testing.assert_allclose(table_features(other, 1.0, K), f, atol=1e-6)
     # ... but not the cue balls' roles, nor the level
-    assert not np.allclose(table_features(pos[:, OPPONENT_VIEW], 1.0, K), f)
+    assert not np.allclose(table_features(pos[:, SWAP], 1.0, K), f)
     assert not np.allclose(table_features(pos, 5.0, K), f)
 
 
@@ -123,7 +125,7 @@ def test_leave_terms_price_scoring_leaves_for_the_shooter_and_misses_for_the_opp
     levels = np.full(len(pos), 1.0)
     cfg = RobustConfig(position=0.5, leave=2.0)
     terms = leave_terms(res, cfg, value, levels)
-    own, theirs = value.predict(res.positions, levels), value.predict(res.positions[:, OPPONENT_VIEW], levels)
+    own, theirs = value.predict(res.positions, levels), value.predict(res.positions[:, SWAP], levels)
     np.testing.assert_allclose(terms, np.where(res.score, 0.5 * own, -2.0 * theirs))
     np.testing.assert_array_equal(leave_terms(res, RobustConfig(), value, levels), 0.0)
 
@@ -139,21 +141,15 @@ def test_zero_weights_search_bit_for_bit_as_without_a_value():
     assert a.n_sims == b.n_sims
 
 
-def test_position_aware_search_counts_every_simulation_and_prefers_valued_leaves(monkeypatch):
-    calls = []
-
-    def recording(positions, actions, params=K):
-        calls.append(len(actions))
-        return simulate_batch(positions, actions, params)
-
-    monkeypatch.setattr(robust_mod, "simulate_batch", recording)
+def test_position_aware_search_counts_every_simulation_and_prefers_valued_leaves(recorded):
     pos = racks(12, seed=5)
     prop = GeometricProposer(R=K.ball_radius)
     plain = robust_search(pos, prop, RobustConfig(budget=300, k1=150), np.random.default_rng(0), K, FASTFIZ)
-    plain_calls, calls[:] = sum(calls), []
+    plain_calls = sum(len(a) for _, a in recorded)
+    recorded.clear()
     placed = robust_search(pos, prop, RobustConfig(budget=300, k1=150, position=5.0), np.random.default_rng(0), K, FASTFIZ,
                            value=LeftHalf())
-    assert placed.n_sims == sum(calls) == plain.n_sims == plain_calls
+    assert placed.n_sims == sum(len(a) for _, a in recorded) == plain.n_sims == plain_calls
     # the chosen shots' leaves: replay each chosen shot under the noise and look where the cue ball stops
     rng = np.random.default_rng(9)
 
@@ -194,20 +190,13 @@ def test_the_shipped_value_loads_and_records_how_it_was_made():
     assert p.std() > 0.05 and value.predict(racks(200, seed=7), 5.0).mean() < p.mean() - 0.1
 
 
-def test_safety_shots_are_screened_misses_weighed_beside_the_attempts(monkeypatch):
-    calls = []
-
-    def recording(positions, actions, params=K):
-        calls.append(len(actions))
-        return simulate_batch(positions, actions, params)
-
-    monkeypatch.setattr(robust_mod, "simulate_batch", recording)
+def test_safety_shots_are_screened_misses_weighed_beside_the_attempts(recorded):
     pos = racks(6, seed=6)
     prop = GeometricProposer(R=K.ball_radius)
     value = small_value()
     cfg = RobustConfig(budget=300, k1=150, leave=1.0, safeties=4)
     res = robust_search(pos, prop, cfg, np.random.default_rng(0), K, FASTFIZ, value=value)
-    assert res.n_sims == sum(calls) == 6 * 300
+    assert res.n_sims == sum(len(a) for _, a in recorded) == 6 * 300
 
     class Dead:  # no shot reaches a ball: nothing scores, every candidate is a (feeble) safety
         name = "dead"
@@ -215,9 +204,9 @@ def test_safety_shots_are_screened_misses_weighed_beside_the_attempts(monkeypatc
         def propose(self, positions, k, rng):
             return np.zeros((len(positions), k, 4))
 
-    calls[:] = []
+    recorded.clear()
     res = robust_search(pos, Dead(), cfg, np.random.default_rng(0), K, FASTFIZ, value=value)
-    assert res.n_sims == sum(calls) == 6 * 300  # the budget goes to the safeties (without them: the screen only)
+    assert res.n_sims == sum(len(a) for _, a in recorded) == 6 * 300  # the budget goes to the safeties (without them: the screen only)
     alive = robust_mod._with_safeties([[] for _ in pos], np.where(np.arange(10) < 3, 1.0, 0.0)[None].repeat(6, 0),
                                       np.repeat(pos[:, None], 10, axis=1), 2, value, np.ones(6))
     assert all(len(a) == 2 and min(a) >= 3 for a in alive)  # only misses, the two the value rates lowest

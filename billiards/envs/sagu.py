@@ -38,7 +38,7 @@ import numpy as np
 
 from billiards import domain
 from billiards.physics import get_params
-from billiards.physics.noise import NOISE_PRESETS, get_noise
+from billiards.physics.noise import get_noise, noise_level
 
 from ._common import check_flag, initial_racks, play_shots, unnormalize_checked, validate_action
 
@@ -60,13 +60,6 @@ def noise_cap_error(noise) -> str | None:
     observation's bound (:data:`MAX_NOISE_LEVEL` times fastfiz's aim sigma), else None."""
     top = noise_level(noise) * (noise.level_range[1] if noise.is_variable else 1.0)
     return f"noise: at most {MAX_NOISE_LEVEL:g} times fastfiz's aim sigma, got {top:g}" if top > MAX_NOISE_LEVEL else None
-
-
-def noise_level(noise) -> float:
-    """The execution noise's aim sigma in units of fastfiz's (0 for exact play); of variable
-    noise, that of its level 1 (a shot's level is this times the shot's multiplier)."""
-    base = NOISE_PRESETS["fastfiz"].sigma_aim_deg
-    return float(noise.sigma_aim_deg / base) if base else 0.0
 
 
 class SaguEnv:

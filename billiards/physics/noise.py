@@ -181,6 +181,13 @@ NOISE_PRESETS: dict[str, NoiseModel] = {
 }
 
 
+def noise_level(noise: NoiseModel) -> float:
+    """The execution noise's aim sigma in units of fastfiz's (0 for exact play); of variable
+    noise, that of its level 1 (a shot's level is this times the shot's multiplier)."""
+    base = NOISE_PRESETS["fastfiz"].sigma_aim_deg
+    return float(noise.sigma_aim_deg / base) if base else 0.0
+
+
 def get_noise(noise=None) -> NoiseModel:
     """A NoiseModel from None (exact), a preset name, a NoiseModel or a dict of sigmas."""
     if noise is None:
@@ -274,5 +281,5 @@ def noise_record(model: NoiseModel) -> dict:
     return record
 
 
-__all__ = ["CONFIG_FIELDS", "NOISE_PRESETS", "SIGMA_FIELDS", "NoiseConfig", "NoiseModel", "get_noise", "noise_errors",
+__all__ = ["CONFIG_FIELDS", "NOISE_PRESETS", "SIGMA_FIELDS", "NoiseConfig", "NoiseModel", "get_noise", "noise_errors", "noise_level",
            "noise_from_config", "noise_record"]

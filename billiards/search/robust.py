@@ -52,13 +52,10 @@ import numpy as np
 
 from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, simulate_batch
-from billiards.physics.core import RED1, RED2, WHITE, YELLOW
-from billiards.physics.noise import NoiseModel
+from billiards.envs.sagu import SWAP
+from billiards.physics.noise import NoiseModel, noise_level
 
 from .lookahead import VERIFIER_FOUL_PENALTY, SearchResult, verifier_reward
-from .value import noise_level
-
-OPPONENT_VIEW = [YELLOW, WHITE, RED1, RED2]  # the table seen by the other cue ball's player
 
 SCHEDULES = ("uniform", "halving")
 
@@ -192,7 +189,7 @@ def leave_terms(res, cfg: RobustConfig, value, levels: np.ndarray) -> np.ndarray
         return terms
     scored = res.score.astype(bool)
     for rows, weight, table in ((np.flatnonzero(scored), cfg.position, res.positions),
-                                (np.flatnonzero(~scored), -cfg.leave, res.positions[:, OPPONENT_VIEW])):
+                                (np.flatnonzero(~scored), -cfg.leave, res.positions[:, SWAP])):
         if weight and len(rows):
             terms[rows] = weight * value.predict(table[rows], levels[rows])
     return terms
@@ -205,7 +202,7 @@ def _with_safeties(alive: list, exact: np.ndarray, leave: np.ndarray, n: int, va
     rows, cols = np.nonzero(exact == 0)  # screened (drawn: not -inf), no score, no foul
     if not len(rows):
         return alive
-    theirs = value.predict(leave[rows, cols][:, OPPONENT_VIEW], levels[rows])
+    theirs = value.predict(leave[rows, cols][:, SWAP], levels[rows])
     return [a + cols[rows == s][np.argsort(theirs[rows == s], kind="stable")[:n]].tolist() for s, a in enumerate(alive)]
 
 
@@ -270,7 +267,7 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
         played = noise.apply(a1[s_idx, k_idx], z, params)
         res = simulate_batch(positions[s_idx], played, params)
         reward = verifier_reward(res, cfg.foul_penalty)
-        total = reward + leave_terms(res, cfg, value, state_level[s_idx]) if value is not None else reward
+        total = reward + leave_terms(res, cfg, value, state_level[s_idx])
         n_sims += len(s_idx)
         for i in range(len(s_idx)):
             s, k = s_idx[i], k_idx[i]
@@ -316,4 +313,4 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
     return SearchResult(a1[rows, best], chosen_value, r1, leave[rows, best], n_sims)
 
 
-__all__ = ["OPPONENT_VIEW", "RobustConfig", "SCHEDULES", "leave_terms", "robust_search"]
+__all__ = ["RobustConfig", "SCHEDULES", "leave_terms", "robust_search"]

@@ -31,7 +31,7 @@ import numpy as np
 from billiards import numerics
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, random_racks, simulate_batch
 from billiards.physics.core import RED1, RED2, WHITE, YELLOW
-from billiards.physics.noise import NOISE_PRESETS, NoiseModel
+from billiards.physics.noise import NOISE_PRESETS
 
 from .ranker import RankedProposer, ShotRanker, TaggedMLP, fit_mlp
 
@@ -43,11 +43,6 @@ MAX_LEVEL = 5.0
 
 class ValueFileError(ValueError):
     """A table-value file that is missing, corrupt or not a table value."""
-
-
-def noise_level(noise: NoiseModel) -> float:
-    """A noise model's level: its aim sigma in units of fastfiz's (0 for exact play)."""
-    return float(noise.sigma_aim_deg / BASE_NOISE.sigma_aim_deg)
 
 
 def table_features(positions: np.ndarray, levels, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
@@ -229,4 +224,4 @@ if __name__ == "__main__":
 
 
 __all__ = ["BASE_NOISE", "MAX_LEVEL", "N_FEATURES", "TableValue", "ValueFileError", "draw_levels", "held_out_report",
-           "make_dataset", "noise_level", "table_features"]
+           "make_dataset", "table_features"]
