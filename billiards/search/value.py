@@ -106,35 +106,85 @@ def draw_levels(n: int, rng: np.random.Generator) -> np.ndarray:
     return np.where(u < 0.4, 1.0, np.where(u < 0.7, MAX_LEVEL, rng.uniform(0.0, MAX_LEVEL, n)))
 
 
-def make_dataset(n_states: int, ranker: ShotRanker, rng: np.random.Generator, params: PhysicsParams = DEFAULT_PARAMS,
-                 chains: int = 256, pool: int = 300, top: int = 16, samples: int = 16, check: int = 16,
-                 restart: float = 0.2, log=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``n_states`` labelled tables: (features (n, N_FEATURES), targets (n,), positions (n, 4, 2),
-    levels (n,)).
-
-    ``chains`` chains of play advance together. At each table (the chain's level ``l``, drawn
-    by :func:`draw_levels` when the chain starts): the ``top`` of ``pool`` ranked candidates
-    each get ``samples`` noisy replays (sigmas ``l`` x fastfiz's), the best by its share that
-    scores is the search's shot, and the target is the share of ``check`` fresh replays of it
-    that score (an unbiased estimate of that shot's chance). The chain goes on from the first
-    fresh replay's leave, or (with probability ``restart``) from a new random rack."""
+def ranked_chooser(ranker: ShotRanker, params: PhysicsParams = DEFAULT_PARAMS, pool: int = 300, top: int = 16,
+                   samples: int = 16):
+    """The first value's labelling search: the ``top`` of ``pool`` ranked candidates each get
+    ``samples`` noisy replays (sigmas ``level`` x fastfiz's); the best by its share that scores
+    is the shot. Returns ``choose(positions (C, 4, 2), levels (C,), rng) -> actions (C, 4)``."""
     proposer = RankedProposer(ranker, pool=pool, params=params)
-    C = chains
-    pos, lev = random_racks(rng, C, params), draw_levels(C, rng)
-    X, y, P, Lv = [], [], [], []
-    done, t0 = 0, time.time()
-    while done < n_states:
+
+    def choose(pos, lev, rng):
+        C = len(pos)
         cand = proposer.propose(pos, top, rng)  # (C, top, 4)
         z = BASE_NOISE.draw((C, top, samples), rng) * lev[:, None, None, None]
         shots = BASE_NOISE.apply(np.repeat(cand[:, :, None], samples, axis=2), z, params)
         share = simulate_batch(np.repeat(pos, top * samples, axis=0), shots.reshape(-1, 4), params).score
         best = np.argmax(share.reshape(C, top, samples).mean(axis=2), axis=1)
-        chosen = cand[np.arange(C), best]
+        return cand[np.arange(C), best]
+
+    return choose
+
+
+def search_chooser(bands, value: "TableValue", params: PhysicsParams = DEFAULT_PARAMS, budget: int = 400):
+    """A labelling search that is the position-aware robust search itself (one step of policy
+    iteration: the value it prices leaves with is the previous one). ``bands``: ``(upper level,
+    ranker, pool, position weight)`` in increasing order; a table plays the first band whose
+    upper level exceeds its level (the last band takes the rest). Returns ``choose`` as
+    :func:`ranked_chooser`."""
+    from .robust import RobustConfig, robust_search
+
+    plays = [(upper, RankedProposer(ranker, pool=pool, params=params), RobustConfig(budget=budget, position=w))
+             for upper, ranker, pool, w in bands]
+
+    def choose(pos, lev, rng):
+        out = np.zeros((len(pos), 4))
+        band = np.minimum(np.searchsorted([u for u, *_ in plays], lev, side="right"), len(plays) - 1)
+        for b, (_, proposer, cfg) in enumerate(plays):
+            rows = np.flatnonzero(band == b)
+            if len(rows):
+                out[rows] = robust_search(pos[rows], proposer, cfg, rng, params, noise=BASE_NOISE, levels=lev[rows],
+                                          value=value).actions
+        return out
+
+    return choose
+
+
+def make_dataset(n_states: int, ranker: ShotRanker | None, rng: np.random.Generator,
+                 params: PhysicsParams = DEFAULT_PARAMS, chains: int = 256, pool: int = 300, top: int = 16,
+                 samples: int = 16, check: int = 16, restart: float = 0.2, log=None, choose=None,
+                 discount: float = 0.0, value: "TableValue | None" = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``n_states`` labelled tables: (features (n, N_FEATURES), targets (n,), positions (n, 4, 2),
+    levels (n,)).
+
+    ``chains`` chains of play advance together. At each table (the chain's level ``l``, drawn
+    by :func:`draw_levels` when the chain starts) the labelling search picks a shot (``choose``;
+    by default :func:`ranked_chooser` over ``ranker``, ``pool``, ``top``, ``samples``), and the
+    target is the share of ``check`` fresh replays of it (sigmas ``l`` x fastfiz's) that score
+    (an unbiased estimate of that shot's chance). With ``discount`` g > 0 a replay that scores
+    counts ``1 - g + g * value(its leave)`` instead of 1 (a fitted-value-iteration step: the
+    target is then the discounted, normalised run the search makes from the table, 1 for a run
+    that never ends). The chain goes on from the first fresh replay's leave, or (with
+    probability ``restart``) from a new random rack."""
+    if not 0.0 <= discount < 1.0 or (discount and value is None):
+        raise ValueError(f"discount must lie in [0, 1) and a discount > 0 needs the previous value; got {discount}")
+    choose = choose if choose is not None else ranked_chooser(ranker, params, pool, top, samples)
+    C = chains
+    pos, lev = random_racks(rng, C, params), draw_levels(C, rng)
+    X, y, P, Lv = [], [], [], []
+    done, t0 = 0, time.time()
+    while done < n_states:
+        chosen = choose(pos, lev, rng)
         z = BASE_NOISE.draw((C, check), rng) * lev[:, None, None]
         res = simulate_batch(np.repeat(pos, check, axis=0),
                              BASE_NOISE.apply(np.repeat(chosen[:, None], check, axis=1), z, params).reshape(-1, 4), params)
+        worth = res.score.astype(np.float64)
+        if discount:
+            rows = np.flatnonzero(worth > 0)
+            worth[rows] = 1.0 - discount + discount * value.predict(res.positions[rows], np.repeat(lev, check)[rows],
+                                                                    params)
         X.append(table_features(pos, lev, params))
-        y.append(res.score.reshape(C, check).mean(axis=1).astype(np.float32))
+        y.append(worth.reshape(C, check).mean(axis=1).astype(np.float32))
         P.append(pos.copy())
         Lv.append(lev.copy())
         done += C
@@ -175,6 +225,17 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, help="the value file to write (e.g. results/values/value.pt)")
     ap.add_argument("--physics", default="korean_medium", choices=sorted(PRESETS))
     ap.add_argument("--ranker", default="results/rankers/fastfiz/ranker.pt", help="the shot ranker the labelling search uses")
+    ap.add_argument("--labeller", default="ranked", choices=("ranked", "search"),
+                    help="ranked: top of a ranked pool by noisy shares (--pool, --top, --samples); search: the "
+                         "position-aware robust search itself over --value (one step of policy iteration)")
+    ap.add_argument("--value", help="--labeller search / --discount: the previous value (e.g. results/values/value.pt)")
+    ap.add_argument("--high-ranker", default="results/rankers/fastfiz_x5/ranker.pt",
+                    help="--labeller search: the ranker for tables at level >= --split")
+    ap.add_argument("--split", type=float, default=2.5, help="--labeller search: the level where --high-ranker takes over")
+    ap.add_argument("--position", type=float, nargs=2, default=(8.0, 3.0), metavar=("LOW", "HIGH"),
+                    help="--labeller search: the position weight below and above --split")
+    ap.add_argument("--discount", type=float, default=0.0,
+                    help="> 0: a scoring replay counts 1 - g + g V(leave) (V: --value): the discounted run, not one shot")
     ap.add_argument("--states", type=int, default=60000, help="training tables")
     ap.add_argument("--test-states", type=int, default=4096, help="held-out tables")
     ap.add_argument("--pool", type=int, default=300)
@@ -189,6 +250,10 @@ def main(argv=None) -> int:
     for key in ("states", "test_states", "pool", "top", "samples", "check", "hidden", "layers", "epochs"):
         if getattr(args, key) < 1:
             ap.error(f"--{key.replace('_', '-')} must be >= 1")
+    if (args.labeller == "search" or args.discount) and not args.value:
+        ap.error("--labeller search and --discount need --value (the previous value)")
+    if not 0.0 <= args.discount < 1.0 or min(args.position) < 0:
+        ap.error("--discount must lie in [0, 1) and --position weights be >= 0")
     import torch
 
     from billiards.device import start_numba_threads
@@ -198,13 +263,19 @@ def main(argv=None) -> int:
     commit = git_commit()
     params = PRESETS[args.physics]
     ranker = ShotRanker.load(repo_path(args.ranker))
+    previous = TableValue.load(repo_path(args.value)) if args.value else None
+    choose = None
+    if args.labeller == "search":
+        choose = search_chooser([(args.split, ranker, args.pool, args.position[0]),
+                                 (np.inf, ShotRanker.load(repo_path(args.high_ranker)), args.pool, args.position[1])],
+                                previous, params)
     rng = np.random.default_rng(args.seed)
     t0 = time.time()
     say = lambda m: print(m, flush=True)
-    X, y, _, _ = make_dataset(args.states, ranker, rng, params, pool=args.pool, top=args.top, samples=args.samples,
-                              check=args.check, log=say)
-    Xt, yt, _, lt = make_dataset(args.test_states, ranker, np.random.default_rng(args.seed + 10_000), params,
-                                 pool=args.pool, top=args.top, samples=args.samples, check=args.check)
+    data = dict(pool=args.pool, top=args.top, samples=args.samples, check=args.check, choose=choose,
+                discount=args.discount, value=previous)
+    X, y, _, _ = make_dataset(args.states, ranker, rng, params, log=say, **data)
+    Xt, yt, _, lt = make_dataset(args.test_states, ranker, np.random.default_rng(args.seed + 10_000), params, **data)
     say(f"data: {len(y):,} training tables (mean target {y.mean():.3f}), {time.time() - t0:.0f} s")
     value = TableValue(*fit_mlp(X, y, hidden=args.hidden, layers=args.layers, epochs=args.epochs, batch=1024,
                                 seed=args.seed, log=say), {})
@@ -224,4 +295,4 @@ if __name__ == "__main__":
 
 
 __all__ = ["BASE_NOISE", "MAX_LEVEL", "N_FEATURES", "TableValue", "ValueFileError", "draw_levels", "held_out_report",
-           "make_dataset", "table_features"]
+           "make_dataset", "ranked_chooser", "search_chooser", "table_features"]
