@@ -16,7 +16,7 @@ import torch
 import billiards.envs  # noqa: F401  (registers Billiards4Ball-v0)
 import billiards.search.actors as actors_mod
 from billiards.envs import BilliardsEnv, make_env
-from billiards.physics import PRESETS, random_racks, simulate_batch
+from billiards.physics import DEFAULT_PARAMS, PRESETS, random_racks, simulate_batch
 from billiards.physics.noise import NOISE_PRESETS, NoiseModel, noise_errors, noise_from_config, noise_record
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -307,3 +307,30 @@ def test_league_players_are_told_their_shots_level():
     c, d = Telling(), Telling()
     play_match(c, d, seed=3, noise="fastfiz", target=2, max_innings=6)
     assert set(c.levels + d.levels) == {None}  # fixed noise: no level is handed over
+
+
+def test_a_policy_trained_under_variable_noise_is_told_the_level_or_refused_clearly(tmp_path):
+    """Such a policy reads the level as its last input: the league's policy player feeds it; the
+    policy proposer and the pictures, which have no level to give, refuse it by name."""
+    from billiards.files import save_tagged
+    from billiards.league.agents import PolicyAgent
+    from billiards.pictures import load_player
+    from billiards.rl.policy import POLICY_FORMAT, _build_agent, _load_policy_file
+    from billiards.search.proposers import load_policy_proposer
+
+    state = _load_policy_file(ROOT / "results" / "policies" / "fastfiz_aim_features" / "seed0.pt")
+    config = {**state["config"], "noise": {**state["config"]["noise"], "preset": "variable"}}
+    agent, _ = _build_agent(config)
+    path = save_tagged(tmp_path / "variable.pt", {**state, "config": config,
+                                                    "actor": {k: v.clone() for k, v in agent.actor.state_dict().items()}})
+    player = PolicyAgent(str(path), DEFAULT_PARAMS)
+    view = random_racks(np.random.default_rng(0), 1)[0]
+    low, high = player.act(view, 0.0), player.act(view, 5.0)
+    assert low.shape == (4,) and not np.array_equal(low, high)  # the level reaches the network
+    with pytest.raises(ValueError, match="trained under variable noise"):
+        player.act(view, None)
+    with pytest.raises(ValueError, match="trained under variable noise"):
+        load_policy_proposer([path], name="v")
+    with pytest.raises(ValueError, match="trained under variable noise"):
+        load_player(str(path))
+    assert state["format"] == POLICY_FORMAT

@@ -29,6 +29,7 @@ from typing import Optional
 import numpy as np
 
 from billiards import domain
+from billiards.envs._common import with_levels
 from billiards.envs.sagu import SWAP
 from billiards.physics import PhysicsParams, simulate_batch
 from billiards.physics.noise import NoiseModel
@@ -135,11 +136,12 @@ class PolicyAgent:
 
     def __init__(self, path: str, params: PhysicsParams):
         from billiards.files import repo_path
-        from billiards.rl.policy import load_policy
+        from billiards.rl.policy import load_policy, reads_level
 
         self.policy, cfg = load_policy(repo_path(path))
         self.constrain_aim, self.extra_features = bool(cfg.env.constrain_aim), bool(cfg.env.extra_features)
-        self.params = params
+        self.reads_level = reads_level(cfg)  # trained under variable noise: the level is its last input
+        self.params, self.path = params, path
 
     def reseed(self, seed: int) -> None:
         pass  # deterministic
@@ -149,7 +151,13 @@ class PolicyAgent:
         from tensordict import TensorDict
         from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-        obs = torch.as_tensor(domain.observation(view[None], self.extra_features), dtype=torch.float32)
+        obs = domain.observation(view[None], self.extra_features)
+        if self.reads_level:
+            if level is None:
+                raise ValueError(f"policy {self.path} was trained under variable noise and reads each shot's level; "
+                                 f"the match's noise tells none (play it under noise=variable)")
+            obs = with_levels(obs, np.array([level]))
+        obs = torch.as_tensor(obs, dtype=torch.float32)
         with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
             action = self.policy(TensorDict({"observation": obs}, batch_size=[1]))["action"].double().numpy()
         raw = domain.raw_action(action, view[None], self.params.ball_radius, self.constrain_aim)

@@ -94,6 +94,14 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
     return save_tagged(out, payload)
 
 
+def reads_level(cfg) -> bool:
+    """Whether a run's policy reads each shot's noise level as its observation's last entry
+    (trained under variable noise, ``noise=variable``)."""
+    from billiards.physics.noise import noise_from_config
+
+    return noise_from_config(cfg.get("noise")).is_variable
+
+
 def policy_physics(cfg) -> PhysicsParams:
     """The table a run trained on (runs saved before the presets existed: ``international``)."""
     return params_from_config(compat.saved_physics_node(cfg))
