@@ -213,6 +213,21 @@ def test_safety_shots_are_screened_misses_weighed_beside_the_attempts(recorded):
     with pytest.raises(ValueError, match="safeties"):
         RobustConfig(safeties=2)  # safety shots need the leave weight
 
+    # soft safety draws: screened beside the proposer's candidates, in the budget, chosen from
+    recorded.clear()
+    soft = RobustConfig(budget=300, k1=150, leave=1.0, safeties=4, safety_draws=40)
+    res = robust_search(pos, Dead(), soft, np.random.default_rng(0), K, FASTFIZ, value=value)
+    assert res.n_sims == sum(len(a) for _, a in recorded) == 6 * 300
+    waves = soft.k1 // soft.wave  # the adaptive screen's waves (nothing scores), then the soft shots, exactly
+    assert [len(a) for _, a in recorded[:waves + 1]] == [6 * soft.wave] * waves + [6 * 40]
+    assert (res.actions[:, 1] > 0).all()  # the dead proposer's shots go nowhere: a soft shot is played
+    drawn = recorded[waves][1].reshape(6, 40, 4)
+    assert all(any(np.array_equal(a, d) for d in drawn[s]) for s, a in enumerate(res.actions))
+    for bad in (dict(safety_draws=5), dict(leave=1.0, safeties=2, safety_draws=-1),
+                dict(budget=300, k1=150, leave=1.0, safeties=2, safety_draws=150)):
+        with pytest.raises(ValueError, match="safety_draws|halving leaves"):
+            RobustConfig(**bad)
+
 
 def test_the_training_command_writes_a_value_the_search_plays(tmp_path, capsys):
     from billiards.search.value import main

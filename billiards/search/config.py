@@ -150,6 +150,7 @@ class RobustSearchConfig(_SearchOption):
     position: float = 0.0  # position play: a replay that scores is worth 1 + position * V(its leave)
     leave: float = 0.0  # safety play (two-player): a replay that misses costs leave * V(the opponent's table)
     safeties: int = 0  # safety play: also weigh this many screened misses that leave the opponent the hardest table
+    safety_draws: int = 0  # safety play: screen this many soft shots into a red's cone too, as safety candidates
     value: Optional[str] = None  # the table value file (billiards.search.value) that prices the leaves
 
     def settings(self):

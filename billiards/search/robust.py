@@ -35,7 +35,9 @@ position * V(leave)``: the chance that the next shot scores from there), ``leave
 safe in a two-player match (a replay that misses costs ``leave * V`` of the table the opponent
 is left), and with ``safeties`` > 0 the noisy rounds also weigh that many safety shots: screened
 candidates that neither score nor foul, those whose exact leave the value rates hardest for the
-opponent. The statistic is then over reward plus term; the noisy replays are the same ones.
+opponent (``safety_draws`` > 0 adds that many soft shots into a red's contact cone to the screen,
+deliberate safeties to choose from beside the proposer's misses; they count in the budget).
+The statistic is then over reward plus term; the noisy replays are the same ones.
 
 The played action is the best by value; ties go to the higher statistic, then proposer order.
 Simulations per decision: at most ``budget`` (exactly ``budget`` whenever a candidate is left
@@ -79,6 +81,7 @@ class RobustConfig:
     position: float = 0.0  # a replay that scores is worth 1 + position * V(its leave) (needs a table value)
     leave: float = 0.0  # two-player: a replay that misses costs leave * V(the opponent's view of its leave)
     safeties: int = 0  # two-player: also replay the screened misses whose exact leave V rates hardest for the opponent
+    safety_draws: int = 0  # two-player: soft shots into a red's contact cone screened beside the proposer's (safeties)
 
     def __post_init__(self):
         if not (math.isfinite(self.position) and self.position >= 0 and math.isfinite(self.leave) and self.leave >= 0):
@@ -87,6 +90,9 @@ class RobustConfig:
         if self.safeties < 0 or (self.safeties and not (self.leave and self.screen)):
             raise ValueError(f"safeties (safety shots replayed beside the scoring ones) must be >= 0 and need leave > 0 "
                              f"and the exact screen; got safeties={self.safeties}, leave={self.leave}, screen={self.screen}")
+        if self.safety_draws < 0 or (self.safety_draws and not self.safeties):
+            raise ValueError(f"safety_draws (soft shots screened as safety candidates) must be >= 0 and need "
+                             f"safeties > 0; got safety_draws={self.safety_draws}, safeties={self.safeties}")
         if self.schedule not in SCHEDULES:
             raise ValueError(f"robust search schedule must be one of {', '.join(SCHEDULES)}; got {self.schedule!r}")
         if self.target < 0 or self.wave < 1:
@@ -110,11 +116,11 @@ class RobustConfig:
                 raise ValueError(f"schedule=uniform spends k1 * samples + m1 * k2 = {self.k1} * {self.samples} + "
                                  f"{self.m1} * {self.k2} = {self.k1 * self.samples + expand}, not the budget {self.budget}")
         else:
-            rest = self.budget - expand - (self.k1 if self.screen else 0)
+            rest = self.budget - expand - (self.k1 + self.safety_draws if self.screen else 0)
             need = 1 if self.screen else self.k1
             if rest < need:
                 raise ValueError(f"schedule=halving leaves {rest} simulations for noisy samples after "
-                                 f"{'the screen of k1=' + str(self.k1) + ' and ' if self.screen else ''}"
+                                 f"{'the screen of k1=' + str(self.k1) + ' (+ safety_draws) and ' if self.screen else ''}"
                                  f"m1 * k2 = {expand}: it needs at least {need} of the budget {self.budget}")
 
     @property
@@ -166,6 +172,21 @@ def _screen(positions, proposer, cfg: RobustConfig, rng, params):
         exact[rows, cols] = verifier_reward(res, cfg.foul_penalty)
         leave[rows, cols] = res.positions
         screened[active] += take
+
+
+SOFT_SHOTS = dict(power_low=0.1, power_high=0.4, far_share=0.5)  # the safety draws: soft, into either red's cone
+
+
+def _soft_shots(positions, n: int, cfg: RobustConfig, rng, params):
+    """``n`` soft shots per state into a red's contact cone (a geometric proposer at 10-40 %
+    power, half into the farther red), simulated exactly: candidates (S, n, 4), their exact
+    rewards and leaves, as :func:`_screen` returns them."""
+    from .proposers import GeometricProposer
+
+    S = positions.shape[0]
+    a = GeometricProposer(R=params.ball_radius, **SOFT_SHOTS).propose(positions, n, rng)
+    res = simulate_batch(np.repeat(positions, n, axis=0), a.reshape(-1, 4), params)
+    return a, verifier_reward(res, cfg.foul_penalty).reshape(S, n), res.positions.reshape(S, n, 4, 2)
 
 
 def _errors(noise: NoiseModel, counts: np.ndarray, antithetic: bool, rng) -> np.ndarray:
@@ -229,6 +250,11 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
     state_level = (levels if levels is not None else np.ones(S)) * (noise_level(noise) if value is not None else 0.0)
     if cfg.screen:
         a1, exact, leave, screened = _screen(positions, proposer, cfg, rng, params)
+        if cfg.safety_draws:  # soft shots beside the proposer's, for the safety shots to choose from
+            soft = _soft_shots(positions, cfg.safety_draws, cfg, rng, params)
+            a1, exact, leave = (np.concatenate([x, y], axis=1) for x, y in zip((a1, exact, leave), soft))
+            screened = screened + cfg.safety_draws
+            K = a1.shape[1]
         has_leave = np.ones((S, K), dtype=bool)
         n_sims += int(screened.sum())
         alive = [list(np.flatnonzero(exact[s] > 0)) for s in range(S)]
