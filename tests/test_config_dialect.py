@@ -345,17 +345,17 @@ def test_under_noise_the_default_is_the_strongest_measured_configuration():
     position-aware robust search (the shipped table value) over the shot ranker trained for
     that noise, from a pool of 500; without noise, h2 over geometric draws, as before; either
     stays one override away."""
-    value = "results/values/value.pt"
-    for noise, (proposer, ranker, pool, search, position) in {
-            "none": ("geometric", None, None, "h2", None),
-            "fastfiz": ("ranked", "results/rankers/fastfiz/ranker.pt", 500, "robust", 8.0),
-            "fastfiz_x5": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 3.0),
-            "variable": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 5.0)}.items():
+    first, run = "results/values/value.pt", "results/values/run1.pt"  # P(next shot scores); the discounted run
+    for noise, (proposer, ranker, pool, search, position, value) in {
+            "none": ("geometric", None, None, "h2", None, None),
+            "fastfiz": ("ranked", "results/rankers/fastfiz/ranker.pt", 500, "robust", 8.0, run),
+            "fastfiz_x5": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 3.0, first),
+            "variable": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 5.0, first)}.items():
         cfg = compose_search(f"noise={noise}")
         got = (cfg.proposer.kind, cfg.proposer.get("ranker"), cfg.proposer.get("pool"), cfg.search.kind,
                cfg.search.get("position"))
         assert got == (proposer, ranker, pool, search, position), noise
-        assert cfg.search.get("value") == (value if position else None)
+        assert cfg.search.get("value") == value
         search_config.validate(cfg)  # the ranker and value files are there and load
     blind = compose_search("noise=fastfiz", "search=robust", "proposer=ranked")  # the recorded commands' search
     assert (blind.search.position, blind.search.value, blind.proposer.pool) == (0.0, None, 2000)

@@ -1,22 +1,28 @@
-"""A learned value of a table under execution noise: how likely the next shot scores.
+"""A learned value of a table under execution noise: how long a run the search makes from it.
 
 Under noise the search picks each shot for its own chance of scoring; a strong player also
 picks the shot whose *leave* offers an easy next one. The table value ``V(table, level)`` is a
-small network, trained offline on simulated play, that predicts the probability that the
-noise-aware search's next shot scores from a table when the cue errs with ``level`` times the
-``fastfiz`` sigmas (level 1: ``noise=fastfiz``, 5: ``fastfiz_x5``, 0: exact play). The
-robust search (:mod:`billiards.search.robust`) uses it on the noisy replays it already
-simulates: a replay that scores is worth ``1 + position * V(leave)`` (position play), and, in a
-two-player match, a replay that misses costs ``leave * V(the opponent's view of the leave)``
-(safety play).
+small network, trained offline on simulated play, that predicts from a table, when the cue errs
+with ``level`` times the ``fastfiz`` sigmas (level 1: ``noise=fastfiz``, 5: ``fastfiz_x5``, 0:
+exact play), either the probability that the noise-aware search's next shot scores
+(``discount`` 0, the first value, ``results/values/value.pt``) or the run it makes from there,
+discounted by ``g`` and normalised to [0, 1] (``discount`` g > 0: ``V = E[(1 - g) (s_0 + g s_0 s_1
++ g^2 s_0 s_1 s_2 + ...)]`` over the shots' scores s_t, 1 for a run that never ends; the
+shipped run values, made by fitted value iteration with the position-aware search as the
+labeller; the file's ``meta["args"]["discount"]`` says which). The robust search
+(:mod:`billiards.search.robust`) uses it on the noisy replays it already simulates: a replay
+that scores is worth ``1 + position * V(leave)`` (position play), and, in a two-player match,
+a replay that misses costs ``leave * V(the opponent's view of the leave)`` (safety play).
 
 * :func:`table_features` -- the input, one place (training and search).
 * :class:`TableValue` -- the network (a :class:`~billiards.search.ranker.TaggedMLP`: float32,
   the same bits on every CPU; a sealed tagged file, loading executes nothing).
 * :func:`make_dataset` / ``python -m billiards.search.value`` -- how a value is made: chains of
-  play from random racks, each state labelled by the share of ``check`` fresh noisy replays
-  that score of the shot a small noise-aware search (ranked candidates, noisy replays) picks
-  there; the chain goes on from one of those replays' leaves. See ``--help``.
+  play from random racks, each state labelled by ``check`` fresh noisy replays of the shot a
+  labelling search picks there (a small ranked search, or the position-aware search over the
+  previous value): the share that score, or with a discount the mean of ``1 - g + g
+  V_previous(leave)`` over the replays that score; the chain goes on from one of those
+  replays' leaves. See ``--help``.
 """
 
 from __future__ import annotations
@@ -81,7 +87,7 @@ def table_features(positions: np.ndarray, levels, params: PhysicsParams = DEFAUL
 
 class TableValue(TaggedMLP):
     """The table value: a :class:`~billiards.search.ranker.TaggedMLP` over
-    :func:`table_features`; :meth:`predict` is the probability that the next shot scores.
+    :func:`table_features`; :meth:`predict` is the value (the module docstring says which).
     ``meta`` records the table (``physics_params``), the base noise (``noise``: level 1), the
     training command, its held-out check and its cost."""
 
@@ -91,7 +97,8 @@ class TableValue(TaggedMLP):
     WHAT = "table value"
 
     def predict(self, positions: np.ndarray, levels, params: PhysicsParams | None = None) -> np.ndarray:
-        """P(the next shot scores) (...,) float64 for tables (..., 4, 2) at noise ``levels``."""
+        """The value (...,) float64 in (0, 1) of tables (..., 4, 2) at noise ``levels``: P(the next
+        shot scores), or the normalised discounted run for a value made with a discount."""
         logit = self.logits(table_features(positions, levels, params or self.params)).astype(np.float64)
         return 1.0 / (1.0 + numerics.exp(-logit))
 
