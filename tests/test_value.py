@@ -244,3 +244,41 @@ def test_the_training_command_writes_a_value_the_search_plays(tmp_path, capsys):
     assert res.n_sims == 200
     with pytest.raises(SystemExit):
         main(["--out", str(out), "--states", "0"])
+
+
+def test_the_search_labeller_and_the_discount_make_run_targets(tmp_path, monkeypatch):
+    """``--labeller search`` plays the position-aware robust search itself; with a discount g a
+    scoring replay counts 1 - g + g V(its leave): on the same draws every target lies between g'
+    = 1 - g times and 1 times the plain share that scores."""
+    from billiards.search.value import search_chooser
+
+    ranker = ShotRanker.load(ROOT / "results/rankers/fastfiz/ranker.pt")
+    value, g = small_value(), 0.5
+    searched = []
+    real = robust_mod.robust_search
+
+    def spy(positions, proposer, cfg, rng, *args, **kwargs):
+        res = real(positions, proposer, cfg, rng, *args, **kwargs)
+        searched.append((cfg.position, kwargs["levels"].copy(), res.actions.copy()))
+        return res
+
+    monkeypatch.setattr(robust_mod, "robust_search", spy)
+    choose = lambda: search_chooser([(2.5, ranker, 60, 8.0), (np.inf, ranker, 60, 3.0)], value, K, budget=60, k1=30)
+    _, share, _, lev = make_dataset(48, None, np.random.default_rng(4), K, chains=16, check=8, choose=choose())
+    assert searched and {w for w, *_ in searched} == {8.0, 3.0}  # each band plays its own weight
+    assert all((lv < 2.5).all() if w == 8.0 else (lv >= 2.5).all() for w, lv, _ in searched)
+    first = [a for _, _, a in searched]
+    searched.clear()
+    _, run, _, lev2 = make_dataset(48, None, np.random.default_rng(4), K, chains=16, check=8, choose=choose(),
+                                   discount=g, value=value)
+    assert all(np.array_equal(a, b) for a, (_, _, b) in zip(first, searched))  # the same shots, the same replays
+    np.testing.assert_array_equal(lev, lev2)
+    assert (run <= share + 1e-6).all() and (run >= (1 - g) * share - 1e-6).all() and (run < share).any()
+    with pytest.raises(ValueError, match="discount"):
+        make_dataset(8, None, np.random.default_rng(0), K, chains=8, choose=choose(), discount=0.5)  # no value
+    from billiards.search.value import main
+
+    for bad in (["--labeller", "search"], ["--discount", "0.5"], ["--value", "results/values/value.pt", "--discount", "1"]):
+        with pytest.raises(SystemExit):
+            main(["--out", str(tmp_path / "never.pt"), *bad])
+    assert not (tmp_path / "never.pt").exists()

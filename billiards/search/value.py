@@ -132,7 +132,7 @@ def ranked_chooser(ranker: ShotRanker, params: PhysicsParams = DEFAULT_PARAMS, p
     return choose
 
 
-def search_chooser(bands, value: "TableValue", params: PhysicsParams = DEFAULT_PARAMS, budget: int = 400):
+def search_chooser(bands, value: "TableValue", params: PhysicsParams = DEFAULT_PARAMS, budget: int = 400, k1: int = 300):
     """A labelling search that is the position-aware robust search itself (one step of policy
     iteration: the value it prices leaves with is the previous one). ``bands``: ``(upper level,
     ranker, pool, position weight)`` in increasing order; a table plays the first band whose
@@ -140,7 +140,7 @@ def search_chooser(bands, value: "TableValue", params: PhysicsParams = DEFAULT_P
     :func:`ranked_chooser`."""
     from .robust import RobustConfig, robust_search
 
-    plays = [(upper, RankedProposer(ranker, pool=pool, params=params), RobustConfig(budget=budget, position=w))
+    plays = [(upper, RankedProposer(ranker, pool=pool, params=params), RobustConfig(budget=budget, k1=k1, position=w))
              for upper, ranker, pool, w in bands]
 
     def choose(pos, lev, rng):
