@@ -153,3 +153,23 @@ def test_the_match_config_checks_the_noise_cap_and_each_players_search_before_an
     assert any(message in e for e in errors(cfg)), errors(cfg)
     with initialize_config_dir(str(REPO / "conf"), version_base=None):
         assert errors(compose("match", overrides=["players=[greedy_v,safety_v]"])) == []
+
+
+def test_a_player_can_be_added_on_the_command_line_and_a_bad_one_is_named():
+    from hydra import compose, initialize_config_dir
+
+    from billiards.league.agents import AgentConfig
+    from billiards.league.config import agent_config, errors
+
+    mine = "+agents.mine={kind: search, proposer: for_noise, overrides: {position: 4.0, value: results/values/run1.pt}}"
+    with initialize_config_dir(str(REPO / "conf"), version_base=None):
+        cfg = compose("match", overrides=[mine, "players=[greedy,mine]"])
+        bad = compose("match", overrides=["+agents.b1={kind: search, k: many}", "+agents.b2={nope: 1}"])
+    assert errors(cfg) == []
+    added = agent_config(cfg.agents.mine, "mine")
+    assert added == AgentConfig(kind="search", proposer="for_noise",
+                                overrides={"position": 4.0, "value": "results/values/run1.pt"})  # defaults filled in
+    assert agent_config(cfg.agents.greedy, "greedy") == AgentConfig(kind="search", search="robust", proposer="ranked")
+    errs = errors(bad)
+    assert any(e.startswith("agents.b1.k: ") and "many" in e for e in errs), errs
+    assert any(e.startswith("agents.b2") and "nope" in e and "a player's keys" in e for e in errs), errs

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 
@@ -30,7 +31,8 @@ def run(cfg, out_dir) -> dict:
     set_threads(cfg.threads)
     out_dir = Path(cfg.resume or out_dir)
     params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
-    players = {name: make_agent(agent_config(cfg.agents[name]), noise, params) for name in cfg.players}
+    agents = {name: agent_config(cfg.agents[name], name) for name in cfg.players}
+    players = {name: make_agent(agents[name], noise, params) for name in cfg.players}
     # the league's command: this one, or, continuing a league, the one that started it
     if cfg.resume:
         overrides = list(OmegaConf.load(out_dir / ".hydra" / "overrides.yaml"))
@@ -42,7 +44,7 @@ def run(cfg, out_dir) -> dict:
     record = {"command": " ".join(recorded_command(command)), "commit": git_commit(),
               **noise_record(noise), "physics": params.describe(), "target": cfg.target, "start": cfg.start,
               "foul_penalty": cfg.foul_penalty, "max_innings": cfg.max_innings, "matches_per_ordered_pair": cfg.matches,
-              "seed": cfg.seed, "agents": {n: OmegaConf.to_container(cfg.agents[n]) for n in cfg.players}}
+              "seed": cfg.seed, "agents": {n: dataclasses.asdict(a) for n, a in agents.items()}}
     print(f"league of {', '.join(cfg.players)}: {cfg.matches} matches per ordered pair to {cfg.target} points, "
           f"noise {noise.describe()}; output: {display_path(out_dir)}", flush=True)
     league = run_league(players, out_dir=out_dir, matches=cfg.matches, seed=cfg.seed, noise_name=noise.describe(),

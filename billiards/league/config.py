@@ -4,10 +4,12 @@ writes anything (:class:`ValidateMatchConfig`)."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Any, Dict, List, Optional
 
 from omegaconf import MISSING, DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
 from billiards.app_config import ValidatingCallback, numeric_bound_errors, register_app
 from billiards.device import threads_error
@@ -19,7 +21,10 @@ from .agents import AgentConfig
 
 @dataclass
 class MatchAppConfig:
-    agents: Dict[str, AgentConfig] = field(default_factory=dict)  # every player the app knows, by name
+    # every player the app knows, by name: each an AgentConfig, checked by errors() (the map is
+    # untyped so that a player can be added on the command line: +agents.mine={kind: search, ...};
+    # OmegaConf cannot merge a dict into a map of structured values)
+    agents: Dict[str, Any] = field(default_factory=dict)
     players: List[str] = MISSING  # who plays the league (names of agents)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
@@ -51,7 +56,10 @@ def errors(cfg: DictConfig) -> list[str]:
         if err := noise_cap_error(noise_from_config(cfg.noise)):
             errs.append(err)
     for name, agent in cfg.agents.items():
-        errs += agent_config(agent).errors(name)
+        try:
+            errs += agent_config(agent, name).errors(name)
+        except ValueError as err:
+            errs.append(str(err))
     unknown = [p for p in cfg.players if p not in cfg.agents]
     if unknown or len(set(cfg.players)) != len(cfg.players) or len(cfg.players) < 2:
         errs.append(f"players must name at least two different agents of {sorted(cfg.agents)}; got {list(cfg.players)}")
@@ -81,8 +89,18 @@ class ValidateMatchConfig(ValidatingCallback):
     validate = staticmethod(validate)
 
 
-def agent_config(node) -> AgentConfig:
-    return OmegaConf.to_object(node) if isinstance(node, DictConfig) else node
+def agent_config(node, name: str = "?") -> AgentConfig:
+    """A player's :class:`AgentConfig` from its config node (the schema's defaults filled in);
+    ValueError naming ``agents.<name>`` for an unknown key or a value of the wrong type."""
+    if isinstance(node, AgentConfig):
+        return node
+    try:
+        return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(AgentConfig), node))
+    except OmegaConfBaseException as err:
+        keys = ", ".join(f.name for f in dataclasses.fields(AgentConfig))
+        key = getattr(err, "full_key", None)
+        where = f"agents.{name}" + (f".{key}" if key else "")
+        raise ValueError(f"{where}: {str(err).splitlines()[0]} (a player's keys: {keys})") from None
 
 
 __all__ = ["MatchAppConfig", "MatchConfigError", "ValidateMatchConfig", "agent_config", "errors", "validate"]
