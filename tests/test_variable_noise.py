@@ -276,6 +276,13 @@ def test_search_app_plays_variable_noise_and_records_it(tmp_path, monkeypatch, p
     assert results["config"]["noise"]["preset"] == "variable"
     levels = np.concatenate([t for t in told if t is not None and len(t)])
     assert len(levels) == sum(len(t) for t in told) > 0 and ((levels >= 0) & (levels <= 5)).all()
+    if "protocol=p3" in protocol:  # the ledger keeps each last shot's level: the one the search was told
+        from billiards.search.protocols import read_chains
+
+        (chain,) = read_chains(tmp_path / "chains.jsonl").values()
+        recorded = [shot[4] for shot in chain["last_shots"]]
+        assert all(len(shot) == 5 for shot in chain["last_shots"])
+        np.testing.assert_array_equal(recorded, levels[-len(recorded):])
 
 
 def test_search_app_refuses_a_bad_scale_before_writing_anything(tmp_path):

@@ -110,7 +110,8 @@ def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int
 def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int = 6,
               params: PhysicsParams = DEFAULT_PARAMS, bar=None, noise=None):
     """One P3 chain from the canonical rack: (length, last shots [(positions, action, score)],
-    under noise [(positions, commanded action, score, played action)])."""
+    under noise [(positions, commanded action, score, played action)], under variable noise
+    [(..., played action, the shot's level)])."""
     actor.reseed(seed)
     noise = get_noise(noise)
     env = BilliardsEnv(batch_size=[1], start="canonical", on_miss="reset", max_shots=cap, seed=seed, params=params,
@@ -120,12 +121,15 @@ def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int =
     length = 0
     while True:
         before = td["positions"][0].numpy().copy()
+        level = td["noise_level"][0].numpy().copy() if noise.is_variable else None  # the level the env told
         td = env.step(actor(td))
         nxt = td["next"]
         scored = bool(nxt["score"].item())
         shot = (before, td["action"][0].numpy().copy(), scored)
         if not noise.is_exact:
             shot += (nxt["played_action"][0].numpy().copy(),)
+        if level is not None:
+            shot += (level.reshape(()),)
         history.append(shot)
         del history[:-keep_last]
         if not scored:
