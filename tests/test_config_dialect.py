@@ -356,6 +356,7 @@ def test_under_noise_the_default_is_the_strongest_measured_configuration():
                cfg.search.get("position"))
         assert got == (proposer, ranker, pool, search, position), noise
         assert cfg.search.get("value") == value
+        assert cfg.search.get("target") == {"none": None, "fastfiz": 40}.get(noise, 10)  # the adaptive screen's stop
         search_config.validate(cfg)  # the ranker and value files are there and load
     blind = compose_search("noise=fastfiz", "search=robust", "proposer=ranked")  # the recorded commands' search
     assert (blind.search.position, blind.search.value, blind.proposer.pool) == (0.0, None, 2000)
