@@ -94,12 +94,11 @@ def load_player(spec: str, seed: int = 0, constrain_aim: bool = False):
         params = params_from_config(cfg.physics)
         actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
         return actor, False, False, params
-    from billiards.rl.policy import load_policy, policy_physics, reads_level
+    from billiards.rl.policy import level_input_error, load_policy, policy_physics, reads_level
 
     policy, cfg = load_policy(path)
     if reads_level(cfg):
-        raise ValueError(f"policy {path} was trained under variable noise and reads each shot's level; pictures play "
-                         f"exact shots and tell none")
+        raise ValueError(level_input_error(path, "pictures play exact shots and tell none"))
     return policy, bool(cfg.env.constrain_aim), bool(cfg.env.extra_features), policy_physics(cfg)
 
 

@@ -154,8 +154,9 @@ class PolicyAgent:
         obs = domain.observation(view[None], self.extra_features)
         if self.reads_level:
             if level is None:
-                raise ValueError(f"policy {self.path} was trained under variable noise and reads each shot's level; "
-                                 f"the match's noise tells none (play it under noise=variable)")
+                from billiards.rl.policy import level_input_error
+
+                raise ValueError(level_input_error(self.path, "the match's noise tells none (play it under noise=variable)"))
             obs = with_levels(obs, np.array([level]))
         obs = torch.as_tensor(obs, dtype=torch.float32)
         with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():

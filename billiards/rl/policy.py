@@ -102,6 +102,11 @@ def reads_level(cfg) -> bool:
     return noise_from_config(cfg.get("noise")).is_variable
 
 
+def level_input_error(path, why: str) -> str:
+    """The message for a policy that reads the level (:func:`reads_level`) where ``why`` none is given."""
+    return f"policy {path} was trained under variable noise and reads each shot's level; {why}"
+
+
 def policy_physics(cfg) -> PhysicsParams:
     """The table a run trained on (runs saved before the presets existed: ``international``)."""
     return params_from_config(compat.saved_physics_node(cfg))

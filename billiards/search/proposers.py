@@ -392,15 +392,15 @@ def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | No
     ``device``: where the networks run (a GPU takes the torch implementation; default CPU);
     policies trained on another table are used with a :class:`PhysicsMismatchWarning`."""
     from billiards.physics.config import warn_physics_mismatch
-    from billiards.rl.policy import load_policy, policy_physics, reads_level
+    from billiards.rl.policy import level_input_error, load_policy, policy_physics, reads_level
 
     params = DEFAULT_PARAMS if params is None else params
     loaded = [load_policy(p) for p in paths]
     for path, (_, cfg) in zip(paths, loaded):
         if reads_level(cfg):
-            raise ValueError(f"proposer {name!r}: policy {path} was trained under variable noise and reads each shot's "
-                             f"level, which proposers are not given; play it with match.py (a policy player is told "
-                             f"the level) or evaluate it with train.py")
+            raise ValueError(f"proposer {name!r}: " + level_input_error(
+                path, "proposers are not given it; play it with match.py (a policy player is told the level) or "
+                      "evaluate it with train.py"))
     layouts = {(bool(c.env.constrain_aim), bool(c.env.extra_features)) for _, c in loaded}
     if len(layouts) != 1:
         raise ValueError(f"proposer {name!r}: checkpoints mix observation/action layouts {sorted(layouts)}")
