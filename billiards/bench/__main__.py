@@ -1,0 +1,84 @@
+"""``python -m billiards.bench``: the leaderboard's tools.
+
+    python -m billiards.bench leaderboard                # rebuild results/leaderboard.md / .json / .png from the scorecards
+    python -m billiards.bench leaderboard --out /tmp/lb  # ... elsewhere (CI diffs it against the committed one)
+    python -m billiards.bench campaign                   # play every missing scorecard of the project's own entries
+    python -m billiards.bench campaign --only h2_ --tracks p3-exact-v1
+    python -m billiards.bench record-training results/training/paper/table1/sac --row "SAC plain (Table 1)"
+    python -m billiards.bench fingerprint                # each track's fingerprint, recomputed
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+from pathlib import Path
+
+from billiards.files import ROOT
+
+SCORECARDS = Path("results/bench/scorecards")
+
+
+def campaign(only: str | None, tracks: list[str] | None, progress: bool) -> None:
+    from billiards.device import set_threads
+
+    from .entries import ENTRIES, check_entries
+    from .run import SCORECARD_JSON, evaluate
+
+    check_entries()
+    set_threads(1)
+    jobs = [(e, t) for e in ENTRIES for t in e.tracks if (only is None or only in e.slug) and (tracks is None or t in tracks)]
+    for i, (entry, track) in enumerate(jobs, 1):
+        out = SCORECARDS / track / entry.slug
+        card = ROOT / out / SCORECARD_JSON
+        if card.is_file() and not json.loads(card.read_text()).get("partial"):
+            continue
+        command = " ".join(shlex.quote(w) for w in ["python", "evaluate.py", f"track={track}", f"agent={entry.spec}",
+                                                     f"name={entry.slug}", f"group='{entry.row}'", f"out={out}"])
+        print(f"[{i}/{len(jobs)}] {command}", flush=True)
+        evaluate(entry.spec, track, out=ROOT / out, name=entry.slug, group=entry.row, command=command, progress=progress)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m billiards.bench", description="The benchmark's leaderboard tools.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    lb = sub.add_parser("leaderboard", help="rebuild the leaderboard from the committed scorecards")
+    lb.add_argument("--out", type=Path, default=ROOT / "results", help="folder for leaderboard.md/.json/.png (default results/)")
+    lb.add_argument("--no-figure", action="store_true", help="skip the PNG")
+    cp = sub.add_parser("campaign", help="play the project's missing scorecards (resumable)")
+    cp.add_argument("--only", help="entries whose slug contains this")
+    cp.add_argument("--tracks", nargs="*", help="only these tracks")
+    cp.add_argument("--quiet", action="store_true")
+    rt = sub.add_parser("record-training", help="a recorded scorecard from a training setting's committed evaluations")
+    rt.add_argument("setting", type=Path, help="a folder of seed<k>/ training run dirs with eval.json")
+    rt.add_argument("--row", required=True)
+    rt.add_argument("--slug", required=True)
+    sub.add_parser("fingerprint", help="recompute each track's fingerprint")
+    args = parser.parse_args(argv)
+    if args.command == "leaderboard":
+        from .leaderboard import build
+
+        try:
+            paths = build(ROOT / "results" / "bench", args.out, figure=not args.no_figure)
+        except ValueError as err:
+            raise SystemExit(f"Error: {err}") from None
+        print("\n".join(str(p) for p in paths))
+    elif args.command == "campaign":
+        campaign(args.only, args.tracks, not args.quiet)
+    elif args.command == "record-training":
+        from .leaderboard import record_training
+
+        print(record_training(args.setting, args.row, args.slug))
+    else:
+        from .run import fingerprint
+        from .tracks import TRACKS
+
+        for t in TRACKS.values():
+            now = fingerprint(t)
+            print(f"{t.name}: {now} {'ok' if now == t.fingerprint else 'CHANGED (bump the version)'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,66 @@
+"""The leaderboard's own entries: every agent the project has, on every track it applies to.
+
+Each entry is data: a row name, the spec (never code: baselines, policy files, searches and
+league players only, checked), the tracks, and for trained policies one spec per training seed
+pooled into one row. ``python -m billiards.bench campaign`` plays the missing ones into
+``results/bench/scorecards/<track>/<slug>/`` (each scorecard records its own ``evaluate.py``
+command, which replays it alone).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+EXACT = ("innings-v1", "p1-exact-v1", "p3-exact-v1")
+NOISY_P1 = ("p1-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
+NOISY = ("p1-fastfiz-v1", "p3-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
+ALL_SINGLE = EXACT + NOISY
+MATCH = ("match-x5-v1",)
+
+
+@dataclass(frozen=True)
+class Entry:
+    row: str  # the leaderboard row (seeds of one setting share it)
+    slug: str  # the scorecard directory name
+    spec: str
+    tracks: tuple[str, ...]
+    note: str = ""
+
+
+def _seeds(row: str, slug: str, folder: str, tracks, note: str = "") -> list[Entry]:
+    return [Entry(row, f"{slug}_s{s}", f"results/policies/{folder}/seed{s}.pt", tracks, note) for s in range(3)]
+
+
+ENTRIES: tuple[Entry, ...] = (
+    Entry("random", "random", "random", ALL_SINGLE + MATCH, "uniform in the normalised box"),
+    Entry("nearest-red heuristic", "nearest", "nearest", ALL_SINGLE + MATCH, "full-ball hit on the nearest red, half power"),
+    Entry("random inside the aim window", "random_aim", "random_aim", ALL_SINGLE + MATCH, "uniform u, power, tip"),
+    *_seeds("SAC aim + features, foul penalty (Table 5)", "sac_base", "base", ALL_SINGLE),
+    *_seeds("SAC aim + features, gentle (Table 5)", "sac_gentle", "gentle", EXACT),
+    *_seeds("SAC aim + features, near-miss (Table 5)", "sac_near_miss", "near_miss", EXACT),
+    *_seeds("SAC aim + features, both bonuses (Table 5)", "sac_both", "both", EXACT),
+    *_seeds("SAC aim + features trained under fastfiz", "sac_fastfiz", "fastfiz_aim_features", ALL_SINGLE),
+    Entry("SAC aim + features, foul penalty (Table 5), seed 0", "sac_base_s0_match", "results/policies/base/seed0.pt", MATCH),
+    Entry("h2, geometric proposer", "h2_geometric", "search:h2/geometric", EXACT + ("p1-fastfiz-v1",)),
+    Entry("h2, SAC ensemble proposer (base)", "h2_base", "search:h2/base", EXACT),
+    Entry("PUCT, geometric proposer", "puct_geometric", "search:puct/geometric", EXACT),
+    Entry("PUCT, SAC ensemble proposer (near_miss)", "puct_near_miss", "search:puct/near_miss", EXACT),
+    Entry("robust search over the noise's shot ranker (blind to the leave)", "robust_ranked", "search:robust", NOISY),
+    Entry("position-aware robust search (search.py's default under noise)", "position_default", "search:default", NOISY),
+    Entry("league: greedy", "league_greedy", "league:greedy", MATCH),
+    Entry("league: greedy_r (run value)", "league_greedy_r", "league:greedy_r", MATCH),
+    Entry("league: safety_r (run value, safety shots)", "league_safety_r", "league:safety_r", MATCH),
+)
+
+
+def check_entries() -> None:
+    """Entries name no code: every spec is a baseline, a policy file, a search or a league player."""
+    from .agents import BASELINES
+
+    for e in ENTRIES:
+        ok = e.spec in BASELINES or e.spec.startswith(("search:", "league:")) or (e.spec.startswith("results/") and e.spec.endswith(".pt"))
+        if not ok:
+            raise ValueError(f"leaderboard entry {e.slug}: spec {e.spec!r} is not a baseline, policy file, search or league player")
+
+
+__all__ = ["ENTRIES", "Entry", "check_entries"]

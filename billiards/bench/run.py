@@ -1,0 +1,490 @@
+"""Scoring an agent on a track: the protocols, the ledger, the scorecard (docs/benchmark.md).
+
+:func:`evaluate` plays a track's units (blocks of innings, chains or matches) in order; with an
+output directory each finished unit is appended to ``units.jsonl`` as a sealed record carrying
+the run's identity (a hash of the track and the agent), so an interrupted evaluation keeps what
+it finished and the same call continues it; a directory that holds another agent's or another
+track version's evaluation is refused, as is a ledger line that is torn (dropped and played
+again when it is the last), unsealed or foreign. At the end ``scorecard.json`` and
+``scorecard.md`` are written.
+
+The agent is timed alone (CPU seconds of its own calls) and its simulations counted.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from billiards.files import atomic_write_text, display_path, record_intact, sealed_record
+
+from . import stats
+from .agents import Agent, AgentError, resolve_agent
+from .tracks import Track, get_track
+
+IDENTITY_FILE, LEDGER_FILE = "evaluation.json", "units.jsonl"
+SCORECARD_JSON, SCORECARD_MD = "scorecard.json", "scorecard.md"
+
+
+class EvaluationError(RuntimeError):
+    """An evaluation that cannot go on: the agent failed mid-run (what finished is kept) or the
+    directory is not this evaluation's."""
+
+
+# ----------------------------------------------------------------------------- playing units
+
+
+def _params_noise(track: Track):
+    from billiards.physics import get_params
+    from billiards.physics.noise import get_noise
+
+    return get_params(track.physics), get_noise(track.noise)
+
+
+class _Clock:
+    """The agent's own cost: CPU seconds of its calls, decisions, simulations."""
+
+    def __init__(self, agent: Agent):
+        self.agent, self.cpu, self.decisions = agent, 0.0, 0
+        self.sims0 = agent.sims
+
+    def act(self, obs, tables, levels):
+        t0 = time.process_time()
+        raw = self.agent.act(obs, tables, levels)
+        self.cpu += time.process_time() - t0
+        self.decisions += len(tables)
+        if not (isinstance(raw, np.ndarray) and raw.shape == (len(tables), 4) and np.isfinite(raw).all()):
+            raise AgentError(f"agent {self.agent.name} returned an unusable shot: {np.asarray(raw).tolist()[:1]}")
+        return raw
+
+    def record(self) -> dict:
+        return {"decisions": self.decisions, "cpu_s": round(self.cpu, 6), "sims": int(self.agent.sims - self.sims0)}
+
+
+def _levels(env) -> np.ndarray | None:
+    return None if env._levels is None else env._levels.copy()
+
+
+def play_innings(agent: Agent, track: Track, first: int, n: int) -> dict:
+    """Innings ``first .. first + n - 1`` of an innings or P1 track, side by side: inning i's
+    rack and noise from seed ``track.seed + i`` (each inning depends only on its seed and the agent)."""
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    env = Billiards4BallVectorEnv(n, start="random", on_miss="continue", max_shots=track.shots, physics=track.physics,
+                                  noise=track.noise, normalize_actions=False)
+    obs, info = env.reset(seed=track.seed + first)
+    agent.reset(track.seed + first)
+    clock = _Clock(agent)
+    score = np.zeros((n, track.shots), dtype=bool)
+    foul = np.zeros((n, track.shots), dtype=bool)
+    tables = info["positions"]
+    for t in range(track.shots):
+        raw = clock.act(obs, tables.copy(), _levels(env) if track.tells_level else None)
+        obs, _, _, _, info = env.step(raw)
+        score[:, t], foul[:, t] = info["score"], info["foul"]
+        tables = info["positions"]
+    return {"first": first, "n": n, "score": score.astype(int).tolist(), "foul": foul.astype(int).tolist(), **clock.record()}
+
+
+def play_chain(agent: Agent, track: Track, index: int) -> dict:
+    """Chain ``index`` of a P3 track: the opening rack, seed ``track.seed + index``, until the first
+    miss or foul or the cap."""
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    seed = track.seed + index
+    env = Billiards4BallVectorEnv(1, start="canonical", on_miss="reset", max_shots=track.shots, physics=track.physics,
+                                  noise=track.noise, normalize_actions=False)
+    obs, info = env.reset(seed=seed)
+    agent.reset(seed)
+    clock = _Clock(agent)
+    length, fouled = 0, False
+    while True:
+        raw = clock.act(obs, info["positions"].copy(), _levels(env) if track.tells_level else None)
+        obs, _, terminated, truncated, info = env.step(raw)
+        if not info["score"][0]:
+            fouled = bool(info["foul"][0])
+            break
+        length += 1
+        if terminated[0] or truncated[0]:
+            break
+    return {"index": index, "seed": seed, "length": length, "ended_by_foul": fouled, **clock.record()}
+
+
+class _MatchPlayer:
+    """The scored agent as a player of :func:`billiards.league.play.play_match`."""
+
+    def __init__(self, clock: _Clock, tells_level: bool):
+        self.clock, self.tells_level = clock, tells_level
+
+    def reseed(self, seed: int) -> None:
+        self.clock.agent.reset(seed)
+
+    def act(self, view: np.ndarray, level: float | None = None) -> np.ndarray:
+        from billiards.envs._common import with_levels
+        from billiards.league.agents import to_env_action
+
+        levels = None if level is None or not self.tells_level else np.array([float(level)])
+        obs = with_levels(domain_observation(view[None]), levels)
+        raw = self.clock.act(obs, view[None].astype(np.float64), levels)
+        return to_env_action(raw[0])
+
+
+def domain_observation(tables: np.ndarray) -> np.ndarray:
+    from billiards import domain
+
+    return domain.observation(tables)
+
+
+_POOL: dict = {}  # (track name, opponent) -> league player (built once a process)
+
+
+def play_match(agent: Agent, track: Track, index: int) -> dict:
+    """Match ``index`` of a match track: opponent ``index // units``, the break alternating."""
+    from billiards.league.play import play_match as play
+
+    from .agents import league_player
+
+    params, noise = _params_noise(track)
+    j, i = divmod(index, track.units)
+    name = track.opponents[j]
+    if (track.name, name) not in _POOL:
+        _POOL[(track.name, name)] = league_player(name, noise, params)[0]
+    clock = _Clock(agent)
+    seed = track.seed + 1000 * j + i
+    result = play(_MatchPlayer(clock, track.tells_level), _POOL[(track.name, name)], seed=seed,
+                  first="white" if i % 2 == 0 else "yellow", target=track.target, max_innings=track.max_innings,
+                  start="canonical", noise=noise, physics=params)
+    winner = {"white": "agent", "yellow": "opponent", None: None}[result["winner"]]
+    return {"index": index, "opponent": name, "seed": seed, "first": "agent" if i % 2 == 0 else "opponent",
+            "winner": winner, "points": [result["scores"]["white"], result["scores"]["yellow"]],
+            "innings": result["innings"], **clock.record()}
+
+
+def play_unit(agent: Agent, track: Track, unit: int) -> dict:
+    """One resumable unit of ``track`` (a block of innings, a chain, a match)."""
+    if track.protocol in ("innings", "p1"):
+        first = unit * track.block
+        return play_innings(agent, track, first, min(track.block, track.units - first))
+    if track.protocol == "p3":
+        return play_chain(agent, track, unit)
+    return play_match(agent, track, unit)
+
+
+# ----------------------------------------------------------------------------- the fingerprint
+
+
+def fingerprint_data(track: Track) -> list:
+    """What a track's fingerprint covers: its first racks and the nearest-red reference agent's
+    first decisions on them (the shots, and the tables and outcomes they give, noise included),
+    rounded to 1e-9."""
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    from .agents import NearestRedAgent
+
+    params, noise = _params_noise(track)
+    ref = NearestRedAgent(params)
+    r9 = lambda a: np.round(np.asarray(a, dtype=np.float64), 9).tolist()
+    out: list = []
+    if track.protocol == "match":
+        from billiards.envs import sagu_v0
+        from billiards.envs.sagu import AGENTS, shooter_view
+        from billiards.league.agents import to_env_action
+
+        env = sagu_v0.raw_env(first="white", target=track.target, max_innings=track.max_innings, start="canonical",
+                              noise=noise, physics=params)
+        env.reset(seed=track.seed)
+        for _ in range(6):
+            view = shooter_view(env.game.positions, AGENTS.index(env.agent_selection))
+            action = to_env_action(ref.act(None, view[None], None)[0])
+            env.step(action)
+            out.append([r9(env.game.positions), list(env.game.scores), env.agent_selection])
+        return out
+    start, on_miss = ("canonical", "reset") if track.protocol == "p3" else ("random", "continue")
+    env = Billiards4BallVectorEnv(4, start=start, on_miss=on_miss, max_shots=max(track.shots, 2), physics=track.physics,
+                                  noise=track.noise, normalize_actions=False)
+    obs, info = env.reset(seed=track.seed)
+    out.append([r9(info["positions"]), r9(obs), None if env._levels is None else r9(env._levels)])
+    for _ in range(2):
+        raw = ref.act(obs, info["positions"], None)
+        obs, reward, term, trunc, info = env.step(raw)
+        out.append([r9(raw), r9(info["positions"]), info["score"].astype(int).tolist(), info["foul"].astype(int).tolist()])
+    return out
+
+
+def fingerprint(track: Track) -> str:
+    """sha256 of :func:`fingerprint_data` (each track's ``fingerprint`` must equal it)."""
+    return hashlib.sha256(json.dumps(fingerprint_data(track), sort_keys=True).encode()).hexdigest()
+
+
+# ----------------------------------------------------------------------------- the scorecard
+
+
+def _per_inning(records: list[dict], key: str) -> np.ndarray:
+    return np.asarray([row for r in records for row in r[key]], dtype=float)
+
+
+def score_records(track: Track, records: list[dict]) -> dict:
+    """The scorecard's figures from the finished units' records (see docs/benchmark.md)."""
+    decisions = sum(r["decisions"] for r in records)
+    out: dict = {"units_done": len(records), "decisions": decisions,
+                 "ms_per_decision": round(1e3 * sum(r["cpu_s"] for r in records) / max(decisions, 1), 4),
+                 "sims_per_decision": round(sum(r["sims"] for r in records) / max(decisions, 1), 2)}
+    if not records:
+        return out
+    if track.protocol in ("innings", "p1"):
+        score, foul = _per_inning(records, "score"), _per_inning(records, "foul")
+        rate = score.mean(axis=1)  # each inning's success rate: the unit of resampling
+        out["success_per_shot"] = {"mean": round(float(score.mean()), 6), "ci95": stats.bootstrap_ci(rate),
+                                   "n_shots": int(score.size), "n_innings": int(len(rate))}
+        out["foul_per_shot"] = {"mean": round(float(foul.mean()), 6), "ci95": stats.bootstrap_ci(foul.mean(axis=1))}
+        points = score.sum(axis=1)
+        out["points_per_inning"] = stats.summary(points)
+        out["values"] = points.astype(int).tolist() if track.protocol == "innings" else [round(float(v), 6) for v in rate]
+    elif track.protocol == "p3":
+        lengths = np.asarray([r["length"] for r in records], dtype=float)
+        out["chain"] = {**stats.summary(lengths), "max": int(lengths.max()), "reached_cap": int((lengths >= track.shots).sum()),
+                        "cap": track.shots}
+        shots = lengths.sum() + sum(1 for r in records if r["length"] < track.shots)
+        out["success_per_shot"] = {"mean": round(float(lengths.sum() / max(shots, 1)), 6), "n_shots": int(shots)}
+        out["values"] = lengths.astype(int).tolist()
+    else:
+        ratings = dict(track.ratings)
+        scores = [1.0 if r["winner"] == "agent" else 0.0 if r["winner"] == "opponent" else 0.5 for r in records]
+        total = float(sum(scores))
+        out["match"] = {"matches": len(records), "wins": sum(r["winner"] == "agent" for r in records),
+                        "draws": sum(r["winner"] is None for r in records), "win_rate": round(total / len(records), 6),
+                        "ci95": stats.wilson(total, len(records)),
+                        "points_for": round(float(np.mean([r["points"][0] for r in records])), 4),
+                        "points_against": round(float(np.mean([r["points"][1] for r in records])), 4),
+                        "by_opponent": {o: round(float(np.mean([s for s, r in zip(scores, records) if r["opponent"] == o])), 4)
+                                        for o in track.opponents if any(r["opponent"] == o for r in records)}}
+        out["elo"] = stats.elo_against([(ratings[r["opponent"]], s) for r, s in zip(records, scores)])
+        out["values"] = scores
+    return out
+
+
+def scorecard_markdown(card: dict) -> str:
+    """``scorecard.md``: the scorecard as a short page."""
+    t = card["track"]
+    lines = [f"# {card['agent']['name']} on {t['name']}", "", f"{t['description']}. Rules: {card['rules']}.", "",
+             "| figure | value | 95 % interval |", "|---|---|---|"]
+    pct = lambda v: f"{100 * v:.2f} %"
+    if "points_per_inning" in card and t["protocol"] == "innings":
+        p = card["points_per_inning"]
+        lines.append(f"| points per inning | {p['mean']:.3f} (IQM {p['iqm']:.3f}) | {p['ci95'][0]:.3f} - {p['ci95'][1]:.3f} |")
+    if "success_per_shot" in card and "ci95" in card["success_per_shot"]:
+        s = card["success_per_shot"]
+        lines.append(f"| success per shot | {pct(s['mean'])} | {pct(s['ci95'][0])} - {pct(s['ci95'][1])} |")
+    if "chain" in card:
+        c = card["chain"]
+        lines.append(f"| chain length | mean {c['mean']:.2f}, median {c['median']:.1f}, IQM {c['iqm']:.2f}, max {c['max']} "
+                     f"({c['reached_cap']} at the cap {c['cap']}) | {c['ci95'][0]:.2f} - {c['ci95'][1]:.2f} |")
+    if "match" in card:
+        m = card["match"]
+        lines.append(f"| win rate | {pct(m['win_rate'])} of {m['matches']} | {pct(m['ci95'][0])} - {pct(m['ci95'][1])} |")
+        lines.append(f"| Elo | {card['elo']:.0f} ({t['anchor']} = {t['ratings'][t['anchor']]:.0f}) | |")
+    lines.append(f"| compute per decision | {card['ms_per_decision']:.3f} CPU ms, {card['sims_per_decision']:.0f} simulations | |")
+    lines += ["", f"Agent: `{json.dumps(card['agent'], sort_keys=True)}`", "",
+              f"Command: `{card['command']}` at commit `{card['commit']}`"
+              + (" (partial: not every unit finished)" if card.get("partial") else "")
+              + (f" (limited to {card['limit']} units per opponent/track: not a leaderboard entry)" if card.get("limit") else ""),
+              ""]
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- the ledger
+
+
+def run_identity(track: Track, agent_record: dict, limit: int | None) -> str:
+    """The hash every ledger record carries: the track (its version and fingerprint included),
+    the agent and the limit."""
+    body = json.dumps({"track": track.record(), "agent": agent_record, "limit": limit}, sort_keys=True)
+    return hashlib.sha256(body.encode()).hexdigest()[:16]
+
+
+def read_ledger(path: Path, run_id: str) -> dict[int, dict]:
+    """The finished units of a ledger by index. A torn last line (a kill mid-append) is cut off
+    the file, so its unit is played again; any other line that is not an intact record of this
+    run is refused by name."""
+    if not path.is_file():
+        return {}
+    data = path.read_bytes()
+    lines = data.split(b"\n")
+    done: dict[int, dict] = {}
+    good_end = 0
+    for n, raw in enumerate(lines, 1):
+        if not raw.strip():
+            good_end += len(raw) + 1
+            continue
+        try:
+            rec = json.loads(raw)
+            ok = isinstance(rec, dict) and "sha256" in rec and record_intact(rec) and isinstance(rec.get("unit"), int)
+        except ValueError:
+            ok = False
+        last = n == len(lines) or (n == len(lines) - 1 and not lines[-1])
+        if not ok:
+            if last and not data.endswith(b"\n"):
+                with open(path, "r+b") as f:  # the torn tail of a killed append: cut, and the unit played again
+                    f.truncate(good_end)
+                break
+            raise EvaluationError(f"{display_path(path)}: line {n} is not a sealed record of an evaluation unit; "
+                                  f"the ledger was edited or damaged (move the directory aside to start again)")
+        if rec.get("run") != run_id:
+            raise EvaluationError(f"{display_path(path)}: line {n} belongs to another evaluation (run {rec.get('run')!r}, "
+                                  f"this one is {run_id}); a ledger holds one agent on one track version")
+        done[rec["unit"]] = rec
+        good_end += len(raw) + 1
+    return done
+
+
+def _append(path: Path, record: dict) -> None:
+    with open(path, "a") as f:
+        f.write(json.dumps(sealed_record(record), sort_keys=True) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def claim_directory(out: Path, identity: dict) -> None:
+    """Make ``out`` this evaluation's, or refuse: a directory holding another evaluation (another
+    agent, track version or limit) or anything else that is not an evaluation is never written."""
+    path = out / IDENTITY_FILE
+    if path.is_file():
+        try:
+            mine = json.loads(path.read_text())
+        except ValueError:
+            raise EvaluationError(f"{display_path(path)} is damaged; move the directory aside") from None
+        if mine.get("run") != identity["run"]:
+            raise EvaluationError(
+                f"{display_path(out)} holds the evaluation of {mine.get('agent', {}).get('name')!r} on "
+                f"{mine.get('track', {}).get('name')!r} (limit {mine.get('limit')}); this one is {identity['agent']['name']!r} on "
+                f"{identity['track']['name']!r} (limit {identity['limit']}): one directory holds one agent on one track "
+                f"version; choose another directory")
+        return
+    if out.exists() and any(out.iterdir()):
+        raise EvaluationError(f"{display_path(out)} is not empty and holds no evaluation; choose an empty or new directory")
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(identity, indent=2, sort_keys=True) + "\n")
+
+
+# ----------------------------------------------------------------------------- evaluate
+
+
+def agent_record(agent: Agent, spec) -> dict:
+    rec = agent.describe()
+    if isinstance(spec, (str, Path)):
+        rec["spec"] = str(spec)
+    return rec
+
+
+def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None = None, progress: bool = True,
+             name: str | None = None, command: str | None = None, group: str | None = None, spec: str | None = None) -> dict:
+    """Score ``agent`` on ``track`` and return the scorecard (a dict; see docs/benchmark.md).
+
+    ``agent``: any agent :func:`billiards.bench.agents.as_agent` adapts or a spec string of
+    :func:`~billiards.bench.agents.resolve_agent`. ``track``: a track name or :class:`Track`.
+    ``out``: a directory for the ledger and the scorecard (resumable; None keeps it in memory).
+    ``limit``: only the first ``limit`` innings / chains / matches per opponent (a quick look;
+    the scorecard says so). ``group``: the leaderboard row this scorecard pools into with others
+    (the training seeds of one setting). ``spec``: the spec to record when ``agent`` is already built."""
+    from billiards.provenance import git_commit
+    from tqdm.auto import tqdm
+
+    commit = git_commit()
+    full = get_track(track)
+    track = full.scaled(limit) if limit is not None else full
+    spec = agent if spec is None else spec
+    agent = resolve_agent(agent, track, name)
+    identity_agent = agent_record(agent, spec)
+    if group:
+        identity_agent["group"] = group
+    run_id = run_identity(full, identity_agent, limit)
+    if command is None:
+        command = (f"billiards.bench.evaluate({identity_agent.get('spec', identity_agent['name'])!r}, {full.name!r}"
+                   + (f", limit={limit}" if limit else "") + ")")
+    identity = {"run": run_id, "track": full.record(), "agent": identity_agent, "limit": limit}
+    done: dict[int, dict] = {}
+    ledger = None
+    if out is not None:
+        out = Path(out)
+        claim_directory(out, identity)
+        ledger = out / LEDGER_FILE
+        done = read_ledger(ledger, run_id)
+    n_units = track.n_blocks()
+    todo = [u for u in range(n_units) if u not in done]
+    unit_word = {"innings": "inning blocks", "p1": "inning blocks", "p3": "chains", "match": "matches"}[track.protocol]
+    if progress:
+        print(f"evaluate: {agent.name} on {full.name} ({track.rules()}); {len(done)} of {n_units} {unit_word} done"
+              + (f"; output {display_path(out)}" if out is not None else ""), flush=True)
+    bar = tqdm(total=n_units, initial=len(done), desc=full.name, unit=unit_word.split()[-1], disable=not progress,
+               mininterval=1.0)
+    interrupted = False
+    try:
+        for unit in todo:
+            try:
+                rec = play_unit(agent, track, unit)
+            except AgentError as err:
+                raise EvaluationError(f"{err} (on {unit_word[:-1]} {unit} of {full.name}; "
+                                      f"{len(done)} finished units kept{' in ' + display_path(ledger) if ledger else ''})") from err
+            except KeyboardInterrupt:
+                raise
+            except Exception as err:
+                raise EvaluationError(f"agent {agent.name} failed on {unit_word[:-1]} {unit} of {full.name}: "
+                                      f"{type(err).__name__}: {err} ({len(done)} finished units kept)") from err
+            rec = {"unit": unit, "run": run_id, **rec}
+            done[unit] = rec
+            if ledger is not None:
+                _append(ledger, rec)
+            bar.update(1)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        bar.close()
+    records = [done[u] for u in sorted(done)]
+    card = {"track": full.name, "version": full.version, "rules": track.rules(), "agent": identity_agent,
+            **score_records(track, records), "command": command, "commit": commit, "limit": limit,
+            "partial": len(records) < n_units, "verified": True, "run": run_id}
+    card["track_record"] = full.record()
+    card = _ordered(card)
+    if out is not None:
+        atomic_write_text(out / SCORECARD_JSON, json.dumps(card, indent=2) + "\n")
+        atomic_write_text(out / SCORECARD_MD, scorecard_markdown({**card, "track": full.record()}))
+    if progress:
+        print(headline(card) + (f"\nscorecard: {display_path(out / SCORECARD_JSON)}" if out is not None else ""), flush=True)
+    if interrupted:
+        raise KeyboardInterrupt
+    return card
+
+
+def _ordered(card: dict) -> dict:
+    first = ["track", "version", "agent", "success_per_shot", "points_per_inning", "chain", "match", "elo",
+             "ms_per_decision", "sims_per_decision", "command", "commit"]
+    return {**{k: card[k] for k in first if k in card}, **{k: v for k, v in card.items() if k not in first}}
+
+
+def headline(card: dict) -> str:
+    """The scorecard in one line."""
+    parts = []
+    if "points_per_inning" in card and card["track_record"]["protocol"] == "innings":
+        p = card["points_per_inning"]
+        parts.append(f"{p['mean']:.3f} points/inning [{p['ci95'][0]:.3f}, {p['ci95'][1]:.3f}]")
+    if "success_per_shot" in card and "ci95" in card["success_per_shot"]:
+        s = card["success_per_shot"]
+        parts.append(f"success/shot {100 * s['mean']:.2f} % [{100 * s['ci95'][0]:.2f}, {100 * s['ci95'][1]:.2f}]")
+    if "chain" in card:
+        c = card["chain"]
+        parts.append(f"chain {c['mean']:.2f} [{c['ci95'][0]:.2f}, {c['ci95'][1]:.2f}], median {c['median']:.1f}, IQM {c['iqm']:.2f}")
+    if "match" in card:
+        m = card["match"]
+        parts.append(f"win rate {100 * m['win_rate']:.1f} % [{100 * m['ci95'][0]:.1f}, {100 * m['ci95'][1]:.1f}], Elo {card['elo']:.0f}")
+    parts.append(f"{card['ms_per_decision']:.3f} ms, {card['sims_per_decision']:.0f} sims per decision")
+    return f"{card['agent']['name']} on {card['track']}: " + "; ".join(parts) + (" (partial)" if card.get("partial") else "")
+
+
+__all__ = ["EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "claim_directory", "evaluate",
+           "fingerprint", "fingerprint_data", "headline", "play_unit", "read_ledger", "run_identity", "score_records",
+           "scorecard_markdown"]

@@ -1,0 +1,165 @@
+"""The benchmark's tracks: named, versioned evaluation protocols (docs/benchmark.md).
+
+A track fixes everything that determines its numbers: the table (physics preset), the execution
+noise (and, for ``variable``, that each shot's level is told to the agent), the protocol, how many
+innings / chains / matches, the evaluation seeds, what the agent may use at decision time, and
+a version. Its name ends in ``-v<N>``, the rule the env IDs follow too (``Billiards4Ball-v0``):
+a change to the simulator, the envs or the track that changes any of its numbers gives it a new
+``N``. Each track carries a fingerprint of its first racks and of a reference agent's first
+decisions (the nearest-red heuristic); ``tests/bench`` recomputes it, so such a change cannot go
+unnoticed.
+
+Protocols:
+
+* ``innings``: the paper's evaluation, ``units`` random-start innings of ``shots`` shots,
+  continue-on-miss; points per inning (and per-shot success);
+* ``p1``: per-shot success from random racks: ``units`` innings of ``shots`` shots each,
+  continue-on-miss (every shot after the first plays from the table the previous one left);
+* ``p3``: chains from the opening rack, one per seed, each until its first miss or foul or
+  ``shots`` (the cap) scoring shots;
+* ``match``: ``units`` matches to ``target`` against each reference opponent (league players of
+  ``conf/match.yaml``), the break alternating; win rate and an Elo against the pool's fixed
+  ratings (anchored to ``anchor``).
+
+Seeds: inning or chain ``i`` plays with seed ``seed + i``; match ``i`` against opponent ``j``
+with ``seed + 1000 j + i``. The seeds are held out: no training, tuning or reported run in the
+repository used them (``tests/bench`` checks every committed record).
+
+Decision-time access: every agent sees the observation (the gymnasium env's); an agent that
+searches with the simulator may use up to ``budget`` simulations per decision, counted and
+reported on its scorecard (the leaderboard lists the two classes apart).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from dataclasses import dataclass
+
+PROTOCOLS = ("innings", "p1", "p3", "match")
+VERSION_RE = re.compile(r"^(?P<base>[a-z0-9][a-z0-9-]*?)-v(?P<version>\d+)$")
+
+
+@dataclass(frozen=True)
+class Track:
+    """One evaluation protocol, fixed (see the module docstring)."""
+
+    name: str  # "<base>-v<version>"
+    protocol: str  # innings | p1 | p3 | match
+    description: str
+    units: int  # innings (innings, p1), chains (p3), matches per opponent (match)
+    shots: int = 10  # shots per inning (innings, p1); the chain cap (p3)
+    seed: int = 0  # the first evaluation seed (held out)
+    physics: str = "korean_medium"
+    noise: str = "none"  # a noise preset of conf/noise/
+    tells_level: bool = False  # variable noise: the shot's level is the observation's last entry
+    budget: int = 400  # simulations per decision an agent that searches may use
+    block: int = 25  # innings per resumable unit (innings, p1)
+    target: int = 10  # match: points to win
+    opponents: tuple[str, ...] = ()  # match: the reference pool (league players by name)
+    ratings: tuple[tuple[str, float], ...] = ()  # match: the pool's fixed Elo ratings
+    anchor: str = ""  # match: the pool player whose rating defines the scale
+    max_innings: int = 200  # match: innings before a match is called a draw
+    fingerprint: str = ""  # sha256 over the first racks and the reference agent's first decisions
+
+    @property
+    def version(self) -> int:
+        return int(VERSION_RE.match(self.name)["version"])
+
+    @property
+    def base(self) -> str:
+        return VERSION_RE.match(self.name)["base"]
+
+    @property
+    def metric(self) -> str:
+        """The number the leaderboard ranks this track by."""
+        return {"innings": "points_per_inning", "p1": "success_per_shot", "p3": "chain", "match": "elo"}[self.protocol]
+
+    def seeds(self) -> list[int]:
+        """Every evaluation seed the track plays (innings, chains or matches)."""
+        if self.protocol == "match":
+            return [self.seed + 1000 * j + i for j in range(len(self.opponents)) for i in range(self.units)]
+        return list(range(self.seed, self.seed + self.units))
+
+    def n_blocks(self) -> int:
+        """Resumable units: blocks of innings, chains or matches."""
+        if self.protocol in ("innings", "p1"):
+            return -(-self.units // self.block)
+        return len(self.seeds())
+
+    def rules(self) -> str:
+        """The track's rules in one line (docs, scorecards, ``--help``)."""
+        noise = "exact play" if self.noise == "none" else f"noise {self.noise}" + (" (level told)" if self.tells_level else "")
+        what = {
+            "innings": f"{self.units} random-start innings x {self.shots} shots, continue-on-miss; points per inning",
+            "p1": f"{self.units} random-start innings x {self.shots} shots, continue-on-miss; per-shot success",
+            "p3": f"{self.units} chains from the opening rack to the first miss or foul, cap {self.shots}; chain length",
+            "match": (f"{self.units} matches to {self.target} against each of {', '.join(self.opponents)} (break "
+                      f"alternating); win rate and Elo ({self.anchor} = {dict(self.ratings).get(self.anchor, 0):.0f})"),
+        }[self.protocol]
+        return f"{what}; {noise}, {self.physics}; seeds from {self.seed:,}; search budget {self.budget} sims/decision"
+
+    def record(self) -> dict:
+        """The track as a JSON record (scorecards)."""
+        rec = dataclasses.asdict(self)
+        rec.update(version=self.version, opponents=list(self.opponents), ratings=dict(self.ratings))
+        return rec
+
+    def scaled(self, units: int) -> Track:
+        """The same track cut to its first ``units`` innings / chains / matches per opponent (a
+        quick look or a test; its scorecard is marked ``limit`` and never enters the leaderboard)."""
+        if not 1 <= units <= self.units:
+            raise ValueError(f"limit must lie in 1..{self.units} for track {self.name}, got {units}")
+        return dataclasses.replace(self, units=units)
+
+
+# The match pool's ratings: greedy (robust search over the fastfiz_x5 ranker) anchors the scale at
+# 1500; greedy_r's is the rating that explains its score against greedy in the committed league
+# results/sagu/fastfiz_x5_run (0.5675 of their 400 matches; billiards.bench.stats.elo_against).
+_MATCH_RATINGS = (("greedy", 1500.0), ("greedy_r", 1547.1))
+
+_REGISTRY: tuple[Track, ...] = (
+    Track("innings-v1", "innings", "The paper's evaluation protocol: points per 10-shot inning from random racks, exact play",
+          units=100, shots=10, seed=7_100_000,
+          fingerprint="52f366f98a57fa382a7b0bf0499a6c492063081dd1be14b6219b3a7e9eaa6213"),
+    Track("p1-exact-v1", "p1", "Per-shot success from random racks, exact play",
+          units=100, shots=20, seed=7_200_000,
+          fingerprint="18e0d8558281ff35926605d66db249c1b8360bc90ba92b2fdaee8fc917657fe9"),
+    Track("p3-exact-v1", "p3", "Chains from the opening rack, exact play",
+          units=20, shots=1000, seed=7_300_000,
+          fingerprint="6933c5596605d869d0a8b91e89a4ab1c23c1c58337b5ed64e11ca8f0ddbe4218"),
+    Track("p1-fastfiz-v1", "p1", "Per-shot success from random racks under fastfiz execution noise",
+          units=100, shots=20, seed=7_400_000, noise="fastfiz",
+          fingerprint="88c6138b01ce84677a5c5d378f86427ca57ce3ce2509142a5a63df3dc7071a08"),
+    Track("p3-fastfiz-v1", "p3", "Chains from the opening rack under fastfiz execution noise",
+          units=50, shots=1000, seed=7_500_000, noise="fastfiz",
+          fingerprint="b240a954549b687aa879f036785e64f67d4071c8f5533aed9b72bff90924f7a1"),
+    Track("p1-x5-v1", "p1", "Per-shot success from random racks under five times fastfiz's noise",
+          units=100, shots=20, seed=7_600_000, noise="fastfiz_x5",
+          fingerprint="1a8911c1063ae41b4763bd2c6cd995c0f8c5e217c93cb4960460cf22b1f76148"),
+    Track("p1-variable-v1", "p1", "Per-shot success from random racks, each shot's noise level drawn in [0, 5] x fastfiz and told",
+          units=100, shots=20, seed=7_700_000, noise="variable", tells_level=True,
+          fingerprint="0381fe660ef21aff6b5aed52be724a42f55a6f97e6e52c0df0376fe2f5eca417"),
+    Track("match-x5-v1", "match", "Matches to 10 under fastfiz_x5 against the reference pool",
+          units=10, seed=7_800_000, noise="fastfiz_x5", opponents=("greedy", "greedy_r"), ratings=_MATCH_RATINGS,
+          anchor="greedy", fingerprint="f599134f6f5850c5f68a2cce58482823b0fd613edb6d3d62afbac7b3494c8bc1"),
+)
+
+TRACKS: dict[str, Track] = {t.name: t for t in _REGISTRY}
+
+
+def get_track(track) -> Track:
+    """A track by name (or the Track itself); an unknown name is an error listing the tracks."""
+    if isinstance(track, Track):
+        return track
+    if track not in TRACKS:
+        raise ValueError(f"unknown track {track!r}; tracks: {', '.join(TRACKS)}")
+    return TRACKS[track]
+
+
+def track_help() -> str:
+    """One line per track (``python evaluate.py --help``)."""
+    return "\n".join(f"  {t.name}: {t.rules()}" for t in TRACKS.values())
+
+
+__all__ = ["PROTOCOLS", "TRACKS", "Track", "get_track", "track_help"]
