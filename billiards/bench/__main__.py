@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 from pathlib import Path
 
 from billiards.files import ROOT
@@ -34,8 +33,7 @@ def campaign(only: str | None, tracks: list[str] | None, progress: bool) -> None
         card = ROOT / out / SCORECARD_JSON
         if card.is_file() and not json.loads(card.read_text()).get("partial"):
             continue
-        command = " ".join(shlex.quote(w) for w in ["python", "evaluate.py", f"track={track}", f"agent={entry.spec}",
-                                                     f"name={entry.slug}", f"group='{entry.row}'", f"out={out}"])
+        command = f"python evaluate.py track={track} agent={entry.spec} name={entry.slug} \"group='{entry.row}'\" out={out}"
         print(f"[{i}/{len(jobs)}] {command}", flush=True)
         evaluate(entry.spec, track, out=ROOT / out, name=entry.slug, group=entry.row, command=command, progress=progress)
 
