@@ -136,6 +136,7 @@ LAYERS = [  # lowest first; a new top-level module or subpackage takes its place
     ("billiards.rl",),
     ("billiards.search",),
     ("billiards.pictures", "billiards.report", "billiards.league"),
+    ("billiards.bench",),
     ("billiards.campaign",),
 ]
 

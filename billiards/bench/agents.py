@@ -106,6 +106,7 @@ class CallableAgent(Agent):
         super().__init__(name or getattr(fn, "__qualname__", None) or type(fn).__name__)
         self.fn, self.normalized = fn, bool(normalized)
         self.one_at_a_time = False
+        self.batched = False  # has answered a batch of several tables: a batch function, never probed again
 
     def _call(self, obs: np.ndarray):
         try:
@@ -115,16 +116,39 @@ class CallableAgent(Agent):
         except Exception as err:
             raise AgentError(f"agent {self.name} raised {type(err).__name__}: {err}") from err
 
+    def _probe_one(self, obs: np.ndarray):
+        """The answer for the first table alone where the function is written for one table
+        (given one observation (D,) it answers an action (4,)); None where it is not."""
+        try:
+            out = self.fn(obs[0])
+            return out if np.shape(out) == (domain.ACTION_DIM,) else None
+        except Exception:
+            return None
+
     def act(self, obs, tables, levels):
         B = obs.shape[0]
+        first = None
         if not self.one_at_a_time:
-            out = self._call(obs)
-            shape = np.shape(out)
-            if B > 1 and shape == (domain.ACTION_DIM,):
-                self.one_at_a_time = True  # written for one table: one call per table from now on
-            else:
+            error, shape = None, None
+            try:
+                out = self._call(obs)
+                shape = np.shape(out)
+            except AgentError as err:
+                error = err
+            except ValueError:  # a ragged answer: _checked says what is wrong with it
+                pass
+            if error is None and (shape == (B, domain.ACTION_DIM) or (B == 1 and shape == (domain.ACTION_DIM,))):
+                self.batched = self.batched or B > 1
                 return to_raw(_checked(out, B, self.name), self.name, self.normalized)
-        rows = [_checked(self._call(obs[i]), 1, self.name)[0] for i in range(B)]
+            # a function written for one table may fail on (or misread) the batch it is first given:
+            # asked about the first table alone, it answers (4,)
+            first = None if self.batched else self._probe_one(obs)
+            if first is None and not (B > 1 and shape == (domain.ACTION_DIM,)):
+                if error is not None:
+                    raise error
+                return to_raw(_checked(out, B, self.name), self.name, self.normalized)  # says what is wrong
+            self.one_at_a_time = True  # written for one table: one call per table from now on
+        rows = [_checked(first if i == 0 and first is not None else self._call(obs[i]), 1, self.name)[0] for i in range(B)]
         return to_raw(np.stack(rows), self.name, self.normalized)
 
     def describe(self) -> dict:

@@ -45,8 +45,8 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("h2, SAC ensemble proposer (base)", "h2_base", "search:h2/base", EXACT),
     Entry("PUCT, geometric proposer", "puct_geometric", "search:puct/geometric", EXACT),
     Entry("PUCT, SAC ensemble proposer (near_miss)", "puct_near_miss", "search:puct/near_miss", EXACT),
-    Entry("robust search over the noise's shot ranker (blind to the leave)", "robust_ranked", "search:robust", NOISY),
-    Entry("position-aware robust search (search.py's default under noise)", "position_default", "search:default", NOISY),
+    Entry("robust search over the shot ranker, blind to the leave", "robust_ranked", "search:robust", NOISY),
+    Entry("position-aware robust search (the default of search.py under noise)", "position_default", "search:default", NOISY),
     Entry("league: greedy", "league_greedy", "league:greedy", MATCH),
     Entry("league: greedy_r (run value)", "league_greedy_r", "league:greedy_r", MATCH),
     Entry("league: safety_r (run value, safety shots)", "league_safety_r", "league:safety_r", MATCH),
@@ -61,6 +61,8 @@ def check_entries() -> None:
         ok = e.spec in BASELINES or e.spec.startswith(("search:", "league:")) or (e.spec.startswith("results/") and e.spec.endswith(".pt"))
         if not ok:
             raise ValueError(f"leaderboard entry {e.slug}: spec {e.spec!r} is not a baseline, policy file, search or league player")
+        if any(q in e.row for q in "'\"\\"):
+            raise ValueError(f"leaderboard entry {e.slug}: a row name has no quotes (it is quoted in the recorded command)")
 
 
 __all__ = ["ENTRIES", "Entry", "check_entries"]

@@ -47,16 +47,17 @@ def _params_noise(track: Track):
 
 
 class _Clock:
-    """The agent's own cost: CPU seconds of its calls, decisions, simulations."""
+    """The agent's own cost: seconds of its calls (wall clock, on the one thread it runs on;
+    the CPU clock costs tens of microseconds a read on some machines), decisions, simulations."""
 
     def __init__(self, agent: Agent):
         self.agent, self.cpu, self.decisions = agent, 0.0, 0
         self.sims0 = agent.sims
 
     def act(self, obs, tables, levels):
-        t0 = time.process_time()
+        t0 = time.perf_counter()
         raw = self.agent.act(obs, tables, levels)
-        self.cpu += time.process_time() - t0
+        self.cpu += time.perf_counter() - t0
         self.decisions += len(tables)
         if not (isinstance(raw, np.ndarray) and raw.shape == (len(tables), 4) and np.isfinite(raw).all()):
             raise AgentError(f"agent {self.agent.name} returned an unusable shot: {np.asarray(raw).tolist()[:1]}")
@@ -374,6 +375,18 @@ def claim_directory(out: Path, identity: dict) -> None:
 # ----------------------------------------------------------------------------- evaluate
 
 
+_COMMIT: list[str] = []
+
+
+def _commit() -> str:
+    """The commit the code runs at, read once a process."""
+    if not _COMMIT:
+        from billiards.provenance import git_commit
+
+        _COMMIT.append(git_commit())
+    return _COMMIT[0]
+
+
 def agent_record(agent: Agent, spec) -> dict:
     rec = agent.describe()
     if isinstance(spec, (str, Path)):
@@ -391,10 +404,9 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
     ``limit``: only the first ``limit`` innings / chains / matches per opponent (a quick look;
     the scorecard says so). ``group``: the leaderboard row this scorecard pools into with others
     (the training seeds of one setting). ``spec``: the spec to record when ``agent`` is already built."""
-    from billiards.provenance import git_commit
     from tqdm.auto import tqdm
 
-    commit = git_commit()
+    commit = _commit()
     full = get_track(track)
     track = full.scaled(limit) if limit is not None else full
     spec = agent if spec is None else spec

@@ -30,15 +30,19 @@ def _round(x: float, digits: int = 6) -> float:
     return float(round(float(x), digits))
 
 
-def iqm(values) -> float:
-    """Interquartile mean: the mean of the middle 50 % (scipy's 25 %-trimmed mean)."""
+def iqm(values, axis=None):
+    """Interquartile mean: the mean of the middle 50 % (scipy's 25 %-trimmed mean); along
+    ``axis`` when given (as a bootstrap's vectorised statistic), else over every value."""
+    if axis is not None:
+        return _st.trim_mean(values, 0.25, axis=axis)
     values = np.asarray(values, dtype=np.float64).reshape(-1)
     return float(_st.trim_mean(values, 0.25)) if values.size else float("nan")
 
 
 def bootstrap_ci(values, statistic=np.mean, confidence: float = 0.95, resamples: int = RESAMPLES) -> list[float]:
-    """The percentile bootstrap interval of ``statistic`` over independent ``values`` (one per
-    inning, chain or match). A constant sample gives a zero-width interval."""
+    """The percentile bootstrap interval of ``statistic`` (a function taking ``axis``, as
+    ``np.mean`` and :func:`iqm`) over independent ``values`` (one per inning, chain or match).
+    A constant sample gives a zero-width interval."""
     values = np.asarray(values, dtype=np.float64).reshape(-1)
     if values.size == 0:
         return [float("nan"), float("nan")]
@@ -46,7 +50,7 @@ def bootstrap_ci(values, statistic=np.mean, confidence: float = 0.95, resamples:
         v = float(statistic(values))
         return [_round(v), _round(v)]
     res = _st.bootstrap((values,), statistic, confidence_level=confidence, n_resamples=resamples, method="percentile",
-                        vectorized=False, rng=np.random.default_rng(SEED))
+                        vectorized=True, rng=np.random.default_rng(SEED))
     return [_round(res.confidence_interval.low), _round(res.confidence_interval.high)]
 
 

@@ -54,7 +54,7 @@ class Track:
     noise: str = "none"  # a noise preset of conf/noise/
     tells_level: bool = False  # variable noise: the shot's level is the observation's last entry
     budget: int = 400  # simulations per decision an agent that searches may use
-    block: int = 25  # innings per resumable unit (innings, p1)
+    block: int = 50  # innings per resumable unit (innings, p1), played side by side
     target: int = 10  # match: points to win
     opponents: tuple[str, ...] = ()  # match: the reference pool (league players by name)
     ratings: tuple[tuple[str, float], ...] = ()  # match: the pool's fixed Elo ratings

@@ -1,8 +1,8 @@
 """Environments: a gymnasium env (``Billiards4Ball-v0``) and a batched TorchRL env, plus the
 TorchRL transforms of the paper's domain knowledge and :func:`make_env`.
 
-Importing this package registers ``Billiards4Ball-v0`` (``gymnasium.make_vec`` of it builds the
-batched vector env of :mod:`billiards.envs.gym_vector`) and loads only the gymnasium side
+``import billiards`` registers ``Billiards4Ball-v0`` (``gymnasium.make_vec`` of it builds the
+batched vector env of :mod:`billiards.envs.gym_vector`); importing this package loads only the gymnasium side
 (numpy, numba, gymnasium). The TorchRL names (:class:`BilliardsEnv`, :func:`make_env`, the
 transforms) load torch and TorchRL on first use, so a gymnasium-only user neither pays for
 that import nor gets the multiprocessing start method TorchRL sets.
@@ -10,16 +10,11 @@ that import nor gets the multiprocessing start method TorchRL sets.
 
 import importlib
 
-import gymnasium
+from billiards import GYM_ID  # registered by ``import billiards``
 
 from ._common import ON_MISS, PARADIGMS, STARTS, EnvOptions
 from .gym_env import INFO_KEYS as GYM_INFO_KEYS
 from .gym_env import Billiards4BallInningEnv
-
-GYM_ID = "Billiards4Ball-v0"
-if GYM_ID not in gymnasium.registry:
-    gymnasium.register(id=GYM_ID, entry_point="billiards.envs.gym_env:Billiards4BallInningEnv",
-                       vector_entry_point="billiards.envs.gym_vector:Billiards4BallVectorEnv")
 
 # TorchRL names -> the submodule that defines them, imported on first attribute access.
 _LAZY = {

@@ -1,0 +1,302 @@
+"""The leaderboard: every scorecard of ``results/bench/``, one table per track, with intervals.
+
+Sources (all data; nothing here names code):
+
+* ``scorecards/<track>/<slug>/scorecard.json``: evaluations played here by ``evaluate.py``
+  (status ``verified``);
+* ``recorded/<track>/<slug>.json``: a training setting's committed final evaluations (the paper
+  tables' runs, whose weights are not in the repository: their innings protocol on the training
+  runs' own evaluation racks, not the track's held-out seeds; status ``recorded``);
+* ``submissions/<track>/<slug>/scorecard.json``: outside entries, by pull request (status
+  ``unverified`` until the same command is run here and its scorecard moves to ``scorecards/``).
+
+Scorecards sharing an agent ``group`` (a policy's training seeds) pool into one row: the mean
+and the interquartile mean over every (seed, unit) score with stratified bootstrap intervals
+(:func:`billiards.bench.stats.aggregate`). ``python -m billiards.bench leaderboard`` writes
+``leaderboard.json``, ``leaderboard.md`` and ``leaderboard.png`` (CI rebuilds the first two
+and diffs them).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from billiards.files import atomic_write_text, display_path
+
+from . import stats
+from .tracks import TRACKS
+
+STATUSES = ("verified", "recorded", "unverified")
+REBUILD = "python -m billiards.bench leaderboard"
+
+# The project's earlier figures for the same agent and protocol, beside the leaderboard's:
+# (track, row) -> (how to read them, the committed files, what differs from the track). Each is
+# read from its files with its own interval (the same bootstrap), and agrees when the two
+# intervals overlap.
+EARLIER: dict[tuple[str, str], tuple[str, tuple[str, ...], str]] = {
+    **{("innings-v1", row): ("eval", tuple(f"results/training/paper/table5/{folder}/seed{k}/eval.json" for k in range(3)),
+                             "the training runs' final evaluations, on their own evaluation racks")
+       for row, folder in (("SAC aim + features, foul penalty (Table 5)", "foul_penalty"),
+                           ("SAC aim + features, both bonuses (Table 5)", "both"),
+                           ("SAC aim + features, gentle (Table 5)", "gentle"),
+                           ("SAC aim + features, near-miss (Table 5)", "near_miss"))},
+    ("p1-exact-v1", "h2, geometric proposer"): (
+        "p1", ("results/search/korean_medium/geometric_h2_p1.json",), "P1 of 100 innings x 100 shots, seed 0"),
+    ("p1-exact-v1", "PUCT, geometric proposer"): (
+        "p1", ("results/search/korean_medium/geometric_puct_p1.json",), "P1 of 100 innings x 100 shots, seed 0"),
+    ("p3-exact-v1", "h2, geometric proposer"): (
+        "p3", ("results/search/korean_medium/geometric_h2_p3.json",), "10 chains (seeds 0-9), cap 10,000"),
+    ("p3-exact-v1", "PUCT, geometric proposer"): (
+        "p3", ("results/search/korean_medium/geometric_puct_p3.json",), "10 chains (seeds 0-9), cap 10,000"),
+    ("p1-fastfiz-v1", "position-aware robust search (the default of search.py under noise)"): (
+        "p1", ("results/noisy_track/headline/target40_fastfiz_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
+    ("p3-fastfiz-v1", "position-aware robust search (the default of search.py under noise)"): (
+        "p3", ("results/noisy_track/headline/target40_fastfiz_p3/results.json",), "300 chains, seeds 2000-2299"),
+    ("p1-fastfiz-v1", "robust search over the shot ranker, blind to the leave"): (
+        "p1", ("results/noisy_track/headline/ranked500_fastfiz_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
+    ("p3-fastfiz-v1", "robust search over the shot ranker, blind to the leave"): (
+        "p3", ("results/noisy_track/headline/ranked500_fastfiz_p3/results.json",), "300 chains, seeds 2000-2299"),
+    ("p1-x5-v1", "position-aware robust search (the default of search.py under noise)"): (
+        "p1", ("results/noisy_track/headline/position_fastfiz_x5_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
+    ("p1-x5-v1", "robust search over the shot ranker, blind to the leave"): (
+        "p1", ("results/noisy_track/headline/ranked500_fastfiz_x5_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
+}
+
+
+def earlier_figure(kind: str, files: tuple[str, ...]) -> dict:
+    """An earlier figure and its 95 % interval, read from its committed files (innings: points
+    per inning over every seed's evaluation; P1: per-shot success resampled by inning; P3: the
+    chain mean resampled by chain)."""
+    from billiards.files import ROOT
+
+    data = [json.loads((ROOT / f).read_text()) for f in files]
+    if kind == "eval":
+        runs = [d["points"] for d in data]
+        agg = stats.aggregate(runs, statistic=np.mean) if len(runs) > 1 else None
+        value, ci = (agg["iqm"], agg["ci95"]) if agg else (float(np.mean(runs[0])), stats.bootstrap_ci(runs[0]))
+    elif kind == "p1":
+        rates = np.asarray(data[0]["values"], dtype=float) / data[0]["extra"]["shots_per_inning"]
+        value, ci = float(rates.mean()), stats.bootstrap_ci(rates)
+    else:
+        value, ci = float(np.mean(data[0]["values"])), stats.bootstrap_ci(data[0]["values"])
+    return {"value": round(value, 6), "ci95": ci, "where": ", ".join(files)}
+
+
+def _load(path: Path) -> dict:
+    try:
+        card = json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{display_path(path)}: not a readable scorecard ({err})") from None
+    for key in ("track", "version", "agent"):
+        if key not in card:
+            raise ValueError(f"{display_path(path)}: a scorecard needs the key {key!r}")
+    if card["track"] not in TRACKS:
+        raise ValueError(f"{display_path(path)}: unknown track {card['track']!r}")
+    if card["version"] != TRACKS[card["track"]].version:
+        raise ValueError(f"{display_path(path)}: track {card['track']} is at version {TRACKS[card['track']].version}, "
+                         f"the scorecard at {card['version']}: play it again on the current version")
+    return card
+
+
+def collect(root: Path) -> list[dict]:
+    """Every scorecard under ``root`` with its status and source path; partial and limited ones are left out."""
+    cards = []
+    for status, pattern in (("verified", "scorecards/*/*/scorecard.json"), ("recorded", "recorded/*/*.json"),
+                            ("unverified", "submissions/*/*/scorecard.json")):
+        for path in sorted(root.glob(pattern)):
+            card = _load(path)
+            if card.get("partial") or card.get("limit"):
+                continue
+            card["status"] = status
+            card["source"] = display_path(path)
+            cards.append(card)
+    return cards
+
+
+def _runs(cards: list[dict]) -> list[list[float]]:
+    out = []
+    for c in cards:
+        if "runs" in c:  # a recorded setting: one list of scores per training seed
+            out += [r["values"] for r in c["runs"]]
+        else:
+            out.append(c["values"])
+    return out
+
+
+def _row(track, cards: list[dict]) -> dict:
+    """One leaderboard row from the scorecards of one group on one track."""
+    first = cards[0]
+    row = {"row": first["agent"].get("group") or first["agent"]["name"], "status": first["status"],
+           "agents": [c["agent"]["name"] for c in cards], "sources": [c["source"] for c in cards],
+           "compute": first["agent"].get("compute", "observation"), "version": first["version"]}
+    runs = _runs(cards)
+    row["seeds"] = len(runs)
+    if track.protocol == "match":
+        card = first
+        row.update(score=card["elo"], win_rate=card["match"]["win_rate"], ci95=card["match"]["ci95"],
+                   matches=card["match"]["matches"], by_opponent=card["match"]["by_opponent"])
+    else:
+        if len(runs) == 1:
+            summary = stats.summary(runs[0])
+            row.update(score=summary["mean"], ci95=summary["ci95"], iqm=summary["iqm"])
+        else:
+            mean = stats.aggregate(runs, statistic=np.mean)
+            iqm = stats.aggregate(runs)
+            row.update(score=mean["iqm"], ci95=mean["ci95"], iqm=iqm["iqm"], iqm_ci95=iqm["ci95"], per_seed=mean["per_seed"])
+        if track.protocol == "p3":
+            pooled = np.concatenate([np.asarray(r, dtype=float) for r in runs])
+            row.update(median=float(np.median(pooled)), max=int(pooled.max()), reached_cap=int((pooled >= track.shots).sum()),
+                       chains=int(pooled.size))
+    ms = [c["ms_per_decision"] for c in cards if c.get("ms_per_decision") is not None]
+    sims = [c["sims_per_decision"] for c in cards if c.get("sims_per_decision") is not None]
+    row["ms_per_decision"] = round(float(np.mean(ms)), 3) if ms else None
+    row["sims_per_decision"] = round(float(np.mean(sims)), 1) if sims else None
+    earlier = EARLIER.get((track.name, row["row"]))
+    if earlier is not None:
+        kind, files, differs = earlier
+        fig = earlier_figure(kind, files)
+        lo, hi = row["ci95"]
+        row["earlier"] = {**fig, "intervals_overlap": bool(fig["ci95"][0] <= hi and lo <= fig["ci95"][1]),
+                          "within_ci95": bool(lo <= fig["value"] <= hi), "protocol": differs}
+    if first.get("note"):
+        row["note"] = first["note"]
+    return row
+
+
+def leaderboard(root: Path) -> dict:
+    """The leaderboard of the scorecards under ``root`` (see the module docstring)."""
+    cards = collect(root)
+    tracks = {}
+    for name, track in TRACKS.items():
+        groups: dict[tuple, list[dict]] = {}
+        for c in cards:
+            if c["track"] == name:
+                groups.setdefault((c["status"], c["agent"].get("group") or c["agent"]["name"]), []).append(c)
+        rows = [_row(track, g) for g in groups.values()]
+        rows.sort(key=lambda r: (-r["score"], r["row"]))
+        tracks[name] = {"rules": track.rules(), "description": track.description, "version": track.version,
+                        "metric": track.metric, "rows": rows}
+    agents = sorted({r["row"] for t in tracks.values() for r in t["rows"]})
+    return {"rebuild": REBUILD, "agents": len(agents), "scorecards": len(cards), "tracks": tracks}
+
+
+def markdown(board: dict) -> str:
+    """``leaderboard.md``."""
+    lines = ["# Leaderboard", "",
+             f"Every agent of the project on every track it applies to ({board['agents']} agents, {board['scorecards']} "
+             "scorecards). Rebuilt by `" + board["rebuild"] + "` from the scorecards under `results/bench/` "
+             "(docs/benchmark.md: the tracks, how to score and submit an agent). Intervals are 95 % bootstrap "
+             "intervals resampled by inning, chain or match (rows pooling training seeds: a stratified bootstrap over "
+             "seeds and their units; IQM: the interquartile mean); match win rates carry Wilson intervals. Compute: "
+             "the agent's own CPU milliseconds per decision on one core of the machine that played it, and simulations "
+             "per decision (the tracks allow 400). Status: **verified** played here by the recorded command; "
+             "**recorded** a training setting's own final evaluations (same protocol, the training runs' evaluation "
+             "racks, no weights in the repository); **unverified** an outside submission not yet re-run.", ""]
+    for name, t in board["tracks"].items():
+        track = TRACKS[name]
+        metric = {"innings": "points per inning", "p1": "success per shot", "p3": "chain length (mean)",
+                  "match": "Elo"}[track.protocol]
+        lines += [f"## {name}", "", f"{t['description']}: {t['rules']}.", ""]
+        if not t["rows"]:
+            lines += ["(no scorecards yet)", ""]
+            continue
+        extra = {"innings": "IQM", "p1": "IQM", "p3": "median · IQM · max · at cap", "match": "win rate [95 %]"}[track.protocol]
+        lines += [f"| # | agent | {metric} [95 %] | {extra} | seeds | ms · sims / decision | class | status | earlier figure |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for i, r in enumerate(t["rows"], 1):
+            if track.protocol == "match":
+                main = f"{r['score']:.0f}"
+                more = f"{100 * r['win_rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}]"
+            else:
+                fmt = (lambda v: f"{100 * v:.2f} %") if track.protocol == "p1" else (lambda v: f"{v:.3f}") if \
+                    track.protocol == "innings" else (lambda v: f"{v:.2f}")
+                main = f"{fmt(r['score'])} [{fmt(r['ci95'][0])}, {fmt(r['ci95'][1])}]"
+                more = fmt(r["iqm"]) if track.protocol != "p3" else \
+                    f"{r['median']:.1f} · {r['iqm']:.2f} · {r['max']} · {r['reached_cap']}/{r['chains']}"
+            cost = "—" if r["ms_per_decision"] is None else f"{r['ms_per_decision']:.2f} · {r['sims_per_decision']:.0f}"
+            earlier = ""
+            if "earlier" in r:
+                e = r["earlier"]
+                f = (lambda v: f"{100 * v:.2f} %") if track.protocol == "p1" else \
+                    (lambda v: f"{v:.3f}" if track.protocol == "innings" else f"{v:.2f}")
+                verdict = "agrees" if e["within_ci95"] else "intervals overlap" if e["intervals_overlap"] else "differs"
+                earlier = f"{f(e['value'])} [{f(e['ci95'][0])}, {f(e['ci95'][1])}], {verdict} ({e['protocol']})"
+            lines.append(f"| {i} | {r['row']} | {main} | {more} | {r['seeds']} | {cost} | {r['compute']} | {r['status']} | {earlier} |")
+        lines.append("")
+    lines += ["Sources: each row's scorecards are listed in `leaderboard.json` (`sources`), each with the command that "
+              "played it and its commit.", ""]
+    return "\n".join(lines)
+
+
+def draw_figure(board: dict, path: Path) -> Path:
+    """``leaderboard.png``: one panel per track, each row's figure with its interval."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [n for n, t in board["tracks"].items() if t["rows"]]
+    fig, axes = plt.subplots(len(names), 1, figsize=(8, 1.2 + 0.28 * sum(len(board["tracks"][n]["rows"]) for n in names)),
+                             squeeze=False, gridspec_kw={"height_ratios": [max(len(board["tracks"][n]["rows"]), 1) for n in names]})
+    for ax, name in zip(axes[:, 0], names):
+        rows = board["tracks"][name]["rows"][::-1]
+        y = np.arange(len(rows))
+        scale = 100.0 if TRACKS[name].protocol == "p1" else 1.0
+        score = np.array([r["score"] for r in rows]) * (scale if TRACKS[name].protocol != "match" else 1)
+        if TRACKS[name].protocol == "match":
+            lo = hi = np.zeros(len(rows))
+        else:
+            lo = score - np.array([r["ci95"][0] for r in rows]) * scale
+            hi = np.array([r["ci95"][1] for r in rows]) * scale - score
+        colors = ["tab:blue" if r["compute"] == "observation" else "tab:orange" for r in rows]
+        ax.barh(y, score, xerr=[lo, hi], color=colors, capsize=2)
+        ax.set_yticks(y, [r["row"][:60] for r in rows], fontsize=6)
+        ax.set_title(f"{name}: {board['tracks'][name]['metric'].replace('_', ' ')}" + (" (%)" if scale == 100 else ""), fontsize=8)
+        ax.tick_params(axis="x", labelsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    plt.close(fig)
+    return path
+
+
+def build(root: Path, out: Path, figure: bool = True) -> list[Path]:
+    """Write ``leaderboard.json``, ``.md`` (and ``.png``) into ``out`` from the scorecards under ``root``."""
+    board = leaderboard(root)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [atomic_write_text(out / "leaderboard.json", json.dumps(board, indent=2) + "\n"),
+             atomic_write_text(out / "leaderboard.md", markdown(board))]
+    if figure:
+        paths.append(draw_figure(board, out / "leaderboard.png"))
+    return paths
+
+
+def record_training(setting: Path, row: str, slug: str, root: Path | None = None) -> Path:
+    """A ``recorded`` innings-v1 scorecard from a training setting's committed final evaluations
+    (``<setting>/seed<k>/eval.json``: the innings protocol, 100 innings x 10 shots)."""
+    from billiards.files import ROOT
+
+    root = root or ROOT / "results" / "bench"
+    runs = []
+    for seed_dir in sorted(Path(setting).glob("seed*")):
+        ev = json.loads((seed_dir / "eval.json").read_text())
+        if (ev.get("n_innings"), ev.get("max_shots"), ev.get("start"), ev.get("noise", "none")) != (100, 10, "random", "none"):
+            raise ValueError(f"{seed_dir}/eval.json is not the innings protocol (100 random-start innings of 10 shots, exact)")
+        runs.append({"seed_dir": display_path(seed_dir), "eval_seed": ev["seed"], "values": ev["points"]})
+    if not runs:
+        raise ValueError(f"{setting}: no seed*/eval.json")
+    track = TRACKS["innings-v1"]
+    card = {"track": track.name, "version": track.version,
+            "agent": {"name": slug, "group": row, "kind": "recorded", "compute": "observation"},
+            "runs": runs, "ms_per_decision": None, "sims_per_decision": None,
+            "note": "the training runs' final evaluations (their own evaluation racks, not the track's seeds)",
+            "command": f"python -m billiards.bench record-training {display_path(setting)} --row '{row}' --slug {slug}"}
+    path = root / "recorded" / track.name / f"{slug}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(card, indent=2) + "\n")
+    return path
+
+
+__all__ = ["EARLIER", "REBUILD", "STATUSES", "build", "collect", "draw_figure", "leaderboard", "markdown", "record_training"]
