@@ -296,6 +296,50 @@ def test_report_writes_reproduction_rows_from_the_run_directories(tmp_path):
     assert rc == 2 and "no stage has run there" in text
 
 
+def test_each_training_row_carries_its_iqm_with_a_stratified_bootstrap_interval(tmp_path):
+    """A row whose seeds all recorded their evaluation's per-inning points gets ``aggregate``: the
+    IQM over every (seed, inning) with its 95 % stratified bootstrap interval (which holds the
+    IQM), the mean and the per-seed means; a table's comparison gets P(X > Y) with its interval;
+    both are the same bytes when written again. Rows without the points show none (a dash)."""
+    import random
+
+    root = tmp_path / "state"
+    rng = random.Random(0)
+    for row, centre in (("aim", 2), ("aim_features", 6)):
+        for seed in (0, 1):
+            d = root / "table4" / row / f"seed{seed}"
+            points = [max(0, centre + rng.randint(-2, 3)) for _ in range(20)]
+            _fake_run(d, "table4", row, seed, sum(points) / len(points), max(points), 0.0, 400)
+            ev = json.loads((d / "eval.json").read_text())
+            (d / "eval.json").write_text(json.dumps({**ev, "points": points}))
+    _fake_run(root / "table4" / "plain" / "seed0", "table4", "plain", 0, 0.5, 3, 0.0, 400)  # no points recorded
+
+    first, second = tmp_path / "first", tmp_path / "second"
+    data = json.loads(write_report(Sources("paper", root, root), first)[0].read_text())
+    write_report(Sources("paper", root, root), second)
+    for name in ("reproduction.json", "reproduction.md"):
+        assert (first / name).read_bytes() == (second / name).read_bytes(), name
+    rows = {(r["table"], r.get("variant")): r for r in data["rows"]}
+    for key in ((4, "aim"), (4, "aim_features"), (5, "aim_features")):
+        agg, ours = rows[key]["aggregate"], rows[key]["ours"]
+        assert agg["seeds"] == 2 and len(agg["per_seed"]) == 2
+        assert agg["mean"] == pytest.approx(ours["mean"], abs=1e-4)
+        lo, hi = agg["ci95"]
+        assert lo <= agg["iqm"] <= hi and lo < hi
+    assert rows[(5, "aim_features")]["aggregate"] == rows[(4, "aim_features")]["aggregate"]  # the same runs
+    assert rows[(4, "plain")]["aggregate"] is None and rows[(4, "plain")]["ours"]["mean"] == pytest.approx(0.5)
+    assert rows[(1, "sac")]["aggregate"] is None
+    (better,) = [p for p in data["improvement"] if p["table"] == 4]
+    assert (better["x"], better["y"], better["seeds"]) == ("aim_features", "aim", [2, 2])
+    assert better["ci95"][0] <= better["p"] <= better["ci95"][1] and better["p"] > 0.9
+    md = re.sub(" +", " ", (first / "reproduction.md").read_text())
+    agg = rows[(4, "aim_features")]["aggregate"]
+    assert "| mean ± std | IQM [95 % CI] |" in md
+    assert f"{agg['iqm']:.3f} [{agg['ci95'][0]:.3f}, {agg['ci95'][1]:.3f}]" in md
+    assert f"| `aim_features` > `aim` | {better['p']:.3f} [" in md
+    assert "Deep RL at the Edge of the Statistical Precipice" in md
+
+
 def test_rand_eval_is_the_points_before_the_first_miss_of_the_random_start_evaluation(tmp_path):
     """Table 3's "rand. eval" column: the mean over seeds of each run's mean points before the
     first miss from random racks; missing unless every run recorded it."""

@@ -12,7 +12,7 @@ Sources (all data; nothing here names code):
 
 Scorecards sharing an agent ``group`` (a policy's training seeds) pool into one row: the mean
 and the interquartile mean over every (seed, unit) score with stratified bootstrap intervals
-(:func:`billiards.bench.stats.aggregate`). ``python -m billiards.bench leaderboard`` writes
+(:func:`billiards.stats.aggregate`). ``python -m billiards.bench leaderboard`` writes
 ``leaderboard.json``, ``leaderboard.md`` and ``leaderboard.png`` (CI rebuilds the first two
 and diffs them).
 """
@@ -26,7 +26,7 @@ import numpy as np
 
 from billiards.files import atomic_write_text, display_path
 
-from . import stats
+from billiards import stats
 from .tracks import TRACKS
 
 STATUSES = ("verified", "recorded", "unverified")

@@ -23,7 +23,7 @@ import numpy as np
 
 from billiards.files import atomic_write_text, display_path, record_intact, sealed_record
 
-from . import stats
+from billiards import stats
 from .agents import Agent, AgentError, resolve_agent
 from .tracks import Track, get_track
 

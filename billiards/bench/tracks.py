@@ -115,7 +115,7 @@ class Track:
 
 # The match pool's ratings: greedy (robust search over the fastfiz_x5 ranker) anchors the scale at
 # 1500; greedy_r's is the rating that explains its score against greedy in the committed league
-# results/sagu/fastfiz_x5_run (0.5675 of their 400 matches; billiards.bench.stats.elo_against).
+# results/sagu/fastfiz_x5_run (0.5675 of their 400 matches; billiards.stats.elo_against).
 _MATCH_RATINGS = (("greedy", 1500.0), ("greedy_r", 1547.1))
 
 _REGISTRY: tuple[Track, ...] = (

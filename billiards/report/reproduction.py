@@ -14,6 +14,12 @@ are not all finished are written with ``"complete": false``.
   per proposer x method x protocol (Table 6), ours beside the paper's figures, with the seeds
   finished and planned, steps per seed, physics, CPU-hours and commits; ``"extra"``: the rows
   beside the tables (``compared_with``) in the same form;
+* per training row, ``"aggregate"``: the interquartile mean (IQM) of every evaluation inning of
+  every finished seed with its 95 % stratified bootstrap interval (:func:`billiards.stats.aggregate`,
+  the methodology of Agarwal et al. 2021, ``rliable``); ``"improvement"``: for the comparisons
+  a table's take-away rests on (:data:`COMPARISONS`), the probability of improvement P(X > Y)
+  with its interval (:func:`billiards.stats.probability_of_improvement`). Both draw from
+  a fixed generator, so the report still regenerates byte for byte;
 * ``reproduction.md``: the same as Markdown tables (``tabulate``), and the CPU-hours per table.
 """
 
@@ -39,6 +45,14 @@ EXTRA = "extra"  # the rows beside the tables
 STARTS = STARTS_FILE  # a training run's start records (billiards.provenance.record_start)
 OUR_KEYS = ("mean", "std", "max", "foul_inn", "foul_sh", "succ_sh", "canonical", "rand_eval")
 SEARCH_FILES = ("results.json", "chains.jsonl", "config.yaml", "search.log")
+# the row comparisons each training table's take-away rests on, (X, Y): P(X > Y) is reported
+COMPARISONS = {
+    "table1": (("sac", "ppo"),),
+    "table2": (("random_continue", "canonical_continue"),),
+    "table3": (("rm", "plain"), ("rm_aim", "aim")),
+    "table4": (("aim_features", "aim"), ("aim", "plain")),
+    "table5": (("near_miss", "aim_features"), ("foul_penalty", "aim_features")),
+}
 
 
 def _round(x):
@@ -99,10 +113,46 @@ def train_state(run_dir: Path) -> TrainState:
                       int(summary.get("frames", 0)), commits)
 
 
-def training_rows(src: Sources, tables: list[Table], spent: dict[str, float]) -> list[dict]:
+def inning_points(runs: list) -> list[list[float]] | None:
+    """Each run's per-inning points of its final evaluation (``eval.json``'s ``points``), one
+    list per seed; None unless every run recorded them."""
+    points = [r.eval.get("points") for r in runs]
+    return points if runs and all(isinstance(p, list) and p for p in points) else None
+
+
+def seed_aggregate(points: list[list[float]] | None) -> dict | None:
+    """The IQM of every (seed, inning) score with its 95 % stratified bootstrap interval, the
+    plain mean and the per-seed means (:func:`billiards.stats.aggregate`)."""
+    if points is None:
+        return None
+    from billiards.stats import aggregate as stratified
+
+    agg = stratified(points)
+    return {"iqm": _round(agg["iqm"]), "ci95": [_round(x) for x in agg["ci95"]], "mean": _round(agg["mean"]),
+            "seeds": agg["seeds"], "per_seed": [_round(x) for x in agg["per_seed"]]}
+
+
+def improvements(tables: list[Table], scores: dict[tuple[str, str], list]) -> list[dict]:
+    """P(X > Y) with its 95 % stratified bootstrap interval for each pair of :data:`COMPARISONS`
+    whose rows both have every finished seed's inning points (``scores``, by table and row)."""
+    from billiards.stats import probability_of_improvement
+
+    out = []
+    for table in tables:
+        for x, y in COMPARISONS.get(table.name, ()):
+            if (xs := scores.get((table.name, x))) and (ys := scores.get((table.name, y))):
+                p = probability_of_improvement(xs, ys)
+                out.append({"table": int(table.name[5:]), "x": x, "y": y, "p": _round(p["p"]),
+                            "ci95": [_round(v) for v in p["ci95"]], "seeds": [len(xs), len(ys)]})
+    return out
+
+
+def training_rows(src: Sources, tables: list[Table], spent: dict[str, float],
+                  scores: dict[tuple[str, str], list] | None = None) -> list[dict]:
     """One row per row of ``tables``; a ``compared_with`` row carries ``compared_with`` and
     ``paper_row`` (the row it is shown against). Adds each table's CPU seconds to ``spent``
-    (a shared row's are its source's)."""
+    (a shared row's are its source's) and, with ``scores``, each row's per-seed inning points
+    under ``(table, row)``."""
     rows = []
     for table in tables:
         for name, spec in table.rows.items():
@@ -126,7 +176,7 @@ def training_rows(src: Sources, tables: list[Table], spent: dict[str, float]) ->
                 "steps": source_table.steps, "physics": None, "ours": None,
                 "paper": {k: spec.figures[k] for k in ("mean", "std", *columns) if k in spec.figures},
                 "cpu_hours": round(cpu_s / 3600, 3), "commits": list(dict.fromkeys(commits)),
-                "shared_with": [source] if spec.same_as else None,
+                "shared_with": [source] if spec.same_as else None, "aggregate": None,
             }
             if done:
                 agg = aggregate(done)
@@ -135,6 +185,10 @@ def training_rows(src: Sources, tables: list[Table], spent: dict[str, float]) ->
                 row["steps_reached"] = agg["frames"]
                 physics = sorted({r.physics for r in done})
                 row["physics"] = physics[0] if len(physics) == 1 else physics
+                points = inning_points(done)
+                row["aggregate"] = seed_aggregate(points)
+                if scores is not None and points is not None:
+                    scores[(table.name, name)] = points
             row["complete"] = len(done) == len(table.seeds)
             spent[table.name] += 0.0 if spec.same_as else cpu_s
             rows.append(row)
@@ -231,8 +285,10 @@ def reproduction(src: Sources, out: Path | None = None) -> dict:
     tables = [t for name, t in sorted(paper_tables().items()) if t.app == "train" and name[5:].isdigit()]
     extra = [paper_tables()[EXTRA]]
     spent: dict[str, float] = defaultdict(float)
-    rows = training_rows(src, tables, spent) + search_rows(src, paper_tables()["table6"], spent)
-    data = {"campaign": src.name, "regenerate": REGENERATE, "rows": rows, "extra": training_rows(src, extra, spent)}
+    scores: dict[tuple[str, str], list] = {}
+    rows = training_rows(src, tables, spent, scores) + search_rows(src, paper_tables()["table6"], spent)
+    data = {"campaign": src.name, "regenerate": REGENERATE, "rows": rows, "extra": training_rows(src, extra, spent),
+            "improvement": improvements(tables, scores)}
     data["cpu_hours_by_table"] = {t: round(s / 3600, 3) for t, s in spent.items()}
     if out is not None:
         data["figures"] = curve_figures(src, tables, extra, out)
@@ -241,9 +297,27 @@ def reproduction(src: Sources, out: Path | None = None) -> dict:
 
 # ----------------------------------------------------------------------------- Markdown
 
+IQM_TITLE = "IQM [95 % CI]"
+
+
+def iqm_cell(r: dict | None) -> str:
+    """A row's IQM with its 95 % stratified bootstrap interval (``aggregate``), or a dash."""
+    agg = (r or {}).get("aggregate")
+    if not agg:
+        return "–"
+    return f"{agg['iqm']:.3f} [{agg['ci95'][0]:.3f}, {agg['ci95'][1]:.3f}]"
+
+
+def _with_iqm(cols: list[str], r: dict | None, cells: list[str]) -> list[str]:
+    """``cells`` (one per column of ``cols``) with the IQM cell after the mean's (the header's
+    title where ``r`` is None)."""
+    at = cols.index("mean") + 1 if "mean" in cols else 0
+    return [*cells[:at], IQM_TITLE if r is None else iqm_cell(r), *cells[at:]]
+
+
 def _run_cells(r: dict, cols: list[str]) -> list[str]:
-    return [f"{len(r['seeds'])}/{len(r['seeds_planned'])}", f"{r['steps']:,}", *[figure(c, r["ours"]) for c in cols],
-            f"{r['cpu_hours']:.2f}", ", ".join(r["commits"]) or "–"]
+    return [f"{len(r['seeds'])}/{len(r['seeds_planned'])}", f"{r['steps']:,}",
+            *_with_iqm(cols, r, [figure(c, r["ours"]) for c in cols]), f"{r['cpu_hours']:.2f}", ", ".join(r["commits"]) or "–"]
 
 
 def markdown(data: dict) -> str:
@@ -252,7 +326,12 @@ def markdown(data: dict) -> str:
              "Ours | paper. mean ± std: points per inning over seeds (each seed's evaluation mean: 100 innings, "
              "max_shots 10, deterministic policy); max: best inning over seeds; foul/inn: innings with a foul (%); "
              "foul/sh, succ/sh: per shot (%); canonical: the same evaluation from the opening rack. "
-             "seeds: finished / planned.", ""]
+             "seeds: finished / planned.", "",
+             "IQM [95 % CI] (ours only): the interquartile mean, the mean of the middle 50 %, of every evaluation "
+             "inning of every seed, with a 95 % stratified bootstrap interval that resamples the seeds and the "
+             "innings within each seed (Agarwal et al. 2021, \"Deep RL at the Edge of the Statistical Precipice\"). "
+             "P(X > Y): the probability that an inning of row X scores above one of row Y (ties count half), "
+             "averaged over their seed pairs, with its interval from the same resampling.", ""]
     for number in range(1, 6):
         if not (table := [r for r in rows if r["table"] == number]):
             continue
@@ -260,10 +339,15 @@ def markdown(data: dict) -> str:
         cols = list(spec.columns)
         body = [[r["variant"] + (f" (= {', '.join(r['shared_with'])})" if r.get("shared_with") else ""),
                  f"{len(r['seeds'])}/{len(r['seeds_planned'])}", f"{r['steps']:,}",
-                 *[f"{figure(c, r['ours'])} \\| {figure(c, r['paper'])}" for c in cols],
+                 *_with_iqm(cols, r, [f"{figure(c, r['ours'])} \\| {figure(c, r['paper'])}" for c in cols]),
                  f"{r['cpu_hours']:.2f}", ", ".join(r["commits"]) or "–"] for r in table]
         parts += [f"## {spec.title}", "",
-                  md_table(["variant", "seeds", "steps", *[COLUMN_TITLES[c] for c in cols], "CPU-h", "commits"], body), ""]
+                  md_table(["variant", "seeds", "steps", *_with_iqm(cols, None, [COLUMN_TITLES[c] for c in cols]),
+                            "CPU-h", "commits"], body), ""]
+        if pairs := [p for p in data.get("improvement", []) if p["table"] == number]:
+            parts += [md_table(["probability of improvement", "P(X > Y) [95 % CI]", "seeds X, Y"],
+                               [[f"`{p['x']}` > `{p['y']}`", f"{p['p']:.3f} [{p['ci95'][0]:.3f}, {p['ci95'][1]:.3f}]",
+                                 f"{p['seeds'][0]}, {p['seeds'][1]}"] for p in pairs]), ""]
         if picture := data.get("figures", {}).get(f"table{number}"):
             parts += [f"![Table {number}: learning curves of the finished seeds, the paper's figure beside them]({picture})", ""]
     if t6 := [r for r in rows if r["table"] == 6]:
@@ -289,9 +373,11 @@ def markdown(data: dict) -> str:
         body = [[r["variant"], *_run_cells(r, cols)]]
         if base is not None:
             body.append([f"Table {r['table']} `{base['variant']}` (project CPU settings)", *_run_cells(base, cols)])
-        body.append([f"the paper's `{r['compared_with']}`", "", "", *[figure(c, r["paper"]) for c in cols], "", ""])
+        body.append([f"the paper's `{r['compared_with']}`", "", "",
+                     *_with_iqm(cols, {}, [figure(c, r["paper"]) for c in cols]), "", ""])
         parts += [f"## {tables[EXTRA].title}", "",
-                  md_table(["run", "seeds", "steps", *[COLUMN_TITLES[c] for c in cols], "CPU-h", "commits"], body), ""]
+                  md_table(["run", "seeds", "steps", *_with_iqm(cols, None, [COLUMN_TITLES[c] for c in cols]),
+                            "CPU-h", "commits"], body), ""]
         if picture := data.get("figures", {}).get(f"extra_table{r['table']}"):
             parts += [f"![Table {r['table']}'s task: learning curves of the authors' SAC settings and ours, "
                       f"the paper's figure beside them]({picture})", ""]
