@@ -218,8 +218,12 @@ def fingerprint_data(track: Track) -> list:
 
 
 def fingerprint(track: Track) -> str:
-    """sha256 of :func:`fingerprint_data` (each track's ``fingerprint`` must equal it)."""
-    return hashlib.sha256(json.dumps(fingerprint_data(track), sort_keys=True).encode()).hexdigest()
+    """sha256 of the track's settings (all but the fingerprint) and :func:`fingerprint_data`:
+    each track's ``fingerprint`` must equal it, so a change to the track itself or to what its
+    first units play changes it."""
+    settings = {k: v for k, v in track.record().items() if k != "fingerprint"}
+    body = json.dumps({"settings": settings, "play": fingerprint_data(track)}, sort_keys=True)
+    return hashlib.sha256(body.encode()).hexdigest()
 
 
 # ----------------------------------------------------------------------------- the scorecard
@@ -354,6 +358,8 @@ def claim_directory(out: Path, identity: dict) -> None:
     """Make ``out`` this evaluation's, or refuse: a directory holding another evaluation (another
     agent, track version or limit) or anything else that is not an evaluation is never written."""
     path = out / IDENTITY_FILE
+    if out.exists() and not out.is_dir():
+        raise EvaluationError(f"{display_path(out)} is a file, not a directory; choose an empty or new directory")
     if path.is_file():
         try:
             mine = json.loads(path.read_text())

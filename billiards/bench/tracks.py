@@ -5,9 +5,9 @@ noise (and, for ``variable``, that each shot's level is told to the agent), the 
 innings / chains / matches, the evaluation seeds, what the agent may use at decision time, and
 a version. Its name ends in ``-v<N>``, the rule the env IDs follow too (``Billiards4Ball-v0``):
 a change to the simulator, the envs or the track that changes any of its numbers gives it a new
-``N``. Each track carries a fingerprint of its first racks and of a reference agent's first
-decisions (the nearest-red heuristic); ``tests/bench`` recomputes it, so such a change cannot go
-unnoticed.
+``N``. Each track carries a fingerprint of its settings, its first racks and a reference agent's
+first decisions (the nearest-red heuristic); ``tests/test_bench.py`` recomputes it, so such a
+change cannot go unnoticed.
 
 Protocols:
 
@@ -23,7 +23,7 @@ Protocols:
 
 Seeds: inning or chain ``i`` plays with seed ``seed + i``; match ``i`` against opponent ``j``
 with ``seed + 1000 j + i``. The seeds are held out: no training, tuning or reported run in the
-repository used them (``tests/bench`` checks every committed record).
+repository used them (``tests/test_bench.py`` checks every committed record).
 
 Decision-time access: every agent sees the observation (the gymnasium env's); an agent that
 searches with the simulator may use up to ``budget`` simulations per decision, counted and
@@ -121,28 +121,28 @@ _MATCH_RATINGS = (("greedy", 1500.0), ("greedy_r", 1547.1))
 _REGISTRY: tuple[Track, ...] = (
     Track("innings-v1", "innings", "The paper's evaluation protocol: points per 10-shot inning from random racks, exact play",
           units=100, shots=10, seed=7_100_000,
-          fingerprint="52f366f98a57fa382a7b0bf0499a6c492063081dd1be14b6219b3a7e9eaa6213"),
+          fingerprint="a2f0dab7360af71310fa73a116ad68180829a025e5cc4b1c905e7f83fbc0286b"),
     Track("p1-exact-v1", "p1", "Per-shot success from random racks, exact play",
           units=100, shots=20, seed=7_200_000,
-          fingerprint="18e0d8558281ff35926605d66db249c1b8360bc90ba92b2fdaee8fc917657fe9"),
+          fingerprint="cfc0f8ff7ff57815fe1d4eda320562dc2d7589f2e553dc96acfc7668c57df251"),
     Track("p3-exact-v1", "p3", "Chains from the opening rack, exact play",
           units=20, shots=1000, seed=7_300_000,
-          fingerprint="6933c5596605d869d0a8b91e89a4ab1c23c1c58337b5ed64e11ca8f0ddbe4218"),
+          fingerprint="ed89d0bb2a977de82ed0d01dcbb269e036fc547adabafb6fdf5f9c326f2bb17b"),
     Track("p1-fastfiz-v1", "p1", "Per-shot success from random racks under fastfiz execution noise",
           units=100, shots=20, seed=7_400_000, noise="fastfiz",
-          fingerprint="88c6138b01ce84677a5c5d378f86427ca57ce3ce2509142a5a63df3dc7071a08"),
+          fingerprint="3af43f59e5a5084ad25b11190a174655d1a4abe04fb3bdcabe171e19c4c9c3da"),
     Track("p3-fastfiz-v1", "p3", "Chains from the opening rack under fastfiz execution noise",
           units=50, shots=1000, seed=7_500_000, noise="fastfiz",
-          fingerprint="b240a954549b687aa879f036785e64f67d4071c8f5533aed9b72bff90924f7a1"),
+          fingerprint="cd0e39edc0b7e1ff86c825ae55dc85313af0873d4f30995f7808e41000b6c996"),
     Track("p1-x5-v1", "p1", "Per-shot success from random racks under five times fastfiz's noise",
           units=100, shots=20, seed=7_600_000, noise="fastfiz_x5",
-          fingerprint="1a8911c1063ae41b4763bd2c6cd995c0f8c5e217c93cb4960460cf22b1f76148"),
+          fingerprint="e0b426743600da4d2ff5c6f179aa4ee38c24114355790ad23298d756757ea22b"),
     Track("p1-variable-v1", "p1", "Per-shot success from random racks, each shot's noise level drawn in [0, 5] x fastfiz and told",
           units=100, shots=20, seed=7_700_000, noise="variable", tells_level=True,
-          fingerprint="0381fe660ef21aff6b5aed52be724a42f55a6f97e6e52c0df0376fe2f5eca417"),
+          fingerprint="21f58dd0847e89d3fe80b44fa3f9a2aef6bfea353ef75824e021e3cb52a1b886"),
     Track("match-x5-v1", "match", "Matches to 10 under fastfiz_x5 against the reference pool",
           units=10, seed=7_800_000, noise="fastfiz_x5", opponents=("greedy", "greedy_r"), ratings=_MATCH_RATINGS,
-          anchor="greedy", fingerprint="f599134f6f5850c5f68a2cce58482823b0fd613edb6d3d62afbac7b3494c8bc1"),
+          anchor="greedy", fingerprint="5e6bf1ae696bf9691ae21d6706926dd3187da7476a94e0415db3e8d8ce680657"),
 )
 
 TRACKS: dict[str, Track] = {t.name: t for t in _REGISTRY}
