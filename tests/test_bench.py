@@ -754,3 +754,21 @@ def test_elo_against_the_anchor():
     r = stats.elo_against([(1500.0, 1.0)] * wins + [(1500.0, 0.0)] * (20 - wins))
     assert 1 / (1 + 10 ** ((1500.0 - r) / 400)) == pytest.approx((wins + 0.5) / 21, abs=1e-3)
     assert np.isfinite(stats.elo_against([(1500.0, 1.0)] * 10))  # all won: finite
+
+
+# ----------------------------------------------------------------------------- registration
+
+
+def test_import_billiards_registers_the_gymnasium_env_and_the_module_prefix_works():
+    """``gym.make("billiards:Billiards4Ball-v0")`` in a fresh interpreter, with no import of ours,
+    and ``import billiards`` alone registering the ID, without loading torch."""
+    code = ("import sys, gymnasium as gym\n"
+            "env = gym.make('billiards:Billiards4Ball-v0')\n"
+            "obs, _ = env.reset(seed=0)\n"
+            "assert obs.shape == (28,), obs.shape\n"
+            "import billiards\n"
+            "assert billiards.GYM_ID in gym.registry\n"
+            "print('TORCH', 'torch' in sys.modules)\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "TORCH False" in proc.stdout

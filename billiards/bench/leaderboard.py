@@ -13,8 +13,8 @@ Sources (all data; nothing here names code):
 Scorecards sharing an agent ``group`` (a policy's training seeds) pool into one row: the mean
 and the interquartile mean over every (seed, unit) score with stratified bootstrap intervals
 (:func:`billiards.stats.aggregate`). ``python -m billiards.bench leaderboard`` writes
-``leaderboard.json``, ``leaderboard.md`` and ``leaderboard.png`` (CI rebuilds the first two
-and diffs them).
+``leaderboard.json``, ``leaderboard.md``, ``leaderboard.png`` and ``leaderboard_profiles.png``
+(CI rebuilds the first two and diffs them).
 """
 
 from __future__ import annotations
@@ -30,6 +30,9 @@ from billiards import stats
 from .tracks import TRACKS
 
 STATUSES = ("verified", "recorded", "unverified")
+# performance profiles: the share of units (innings, chains) scoring above each threshold
+PROFILE_THRESHOLDS = {"innings": tuple(range(10)), "p1": tuple(round(0.1 * k, 1) for k in range(10)),
+                      "p3": (0, 1, 2, 5, 10, 20, 50, 100, 200, 500)}
 REBUILD = "python -m billiards.bench leaderboard"
 
 # The project's earlier figures for the same agent and protocol, beside the leaderboard's:
@@ -175,10 +178,16 @@ def leaderboard(root: Path) -> dict:
         for c in cards:
             if c["track"] == name:
                 groups.setdefault((c["status"], c["agent"].get("group") or c["agent"]["name"]), []).append(c)
-        rows = [_row(track, g) for g in groups.values()]
-        rows.sort(key=lambda r: (-r["score"], r["row"]))
-        tracks[name] = {"rules": track.rules(), "description": track.description, "version": track.version,
-                        "metric": track.metric, "rows": rows}
+        ranked = sorted(((_row(track, g), _runs(g)) for g in groups.values()), key=lambda rr: (-rr[0]["score"], rr[0]["row"]))
+        entry = {"rules": track.rules(), "description": track.description, "version": track.version,
+                 "metric": track.metric, "rows": [r for r, _ in ranked]}
+        if track.protocol != "match" and ranked:
+            for (row, runs), (_, below) in zip(ranked, ranked[1:]):  # is each row really above the next?
+                row["p_above_next"] = stats.probability_of_improvement(runs, below)
+            thresholds = PROFILE_THRESHOLDS[track.protocol]
+            entry["profiles"] = {"thresholds": list(thresholds),
+                                 "rows": {row["row"]: stats.performance_profile(runs, thresholds) for row, runs in ranked}}
+        tracks[name] = entry
     agents = sorted({r["row"] for t in tracks.values() for r in t["rows"]})
     return {"rebuild": REBUILD, "agents": len(agents), "scorecards": len(cards), "tracks": tracks}
 
@@ -204,8 +213,8 @@ def markdown(board: dict) -> str:
             lines += ["(no scorecards yet)", ""]
             continue
         extra = {"innings": "IQM", "p1": "IQM", "p3": "median · IQM · max · at cap", "match": "win rate [95 %]"}[track.protocol]
-        lines += [f"| # | agent | {metric} [95 %] | {extra} | seeds | ms · sims / decision | class | status | earlier figure |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+        lines += [f"| # | agent | {metric} [95 %] | {extra} | P(above the next) [95 %] | seeds | ms · sims / decision | class "
+                  "| status | earlier figure |", "|---|---|---|---|---|---|---|---|---|---|"]
         for i, r in enumerate(t["rows"], 1):
             if track.protocol == "match":
                 main = f"{r['score']:.0f}"
@@ -224,10 +233,16 @@ def markdown(board: dict) -> str:
                     (lambda v: f"{v:.3f}" if track.protocol == "innings" else f"{v:.2f}")
                 verdict = "agrees" if e["within_ci95"] else "intervals overlap" if e["intervals_overlap"] else "differs"
                 earlier = f"{f(e['value'])} [{f(e['ci95'][0])}, {f(e['ci95'][1])}], {verdict} ({e['protocol']})"
-            lines.append(f"| {i} | {r['row']} | {main} | {more} | {r['seeds']} | {cost} | {r['compute']} | {r['status']} | {earlier} |")
+            above = "" if "p_above_next" not in r else \
+                f"{r['p_above_next']['p']:.2f} [{r['p_above_next']['ci95'][0]:.2f}, {r['p_above_next']['ci95'][1]:.2f}]"
+            lines.append(f"| {i} | {r['row']} | {main} | {more} | {above} | {r['seeds']} | {cost} | {r['compute']} | {r['status']} "
+                         f"| {earlier} |")
         lines.append("")
-    lines += ["Sources: each row's scorecards are listed in `leaderboard.json` (`sources`), each with the command that "
-              "played it and its commit.", ""]
+    lines += ["P(above the next): the probability that a unit (inning, chain) of the row scores above one of the row "
+              "below it, ties counting half (rliable's probability of improvement, stratified bootstrap interval); 0.5 "
+              "means the two rows cannot be told apart. `leaderboard.json` also holds each track's performance profiles "
+              "(the share of units above each threshold; `leaderboard_profiles.png`) and each row's scorecards "
+              "(`sources`), each with the command that played it and its commit.", ""]
     return "\n".join(lines)
 
 
@@ -270,7 +285,33 @@ def build(root: Path, out: Path, figure: bool = True) -> list[Path]:
              atomic_write_text(out / "leaderboard.md", markdown(board))]
     if figure:
         paths.append(draw_figure(board, out / "leaderboard.png"))
+        paths.append(draw_profiles(board, out / "leaderboard_profiles.png"))
     return paths
+
+
+def draw_profiles(board: dict, path: Path) -> Path:
+    """``leaderboard_profiles.png``: the performance profiles of the exact tracks' rows."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [n for n in ("innings-v1", "p1-exact-v1", "p3-exact-v1", "p3-fastfiz-v1") if board["tracks"][n].get("profiles")]
+    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.6), squeeze=False)
+    for ax, name in zip(axes[0], names):
+        prof = board["tracks"][name]["profiles"]
+        x = np.arange(len(prof["thresholds"]))
+        for row, fractions in prof["rows"].items():
+            ax.plot(x, fractions, marker=".", linewidth=1, label=row[:40])
+        ax.set_xticks(x, [str(t) for t in prof["thresholds"]], fontsize=6)
+        ax.set_title(f"{name}: share of units above tau", fontsize=8)
+        ax.set_ylim(-0.02, 1.02)
+        ax.tick_params(axis="y", labelsize=6)
+    axes[0][-1].legend(fontsize=4.5, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    plt.close(fig)
+    return path
 
 
 def record_training(setting: Path, row: str, slug: str, root: Path | None = None) -> Path:
@@ -299,4 +340,5 @@ def record_training(setting: Path, row: str, slug: str, root: Path | None = None
     return path
 
 
-__all__ = ["EARLIER", "REBUILD", "STATUSES", "build", "collect", "draw_figure", "leaderboard", "markdown", "record_training"]
+__all__ = ["EARLIER", "PROFILE_THRESHOLDS", "REBUILD", "STATUSES", "build", "collect", "draw_figure", "draw_profiles",
+           "earlier_figure", "leaderboard", "markdown", "record_training"]

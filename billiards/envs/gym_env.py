@@ -1,8 +1,9 @@
 """Gymnasium environment: one Korean 4-ball inning, one step per shot.
 
-Registered as ``Billiards4Ball-v0`` when :mod:`billiards.envs` is imported::
+Registered as ``Billiards4Ball-v0`` when :mod:`billiards` is imported (``gym.make("billiards:Billiards4Ball-v0")``
+imports it)::
 
-    import gymnasium as gym, billiards.envs
+    import gymnasium as gym, billiards
     env = gym.make("Billiards4Ball-v0", start="random", on_miss="continue", max_shots=10)
     env = gym.make("Billiards4Ball-v0", physics="international")   # another table (default korean_medium)
 
