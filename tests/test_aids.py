@@ -151,7 +151,7 @@ def test_training_with_rm_shaping_evaluates_the_true_score(tmp_path):
         [sys.executable, str(REPO / "train.py"), "shaping=rm", f"shaping.rm_model={model_path}", "shaping.rm=2.0",
          "budget=smoke", "budget.total_steps=1024", "budget.eval_every=0", "budget.checkpoint_every=0",
          f"hydra.run.dir={run_dir}", "progress=false"],
-        cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=240,
+        cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=900,
     )
     assert proc.returncode == 0, proc.stderr[-4000:]
     # training rewards carry the bonus (every shot gets 2 * V_rm > 0) ...

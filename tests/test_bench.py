@@ -655,7 +655,7 @@ def test_config_errors_check_the_output_directory(tmp_path):
 
 def _app(*args, cwd=ROOT):
     return subprocess.run([sys.executable, str(ROOT / "evaluate.py"), *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=300)
+                          timeout=900)
 
 
 def test_evaluate_help_lists_every_track():

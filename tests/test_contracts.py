@@ -212,7 +212,7 @@ def test_a_damaged_file_named_by_config_is_refused_before_anything_is_written(tm
     damaged = tmp_path / "damaged.pt"
     damaged.write_bytes(bytes(data[: len(data) // 2]))  # truncated
     proc = subprocess.run([sys.executable, str(ROOT / app), *(o.format(f=damaged) for o in overrides)], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=900)
     assert proc.returncode != 0 and "damaged.pt" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.pt"]
 

@@ -48,7 +48,7 @@ def test_a_gpu_proposer_needs_the_torch_implementation_and_a_gpu():
             PolicyProposer(prop.policies, constrain_aim=True, extra_features=True, device="cuda")
 
 
-def _search(tmp_path, *overrides: str, timeout: float = 300):
+def _search(tmp_path, *overrides: str, timeout: float = 900):
     import subprocess
     import sys
 
@@ -79,7 +79,7 @@ def test_search_app_device_cpu_end_to_end(tmp_path):
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a GPU")
 @pytest.mark.parametrize("device", ["cuda", "cuda:1", "gpu"])
 def test_search_app_refuses_a_device_it_cannot_use_and_writes_nothing(tmp_path, device):
-    proc = _search(tmp_path, f"device={device}", timeout=120)
+    proc = _search(tmp_path, f"device={device}", timeout=900)
     expected = "is not a device" if device == "gpu" else "this machine has no CUDA GPU that torch can use"
     assert proc.returncode != 0 and expected in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr

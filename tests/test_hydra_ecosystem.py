@@ -58,7 +58,7 @@ def compose_cfg(*overrides: str, hydra: bool = False):
         return compose(config_name="config", overrides=list(overrides), return_hydra_config=hydra)
 
 
-def train(cwd: Path, *overrides: str, timeout: float = 300) -> subprocess.CompletedProcess:
+def train(cwd: Path, *overrides: str, timeout: float = 900) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, TRAIN, *overrides], cwd=cwd, env=ENV, capture_output=True, text=True,
                           timeout=timeout)
 
@@ -93,7 +93,7 @@ def test_ray_multirun_runs_every_job(tmp_path):
     """A local Ray instance runs a two-seed sweep; each job writes its run dir under the
     (relative) sweep dir, as the joblib launcher does."""
     ok(train(tmp_path, "-m", "hydra/launcher=ray_tasks", "hydra.launcher.ray.init.num_cpus=2", "seed=0,1", *TINY,
-             "hydra.sweep.dir=sweep", timeout=400))
+             "hydra.sweep.dir=sweep", timeout=900))
     runs = sorted((tmp_path / "sweep").glob("*/eval.json"))
     assert [r.parent.name[:2] for r in runs] == ["0_", "1_"]
     assert {json.loads((r.parent / "summary.json").read_text())["seed"] for r in runs} == {0, 1}
@@ -154,7 +154,7 @@ def test_optuna_study_records_a_failed_trial_and_keeps_the_best(tmp_path):
     proc = ok(train(tmp_path, "-m", "hydra/sweeper=optuna_eval", "hydra/sweeper/sampler=random",
                     "hydra.sweeper.sampler.seed=2", "hydra.sweeper.n_trials=4", "hydra.sweeper.params=null",
                     "budget.total_steps=choice(-1,128,192)", f"hydra.sweeper.storage={db}", "hydra.sweeper.study_name=t",
-                    *SHORT, "hydra.sweep.dir=sweep", timeout=500))
+                    *SHORT, "hydra.sweep.dir=sweep", timeout=900))
     assert "budget.total_steps must be > 0, got -1" in proc.stdout + proc.stderr
     study = optuna.load_study(study_name="t", storage=db)
     assert study.direction == optuna.study.StudyDirection.MAXIMIZE and len(study.trials) == 4
@@ -174,7 +174,7 @@ def test_optuna_study_records_a_failed_trial_and_keeps_the_best(tmp_path):
 def test_optuna_sweep_with_an_invalid_fixed_setting_fails_before_the_study(tmp_path):
     """What the sweeper does not vary is validated before the study starts: every trial would
     fail, so nothing runs and nothing is written."""
-    proc = train(tmp_path, "-m", "hydra/sweeper=optuna_eval", "budget=smoke", "budget.total_steps=-1", timeout=60)
+    proc = train(tmp_path, "-m", "hydra/sweeper=optuna_eval", "budget=smoke", "budget.total_steps=-1", timeout=900)
     assert proc.returncode != 0
     assert "every trial of the sweep would fail" in proc.stderr and "budget.total_steps must be > 0" in proc.stderr
     assert list(tmp_path.iterdir()) == []

@@ -225,13 +225,13 @@ def test_search_app_plays_the_chosen_table(tmp_path):
     proc = subprocess.run(
         [sys.executable, "search.py", "physics=international", "protocol=p1", "protocol.n_innings=2", "protocol.shots=2",
          "search.budget=40", "search.k1=20", "search.m1=2", "progress=false", "picture=false", f"hydra.run.dir={tmp_path}"],
-        cwd=REPO, capture_output=True, text=True, timeout=240,
+        cwd=REPO, capture_output=True, text=True, timeout=900,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     results = json.loads((tmp_path / "results.json").read_text())
     assert results["physics"] == "international" and results["config"]["physics"]["preset"] == "international"
     bad = subprocess.run([sys.executable, str(REPO / "search.py"), "physics.e_ball=2"], cwd=tmp_path, capture_output=True, text=True,
-                         timeout=60)
+                         timeout=900)
     assert bad.returncode != 0 and "physics.e_ball" in bad.stderr and "Traceback" not in bad.stderr
 
 

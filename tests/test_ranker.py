@@ -140,7 +140,7 @@ def test_training_command_writes_a_ranker_the_search_app_plays(tmp_path):
     out = tmp_path / "r.pt"
     proc = subprocess.run([sys.executable, "-m", "billiards.search.ranker", "--out", str(out), "--racks", "40",
                            "--candidates", "50", "--test-racks", "10", "--epochs", "1", "--hidden", "16"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+                          cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
     ranker = ShotRanker.load(out)
     assert ranker.meta["noise_preset"] == "fastfiz" and ranker.params == K
@@ -150,7 +150,7 @@ def test_training_command_writes_a_ranker_the_search_app_plays(tmp_path):
                            f"proposer.ranker={out}", "proposer.pool=200", "protocol=p1", "protocol.n_innings=2",
                            "protocol.shots=3", "search.budget=60", "search.k1=40", "search.wave=20", "threads=1",
                            "progress=false", "picture=false", f"hydra.run.dir={tmp_path / 'run'}"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+                          cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
     import json
 
@@ -161,7 +161,7 @@ def test_training_command_writes_a_ranker_the_search_app_plays(tmp_path):
 @pytest.mark.slow
 def test_a_missing_ranker_fails_fast_and_writes_nothing(tmp_path):
     proc = subprocess.run([sys.executable, str(ROOT / "search.py"), "noise=fastfiz", "proposer=ranked",
-                           "proposer.ranker=nowhere/r.pt"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+                           "proposer.ranker=nowhere/r.pt"], cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert proc.returncode != 0 and "no ranker file at nowhere/r.pt" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr and list(tmp_path.iterdir()) == []
 

@@ -91,5 +91,5 @@ def test_the_former_command_line_points_to_the_new_one():
     import sys
 
     proc = subprocess.run([sys.executable, "-m", "billiards.render", "shot", "--out", "x.png"], capture_output=True,
-                          text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+                          text=True, timeout=900, cwd=Path(__file__).resolve().parents[1])
     assert proc.returncode != 0 and "python -m billiards.pictures" in proc.stderr

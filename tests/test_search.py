@@ -259,7 +259,7 @@ def test_search_collector_plays_exactly_the_verified_shot(search, proposer, base
 
 def run_search(*args, cwd=ROOT):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "search.py", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "search.py", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
 
 
 @pytest.mark.slow
@@ -312,7 +312,7 @@ def test_policy_proposer_from_a_training_run(tmp_path):
     run = tmp_path / "run"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.run([sys.executable, "train.py", "budget=smoke", "env=aim_features", "progress=false",
-                           f"hydra.run.dir={run}"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+                           f"hydra.run.dir={run}"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-2000:]
     prop = load_policy_proposer([run], name="smoke")
     assert prop.constrain_aim and prop.extra_features
