@@ -772,3 +772,64 @@ def test_import_billiards_registers_the_gymnasium_env_and_the_module_prefix_work
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "TORCH False" in proc.stdout
+
+
+# ----------------------------------------------------------------------------- the leaderboard
+
+
+def _board_root(tmp_path):
+    """A results/bench-like root: two played scorecards on p3-exact-v1 (random, nearest: fast) and a submission."""
+    from billiards.bench.run import evaluate as play
+
+    root = tmp_path / "bench"
+    for name in ("random", "nearest"):
+        play(name, "p3-exact-v1", out=root / "scorecards" / "p3-exact-v1" / name, progress=False, group=f"{name} row")
+    play("random_aim", "p3-exact-v1", out=root / "submissions" / "p3-exact-v1" / "theirs", progress=False, group="their agent")
+    return root
+
+
+def test_the_leaderboard_pools_ranks_and_marks_submissions(tmp_path):
+    from billiards.bench.leaderboard import build
+
+    root = _board_root(tmp_path)
+    paths = build(root, tmp_path / "out", figure=False)
+    board = json.loads(paths[0].read_text())
+    rows = board["tracks"]["p3-exact-v1"]["rows"]
+    assert {r["row"] for r in rows} == {"random row", "nearest row", "their agent"}
+    assert [r["score"] for r in rows] == sorted((r["score"] for r in rows), reverse=True)
+    assert {r["row"]: r["status"] for r in rows}["their agent"] == "unverified"
+    assert all(r["ci95"][0] <= r["score"] <= r["ci95"][1] for r in rows)
+    assert "p_above_next" in rows[0] and "profiles" in board["tracks"]["p3-exact-v1"]
+    again = build(root, tmp_path / "again", figure=False)
+    assert [p.read_bytes() for p in paths] == [p.read_bytes() for p in again]  # byte for byte
+    assert "## p3-exact-v1" in paths[1].read_text() and "their agent" in paths[1].read_text()
+
+
+def test_the_leaderboard_refuses_a_scorecard_its_ledger_does_not_give(tmp_path):
+    from billiards.bench.leaderboard import build
+
+    root = _board_root(tmp_path)
+    card_path = root / "scorecards" / "p3-exact-v1" / "random" / SCORECARD_JSON
+    card = json.loads(card_path.read_text())
+    card["values"] = [card["track_record"]["shots"]] * len(card["values"])  # a forged scorecard: every chain at the cap
+    card_path.write_text(json.dumps(card))
+    with pytest.raises(ValueError, match="differ from those its ledger gives"):
+        build(root, tmp_path / "out", figure=False)
+    card["version"] = 0
+    card_path.write_text(json.dumps(card))
+    with pytest.raises(ValueError, match="play it again on the current version"):
+        build(root, tmp_path / "out", figure=False)
+
+
+@pytest.mark.slow
+def test_the_committed_leaderboard_regenerates_byte_for_byte(tmp_path):
+    committed = ROOT / "results" / "leaderboard.json"
+    if not committed.is_file():
+        pytest.skip("no committed leaderboard")
+    proc = subprocess.run([sys.executable, "-m", "billiards.bench", "leaderboard", "--out", str(tmp_path), "--no-figure"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    for name in ("leaderboard.json", "leaderboard.md"):
+        assert (tmp_path / name).read_bytes() == (ROOT / "results" / name).read_bytes(), name
+    board = json.loads(committed.read_text())
+    assert board["agents"] >= 15

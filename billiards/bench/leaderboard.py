@@ -113,10 +113,31 @@ def collect(root: Path) -> list[dict]:
             card = _load(path)
             if card.get("partial") or card.get("limit"):
                 continue
+            if status != "recorded":
+                check_against_ledger(path, card)
             card["status"] = status
             card["source"] = display_path(path)
             cards.append(card)
     return cards
+
+
+def check_against_ledger(path: Path, card: dict) -> None:
+    """A played scorecard must agree with the sealed ledger beside it: every unit there, of this
+    run, and the scorecard's per-unit scores recomputed from it."""
+    from .run import LEDGER_FILE, EvaluationError, read_ledger, score_records
+
+    ledger = path.parent / LEDGER_FILE
+    if not ledger.is_file():
+        raise ValueError(f"{display_path(path)}: no {LEDGER_FILE} beside it (a scorecard is checked against its ledger)")
+    try:
+        records = read_ledger(ledger, card.get("run", ""), repair=False)
+    except EvaluationError as err:
+        raise ValueError(str(err)) from None
+    track = TRACKS[card["track"]]
+    if len(records) != track.n_blocks():
+        raise ValueError(f"{display_path(ledger)}: {len(records)} units, the track has {track.n_blocks()}")
+    if score_records(track, [records[u] for u in sorted(records)]).get("values") != card.get("values"):
+        raise ValueError(f"{display_path(path)}: its scores differ from those its ledger gives")
 
 
 def _runs(cards: list[dict]) -> list[list[float]]:
@@ -341,4 +362,4 @@ def record_training(setting: Path, row: str, slug: str, root: Path | None = None
 
 
 __all__ = ["EARLIER", "PROFILE_THRESHOLDS", "REBUILD", "STATUSES", "build", "collect", "draw_figure", "draw_profiles",
-           "earlier_figure", "leaderboard", "markdown", "record_training"]
+           "check_against_ledger", "earlier_figure", "leaderboard", "markdown", "record_training"]

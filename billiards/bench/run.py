@@ -312,10 +312,10 @@ def run_identity(track: Track, agent_record: dict, limit: int | None) -> str:
     return hashlib.sha256(body.encode()).hexdigest()[:16]
 
 
-def read_ledger(path: Path, run_id: str) -> dict[int, dict]:
+def read_ledger(path: Path, run_id: str, repair: bool = True) -> dict[int, dict]:
     """The finished units of a ledger by index. A torn last line (a kill mid-append) is cut off
-    the file, so its unit is played again; any other line that is not an intact record of this
-    run is refused by name."""
+    the file (``repair``; else refused), so its unit is played again; any other line that is not
+    an intact record of this run is refused by name."""
     if not path.is_file():
         return {}
     data = path.read_bytes()
@@ -333,7 +333,7 @@ def read_ledger(path: Path, run_id: str) -> dict[int, dict]:
             ok = False
         last = n == len(lines) or (n == len(lines) - 1 and not lines[-1])
         if not ok:
-            if last and not data.endswith(b"\n"):
+            if last and not data.endswith(b"\n") and repair:
                 with open(path, "r+b") as f:  # the torn tail of a killed append: cut, and the unit played again
                     f.truncate(good_end)
                 break
