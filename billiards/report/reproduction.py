@@ -44,7 +44,7 @@ REGENERATE = "python -m billiards.campaign report paper"
 EXTRA = "extra"  # the rows beside the tables
 STARTS = STARTS_FILE  # a training run's start records (billiards.provenance.record_start)
 OUR_KEYS = ("mean", "std", "max", "foul_inn", "foul_sh", "succ_sh", "canonical", "rand_eval")
-SEARCH_FILES = ("results.json", "chains.jsonl", "config.yaml", "search.log")
+SEARCH_FILES = ("results.json", "chains.jsonl", "config.yaml")
 # the row comparisons each training table's take-away rests on, (X, Y): P(X > Y) is reported
 COMPARISONS = {
     "table1": (("sac", "ppo"),),
