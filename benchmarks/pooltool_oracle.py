@@ -443,7 +443,7 @@ def run_shots(inp: dict, max_events: int = 0, timeout: float = 30.0, quiet: bool
 
 # --- self-check -----------------------------------------------------------------------
 def selfcheck(verbose: bool = True, phys: dict = BILLIARD) -> bool:
-    """Hand-computed sanity shots against the reference's formulas, on phys's table, balls and
+    """Hand-computed sanity shots against the formulas of docs/physics.md, on phys's table, balls and
     cue. Returns True if all pass."""
     from pooltool.events import EventType
 
@@ -524,7 +524,7 @@ def selfcheck(verbose: bool = True, phys: dict = BILLIARD) -> bool:
             check("   |v|/V0 = 2/(1 + m/M)", np.hypot(*rvw[1, :2]) / V0, 2 / (1 + m / M), 1e-12)
 
     # 2. Han 2005 sanity: roll straight into the x = w rail at speed V. Expected values from
-    #    the corrected closed form (reference section 5), whichever branch phys selects (on
+    #    the corrected closed form (docs/physics.md section 5), whichever branch phys selects (on
     #    BILLIARD the slide branch: -0.8288 V, +0.3207 V/R, rolls away at -0.5004 V)
     th = np.arcsin(H / R - 1)
     e_c, mu = params.e_c, params.f_c

@@ -34,7 +34,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def test_korean_medium_is_the_papers_table_and_the_default():
     assert DEFAULT_PARAMS is K and PhysicsParams() == K and get_params(None) is K
-    # physics_reference.md §10
+    # docs/physics.md §10
     assert (K.table_width, K.table_length, K.cushion_height) == (1.27, 2.54, 0.037)
     assert (K.ball_radius, K.ball_mass) == (0.03275, 0.21)
     assert (K.cue_mass, K.cue_speed_max, K.max_english) == (0.55, 4.5, 1.0)

@@ -4,7 +4,7 @@ Pure functions over arrays. A table state is ``st`` (N_BALLS, N_STATE) float64, 
 ball in the ball order (WHITE, YELLOW, RED1, RED2) with the columns X, Y, VX, VY, WX, WY, WZ
 (centre, velocity, angular velocity), plus ``lab`` (N_BALLS,) int64 motion labels. Parameters
 arrive as the packed vector of :class:`billiards.physics.params.PhysicsParams` (slots ``P_*``).
-Formulas and their sources are in ``shared/physics_reference.md``; section numbers below refer
+Formulas and their sources are in ``docs/physics.md``; section numbers below refer
 to it.
 
 Layout (pooltool's split, our code):
@@ -934,7 +934,7 @@ def run_shot(positions, V0, phi, a, b, p, record):
         kind, who, other, t_next = _next_event(when, what)
         if kind < 0:
             break
-        # the shot-time limit (reference §10): evolve to it, then every ball rests
+        # the shot-time limit (docs/physics.md §10): evolve to it, then every ball rests
         timeout = t_next > p[P_MAX_TIME]
         if timeout:
             t_next = p[P_MAX_TIME]
