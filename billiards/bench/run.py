@@ -273,27 +273,37 @@ def score_records(track: Track, records: list[dict]) -> dict:
     return out
 
 
-def scorecard_markdown(card: dict) -> str:
-    """``scorecard.md``: the scorecard as a short page."""
-    t = card["track"]
-    lines = [f"# {card['agent']['name']} on {t['name']}", "", f"{t['description']}. Rules: {card['rules']}.", "",
-             "| figure | value | 95 % interval |", "|---|---|---|"]
+def figures(card: dict) -> list[tuple[str, str, str]]:
+    """The scorecard's figures as (what, value, 95 % interval) text, once for both the page and
+    the one-line summary."""
+    protocol = card["track_record"]["protocol"]
     pct = lambda v: f"{100 * v:.2f} %"
-    if "points_per_inning" in card and t["protocol"] == "innings":
+    out = []
+    if "points_per_inning" in card and protocol == "innings":
         p = card["points_per_inning"]
-        lines.append(f"| points per inning | {p['mean']:.3f} (IQM {p['iqm']:.3f}) | {p['ci95'][0]:.3f} - {p['ci95'][1]:.3f} |")
+        out.append(("points per inning", f"{p['mean']:.3f} (IQM {p['iqm']:.3f})", f"{p['ci95'][0]:.3f} - {p['ci95'][1]:.3f}"))
     if "success_per_shot" in card and "ci95" in card["success_per_shot"]:
         s = card["success_per_shot"]
-        lines.append(f"| success per shot | {pct(s['mean'])} | {pct(s['ci95'][0])} - {pct(s['ci95'][1])} |")
+        out.append(("success per shot", pct(s["mean"]), f"{pct(s['ci95'][0])} - {pct(s['ci95'][1])}"))
     if "chain" in card:
         c = card["chain"]
-        lines.append(f"| chain length | mean {c['mean']:.2f}, median {c['median']:.1f}, IQM {c['iqm']:.2f}, max {c['max']} "
-                     f"({c['reached_cap']} at the cap {c['cap']}) | {c['ci95'][0]:.2f} - {c['ci95'][1]:.2f} |")
+        out.append(("chain length", f"mean {c['mean']:.2f}, median {c['median']:.1f}, IQM {c['iqm']:.2f}, max {c['max']} "
+                    f"({c['reached_cap']} at the cap {c['cap']})", f"{c['ci95'][0]:.2f} - {c['ci95'][1]:.2f}"))
     if "match" in card:
         m = card["match"]
-        lines.append(f"| win rate | {pct(m['win_rate'])} of {m['matches']} | {pct(m['ci95'][0])} - {pct(m['ci95'][1])} |")
-        lines.append(f"| Elo | {card['elo']:.0f} ({t['anchor']} = {t['ratings'][t['anchor']]:.0f}) | |")
-    lines.append(f"| compute per decision | {card['ms_per_decision']:.3f} CPU ms, {card['sims_per_decision']:.0f} simulations | |")
+        anchor = card["track_record"]["anchor"]
+        out.append(("win rate", f"{pct(m['win_rate'])} of {m['matches']}", f"{pct(m['ci95'][0])} - {pct(m['ci95'][1])}"))
+        out.append(("Elo", f"{card['elo']:.0f} ({anchor} = {card['track_record']['ratings'][anchor]:.0f})", ""))
+    out.append(("compute per decision", f"{card['ms_per_decision']:.3f} ms, {card['sims_per_decision']:.0f} simulations", ""))
+    return out
+
+
+def scorecard_markdown(card: dict) -> str:
+    """``scorecard.md``: the scorecard as a short page."""
+    t = card["track_record"]
+    lines = [f"# {card['agent']['name']} on {t['name']}", "", f"{t['description']}. Rules: {card['rules']}.", "",
+             "| figure | value | 95 % interval |", "|---|---|---|"]
+    lines += [f"| {what} | {value} | {interval} |" for what, value, interval in figures(card)]
     lines += ["", f"Agent: `{json.dumps(card['agent'], sort_keys=True)}`", "",
               f"Command: `{card['command']}` at commit `{card['commit']}`"
               + (" (partial: not every unit finished)" if card.get("partial") else "")
@@ -470,7 +480,7 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
     card = _ordered(card)
     if out is not None:
         atomic_write_text(out / SCORECARD_JSON, json.dumps(card, indent=2) + "\n")
-        atomic_write_text(out / SCORECARD_MD, scorecard_markdown({**card, "track": full.record()}))
+        atomic_write_text(out / SCORECARD_MD, scorecard_markdown(card))
     if progress:
         print(headline(card) + (f"\nscorecard: {display_path(out / SCORECARD_JSON)}" if out is not None else ""), flush=True)
     if interrupted:
@@ -486,23 +496,10 @@ def _ordered(card: dict) -> dict:
 
 def headline(card: dict) -> str:
     """The scorecard in one line."""
-    parts = []
-    if "points_per_inning" in card and card["track_record"]["protocol"] == "innings":
-        p = card["points_per_inning"]
-        parts.append(f"{p['mean']:.3f} points/inning [{p['ci95'][0]:.3f}, {p['ci95'][1]:.3f}]")
-    if "success_per_shot" in card and "ci95" in card["success_per_shot"]:
-        s = card["success_per_shot"]
-        parts.append(f"success/shot {100 * s['mean']:.2f} % [{100 * s['ci95'][0]:.2f}, {100 * s['ci95'][1]:.2f}]")
-    if "chain" in card:
-        c = card["chain"]
-        parts.append(f"chain {c['mean']:.2f} [{c['ci95'][0]:.2f}, {c['ci95'][1]:.2f}], median {c['median']:.1f}, IQM {c['iqm']:.2f}")
-    if "match" in card:
-        m = card["match"]
-        parts.append(f"win rate {100 * m['win_rate']:.1f} % [{100 * m['ci95'][0]:.1f}, {100 * m['ci95'][1]:.1f}], Elo {card['elo']:.0f}")
-    parts.append(f"{card['ms_per_decision']:.3f} ms, {card['sims_per_decision']:.0f} sims per decision")
+    parts = [f"{what} {value}" + (f" [{interval}]" if interval else "") for what, value, interval in figures(card)]
     return f"{card['agent']['name']} on {card['track']}: " + "; ".join(parts) + (" (partial)" if card.get("partial") else "")
 
 
 __all__ = ["EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "claim_directory", "evaluate",
-           "fingerprint", "fingerprint_data", "headline", "play_unit", "read_ledger", "run_identity", "score_records",
+           "figures", "fingerprint", "fingerprint_data", "headline", "play_unit", "read_ledger", "run_identity", "score_records",
            "scorecard_markdown"]
