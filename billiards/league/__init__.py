@@ -7,13 +7,15 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+RUNTIME_KEYS = ("threads", "progress", "picture", "resume")  # how a league runs, not what it finds
+
 
 def run(cfg, out_dir) -> dict:
     """Play the league ``cfg`` describes into ``out_dir`` (or continue it there)."""
     from omegaconf import OmegaConf
 
     from billiards.device import set_threads
-    from billiards.files import display_path, recorded_command
+    from billiards.files import LedgerError, display_path, recorded_command, run_identity
     from billiards.physics.config import params_from_config
     from billiards.physics.noise import noise_from_config, noise_record
     from billiards.provenance import git_commit
@@ -22,12 +24,18 @@ def run(cfg, out_dir) -> dict:
     from .config import MatchAppConfig, agent_config, validate
     from .play import animate_match, play_match, run_league
 
+    started = cfg
     if cfg.resume:  # the league's own settings, this command line's runtime keys
-        saved = OmegaConf.load(Path(cfg.resume) / ".hydra" / "config.yaml")
-        for key in ("threads", "progress", "picture", "resume"):
+        started = saved = OmegaConf.load(Path(cfg.resume) / ".hydra" / "config.yaml")
+        for key in RUNTIME_KEYS:
             saved[key] = cfg[key]
         cfg = OmegaConf.merge(OmegaConf.structured(MatchAppConfig), saved)
     validate(cfg)
+    # the run identity every match record carries: the league's settings as it started (its
+    # players' own, not every agent the config knows), less the runtime keys
+    settings = OmegaConf.to_container(started, resolve=True)
+    settings["agents"] = {name: settings["agents"][name] for name in settings["players"]}
+    run_id = run_identity(settings, runtime=RUNTIME_KEYS)
     set_threads(cfg.threads)
     out_dir = Path(cfg.resume or out_dir)
     params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
@@ -47,9 +55,13 @@ def run(cfg, out_dir) -> dict:
               "seed": cfg.seed, "agents": {n: dataclasses.asdict(a) for n, a in agents.items()}}
     print(f"league of {', '.join(cfg.players)}: {cfg.matches} matches per ordered pair to {cfg.target} points, "
           f"noise {noise.describe()}; output: {display_path(out_dir)}", flush=True)
-    league = run_league(players, out_dir=out_dir, matches=cfg.matches, seed=cfg.seed, noise_name=noise.describe(),
-                        record=record, progress=cfg.progress, target=cfg.target, max_innings=cfg.max_innings,
-                        start=cfg.start, foul_penalty=cfg.foul_penalty, noise=noise, physics=params)
+    try:
+        league = run_league(players, out_dir=out_dir, matches=cfg.matches, seed=cfg.seed, noise_name=noise.describe(),
+                            record=record, progress=cfg.progress, target=cfg.target, max_innings=cfg.max_innings,
+                            start=cfg.start, foul_penalty=cfg.foul_penalty, noise=noise, physics=params, run=run_id)
+    except LedgerError as err:
+        raise SystemExit(f"Error: cannot continue the league: {err}; a league continues only a ledger it wrote, "
+                         f"sealed (move {display_path(out_dir / 'matches.jsonl')} aside to play every match again)") from None
     for p in league["pairs"]:
         print(f"{p['a']} vs {p['b']}: {p['a_wins']}-{p['b_wins']} ({p['draws']} draws) of {p['matches']}, "
               f"{p['a']}'s score rate {p['a_score_rate']:.3f} [{p['ci95'][0]:.3f}, {p['ci95'][1]:.3f}]", flush=True)

@@ -4,7 +4,10 @@ A league plays, for every ordered pair of players (a, b), ``matches`` matches wi
 and b as yellow, the break alternating (a breaks in the even-numbered ones). Match ``i`` of pair
 ``p`` uses seed ``seed + 1000 p + i`` (the rack, the execution noise and both players' own
 draws), so every match replays alone. Each finished match is appended to ``matches.jsonl`` as it
-ends; a league started again over the same directory plays only what is missing. ``league.json``:
+ends, sealed with the league's run identity (:func:`billiards.files.append_record`); a league
+started again over the same directory plays only what is missing, and refuses a ledger line that
+is unsealed, edited, of another league or a repeated match (a torn last line, from a kill
+mid-append, is cut off and its match played again). ``league.json``:
 per ordered pair ``a``, ``b``, ``noise``, ``matches``, ``a_wins``, ``b_wins``, ``draws``, ``ci95``
 (the Wilson 95 % interval of a's score rate, a draw counting half), points and CPU ms per turn of
 each; and the Elo ratings of a Bradley-Terry fit over all matches (mean 1500).
@@ -12,6 +15,7 @@ each; and the Elo ratings of a Bradley-Terry fit over all matches (mean 1500).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -21,9 +25,7 @@ import numpy as np
 
 from billiards.envs import sagu_v0
 from billiards.envs.sagu import AGENTS, shooter_view
-from billiards.files import atomic_write_text
-
-MATCHES_FILE, LEAGUE_FILE = "matches.jsonl", "league.json"
+from billiards.files import LEAGUE_FILE, MATCHES, MATCHES_FILE, append_record, atomic_write_text, read_ledger, run_identity, scan_ledger
 
 
 def play_match(white, yellow, *, seed: int, first: str = "white", frames: list | None = None, **game) -> dict:
@@ -138,48 +140,60 @@ def summarize(records: list[dict], names: list[str], noise: str) -> dict:
     return {"pairs": pairs, "elo": elo(names, results) if results else {}}
 
 
-def parse_matches(text: str) -> list[dict]:
-    """The finished matches of a league's ``matches.jsonl`` text (a torn last line, from a kill
-    mid-write, is left out)."""
-    out = []
-    for line in text.splitlines():
-        try:
-            out.append(json.loads(line))
-        except ValueError:
-            continue
-    return out
+def parse_matches(text: str, name: str = MATCHES_FILE, legacy: bool = True) -> list[dict]:
+    """The finished matches of a league's ``matches.jsonl`` text, for a read-only view: a torn
+    last line (a kill mid-append) is left out, records written before ledgers were sealed are
+    accepted with ``legacy``; any other bad line (not JSON, not a match record, not matching its
+    seal, of another league, a repeated match) is a :class:`billiards.files.LedgerError` naming
+    ``name`` and the line."""
+    from billiards.files import LedgerError
+
+    scan = scan_ledger(text.encode(), name, MATCHES, legacy=legacy)
+    if scan.problems:
+        raise LedgerError(scan.problems[0])
+    return scan.records
+
+
+def league_identity(names: list[str], matches: int, seed: int, settings: dict) -> str:
+    """A league's run identity: the players (in order: it sets each pair's seeds), the matches
+    per ordered pair, the seed and the ``settings`` that decide the matches (plain values; a
+    dataclass such as the noise model or the physics as its fields)."""
+    plain = {k: dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v for k, v in settings.items()}
+    return run_identity({"players": list(names), "matches": matches, "seed": seed, **plain})
 
 
 def run_league(players: dict, *, out_dir: Path, matches: int, seed: int, noise_name: str, record: dict,
-               progress: bool = True, **game) -> dict:
+               progress: bool = True, run: str | None = None, **game) -> dict:
     """Play every missing match of the league among ``players`` (name -> player) into
-    ``out_dir`` and write ``league.json`` (with ``record``: the command, commit, settings)."""
+    ``out_dir`` and write ``league.json`` (with ``record``: the command, commit, settings).
+
+    ``run``: the league's identity, which every record of ``matches.jsonl`` carries (the app
+    passes a hash of its settings); by default :func:`league_identity` of the arguments (the
+    ``record`` less its command and commit, and ``game``). The ledger's records must all be this
+    league's (:class:`billiards.files.LedgerError` otherwise)."""
     from tqdm import tqdm
 
     names = list(players)
+    if run is None:
+        run = league_identity(names, matches, seed, {"noise_name": noise_name, **game,
+                                                     "record": {k: v for k, v in record.items() if k not in ("command", "commit")}})
     out_dir.mkdir(parents=True, exist_ok=True)
     ledger = out_dir / MATCHES_FILE
-    text = ledger.read_text() if ledger.is_file() else ""
-    done = parse_matches(text)
-    if text and not text.endswith("\n"):  # a torn last line: dropped, so that the next match starts its own line
-        atomic_write_text(ledger, "".join(json.dumps(r) + "\n" for r in done))
+    done = read_ledger(ledger, MATCHES, run, repair=True).records  # a torn last line: cut, its match played again
     have = {(r["a"], r["b"], r["i"]) for r in done}
     todo = [(p, a, b, i) for p, (a, b) in enumerate((a, b) for a in names for b in names if a != b)
             for i in range(matches) if (a, b, i) not in have]
     bar = tqdm(total=len(todo) + len(have), initial=len(have), desc="matches", disable=not progress, unit="match")
-    with ledger.open("a") as f:
-        for p, a, b, i in todo:
-            result = play_match(players[a], players[b], seed=seed + 1000 * p + i, first="white" if i % 2 == 0 else "yellow",
-                                **game)
-            row = {"a": a, "b": b, "i": i, **result}
-            f.write(json.dumps(row) + "\n")
-            f.flush()
-            done.append(row)
-            bar.update(1)
+    for p, a, b, i in todo:
+        result = play_match(players[a], players[b], seed=seed + 1000 * p + i, first="white" if i % 2 == 0 else "yellow",
+                            **game)
+        done.append(append_record(ledger, {"a": a, "b": b, "i": i, **result}, run))
+        bar.update(1)
     bar.close()
-    league = {**record, **summarize(done, names, noise_name)}
+    league = {**record, **summarize(done, names, noise_name), "run": run}
     atomic_write_text(out_dir / LEAGUE_FILE, json.dumps(league, indent=2) + "\n")
     return league
 
 
-__all__ = ["LEAGUE_FILE", "MATCHES_FILE", "animate_match", "elo", "parse_matches", "play_match", "run_league", "summarize", "wilson"]
+__all__ = ["LEAGUE_FILE", "MATCHES_FILE", "animate_match", "elo", "league_identity", "parse_matches", "play_match", "run_league",
+           "summarize", "wilson"]

@@ -18,7 +18,6 @@ the env draws each shot's level from that generator and hands it to the search w
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -28,7 +27,7 @@ from tqdm.auto import tqdm
 
 from billiards.envs import BilliardsEnv
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
-from billiards.files import record_intact, sealed_record
+from billiards.files import CHAINS, CHAINS_FILE, append_record, read_ledger
 from billiards.physics.noise import get_noise
 
 from .actors import SearchActor, make_search_collector
@@ -143,52 +142,35 @@ def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int =
     return length, history
 
 
-CHAINS_FILE = "chains.jsonl"  # one finished P3 chain per line, written as each chain ends
-
-
-def read_chains(path: str | Path | None) -> dict[int, dict]:
-    """The finished chains of a P3 ledger, by seed. The last line may be cut short by a kill and
-    is then ignored; any other line that is not a chain record (an integer seed and length >= 0)
-    is an error naming the file and the line."""
-    if path is None or not Path(path).is_file():
+def read_chains(path: str | Path | None, run: str | None = None, *, legacy: bool = False,
+                repair: bool = False) -> dict[int, dict]:
+    """The finished chains of a P3 ledger (``chains.jsonl``), by seed: every line a sealed chain
+    record of the run ``run`` (None: of one run, whichever), each seed once
+    (:func:`billiards.files.read_ledger`; :class:`billiards.files.LedgerError` naming the file
+    and the line otherwise). A torn last line (a kill mid-append) is left out; with ``repair``
+    (the resume path) it is cut off the file, so its chain is played again. ``legacy``: accept
+    records written before ledgers were sealed (read-only views only; a resume never does)."""
+    if path is None:
         return {}
-    done = {}
-    lines = Path(path).read_text().splitlines()
-    for n, line in enumerate(lines, 1):
-        try:
-            rec = json.loads(line)
-            ok = isinstance(rec, dict) and all(isinstance(rec.get(k), int) and not isinstance(rec.get(k), bool)
-                                               and rec[k] >= 0 for k in ("seed", "length")) and record_intact(rec)
-        except ValueError:
-            ok = False
-        if not ok:
-            if n == len(lines):
-                continue  # the torn last line of a killed run
-            raise ValueError(f"{path}: line {n} is not an intact P3 chain record (an integer seed and length >= 0, its "
-                             f"checksum matching): {line[:80]!r}; "
-                             f"move the file aside to play every chain again")
-        done[rec["seed"]] = rec
-    return done
-
-
-def _append_line(path: Path, record: dict) -> None:
-    with open(path, "a") as f:
-        f.write(json.dumps(sealed_record(record)) + "\n")
-        f.flush()
-        os.fsync(f.fileno())
+    return {r["seed"]: r for r in read_ledger(path, CHAINS, run, legacy=legacy, repair=repair).records}
 
 
 def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: PhysicsParams = DEFAULT_PARAMS,
            progress: bool = True, picture: str | Path | None = None, ledger: str | Path | None = None,
-           noise=None) -> ProtocolResult:
+           noise=None, run: str | None = None) -> ProtocolResult:
     """P3: canonical-start chains until the first miss or foul (cap ``cap``), one per seed.
 
-    With a ``ledger`` file, each finished chain is appended to it as it ends, and chains already
-    in it are not played again: an interrupted P3 keeps every finished chain and continues from
-    the next seed (each chain depends only on its seed, so the result is the same as one
-    uninterrupted run)."""
+    With a ``ledger`` file, each finished chain is appended to it as it ends, sealed with the
+    run's identity ``run`` (:func:`billiards.files.run_identity` of the settings that determine
+    the chains; required with a ledger), and chains already in it are not played again: an
+    interrupted P3 keeps every finished chain and continues from the next seed (each chain
+    depends only on its seed, so the result is the same as one uninterrupted run). A ledger line
+    that is unsealed, edited, of another run or a repeated seed is refused
+    (:class:`billiards.files.LedgerError`); a torn last line is cut off and its chain played again."""
     seeds = list(seeds)
-    done = {s: r for s, r in read_chains(ledger).items() if s in seeds}
+    if ledger is not None and run is None:
+        raise ValueError("run_p3 with a ledger needs the run's identity (run=billiards.files.run_identity(settings))")
+    done = {s: r for s, r in read_chains(ledger, run, repair=True).items() if s in seeds}
     bar = tqdm(total=len(seeds), initial=len(done), desc="P3 chains", unit="chain", disable=not progress, mininterval=1.0)
     for seed in seeds:
         if seed in done:
@@ -198,9 +180,9 @@ def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: Physi
         rec = {"seed": seed, "length": length, "decisions": actor.n_decisions, "seconds": time.perf_counter() - t0,
                "last_shots": [[pos.tolist(), act.tolist(), bool(scored), *(p.tolist() for p in played)]
                               for pos, act, scored, *played in history]}
-        done[seed] = rec
         if ledger is not None:
-            _append_line(Path(ledger), rec)
+            rec = append_record(Path(ledger), rec, run)
+        done[seed] = rec
         bar.update(1)
         ms = 1e3 * rec["seconds"] / max(rec["decisions"], 1)
         bar.set_postfix(seed=seed, chain=length, ms_shot=f"{ms:.1f}")
@@ -235,9 +217,9 @@ def _p3_result(recs: list[dict], cap: int, sims_per_decision: float, partial: bo
     )
 
 
-def partial_p3(ledger: str | Path, seeds, cap: int, sims_per_decision: float) -> ProtocolResult:
-    """The result of the chains a ledger holds so far, marked ``extra["partial"]``."""
-    done = read_chains(ledger)
+def partial_p3(ledger: str | Path, seeds, cap: int, sims_per_decision: float, run: str | None = None) -> ProtocolResult:
+    """The result of the chains a ledger (of the run ``run``) holds so far, marked ``extra["partial"]``."""
+    done = read_chains(ledger, run)
     return _p3_result([done[s] for s in seeds if s in done], cap, sims_per_decision, partial=True)
 
 

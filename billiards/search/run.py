@@ -13,7 +13,7 @@ from omegaconf import OmegaConf
 
 from billiards.app_config import RESUME_AUTO
 from billiards.device import resolve_device, set_threads
-from billiards.files import CONFIG_FILE, RESULTS_FILE, atomic_write_text, display_path
+from billiards.files import CHAINS, CONFIG_FILE, RESULTS_FILE, LedgerError, atomic_write_text, display_path, read_ledger, run_identity
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.noise import noise_from_config, noise_record
@@ -22,10 +22,10 @@ from billiards.provenance import git_commit
 
 from .actors import SearchActor
 from .config import option, saved_config, typed, validate
-from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, read_chains, run_p1, run_p3
+from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, run_p1, run_p3
 from .ranker import noise_mismatch
 
-__all__ = ["CONFIG_FILE", "RESULTS_FILE", "describe", "make_actor", "make_proposer", "resume_config", "run"]
+__all__ = ["CONFIG_FILE", "RESULTS_FILE", "describe", "make_actor", "make_proposer", "resume_config", "run", "search_identity"]
 
 
 def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS, device=None):
@@ -42,6 +42,17 @@ def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchA
 
 
 RUNTIME_KEYS = ("threads", "progress", "picture", "device")  # taken from the command line when resuming
+
+
+def search_identity(out_dir: Path) -> str:
+    """The run identity of the search in ``out_dir`` (every chain record of its ledger carries
+    it): a hash of its ``config.yaml`` as written when it started -- the resolved config -- less
+    the runtime keys and ``resume``. Read from the file both when the run starts and when it is
+    resumed, so the identity does not depend on how today's code would fill in that config."""
+    saved = OmegaConf.to_container(OmegaConf.load(out_dir / CONFIG_FILE), resolve=True)
+    if not isinstance(saved, dict):
+        raise SystemExit(f"Error: {display_path(out_dir / CONFIG_FILE)} is not a search config")
+    return run_identity(saved, runtime=(*RUNTIME_KEYS, "resume"))
 
 
 def describe(cfg, params) -> str:
@@ -77,7 +88,11 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
     chain in ``chains.jsonl`` as it ends, ``results.json`` at the end. Ctrl-C writes
     ``results.json`` from what finished, marked ``partial``; ``resume=<out_dir>`` continues a
     stopped P3 from its next chain. ``resume=auto``: a search finished in ``out_dir`` is left
-    as it is (None is returned), a stopped P3 there continues, anything else starts fresh."""
+    as it is (None is returned), a stopped P3 there continues, anything else starts fresh.
+
+    Every chain record carries the run's identity (:func:`search_identity`) and a seal; a resume
+    refuses a ledger line that is unsealed (ledgers written before the seals included), edited,
+    of another run or a repeated seed, and cuts a torn last line off (its chain is played again)."""
     commit = git_commit()  # the code that runs (read before anything runs: files may change meanwhile)
     out_dir = Path(out_dir)
     cfg = typed(cfg)
@@ -99,6 +114,19 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
                   f"(resume=<dir> continues a stopped one)", flush=True)
             old.unlink()
         atomic_write_text(out_dir / CONFIG_FILE, OmegaConf.to_yaml(cfg, resolve=True))
+    proto = cfg.protocol.name
+    ledger = out_dir / CHAINS_FILE
+    run_id = search_identity(out_dir)  # every chain record carries it, and results.json
+    if cfg.get("resume") and proto == "p3":  # checked before anything is built: a bad ledger fails at once
+        try:  # every line sealed, of this run, each seed once; a torn last line is cut (its chain played again)
+            scan = read_ledger(ledger, CHAINS, run_id, repair=True)
+        except LedgerError as err:
+            raise SystemExit(f"Error: cannot resume: {err}; a resume continues only a ledger this run wrote, "
+                             f"sealed (move {CHAINS_FILE} aside to play every chain again)") from None
+        if scan.cut:
+            print(f"resume: cut the torn last line of {CHAINS_FILE} (a kill mid-append); its chain is played again",
+                  flush=True)
+        print(f"resume: {len(scan.records)} of {cfg.protocol.seeds} chains already finished", flush=True)
     if cfg.threads is not None:
         set_threads(cfg.threads)
     params = params_from_config(cfg.physics)
@@ -110,8 +138,6 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
     if (warning := noise_mismatch(proposer, noise)) is not None:
         print(f"warning: {warning}", flush=True)
     actor = make_actor(cfg, proposer, params)
-    proto = cfg.protocol.name
-    ledger = out_dir / CHAINS_FILE
     interrupted = False
     if proto == "p1":
         result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress,
@@ -119,19 +145,13 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
         interrupted = bool(result.extra.get("partial"))
     else:
         seeds = range(cfg.seed, cfg.seed + cfg.protocol.seeds)
-        if cfg.get("resume"):
-            try:
-                finished = read_chains(ledger)
-            except ValueError as err:
-                raise SystemExit(f"Error: cannot resume: {err}") from None
-            print(f"resume: {len(finished)} of {cfg.protocol.seeds} chains already finished", flush=True)
         picture = out_dir / "longest_chain.png" if cfg.picture else None
         try:
             result = run_p3(actor, seeds, cfg.protocol.cap, params=params, progress=cfg.progress, picture=picture,
-                            ledger=ledger, noise=noise)
+                            ledger=ledger, noise=noise, run=run_id)
         except KeyboardInterrupt:
             interrupted = True
-            result = partial_p3(ledger, seeds, cfg.protocol.cap, actor.cfg.sims_per_decision)
+            result = partial_p3(ledger, seeds, cfg.protocol.cap, actor.cfg.sims_per_decision, run=run_id)
     summary = json.loads(result.to_json())
     summary.update(
         proposer=cfg.proposer.name,
@@ -141,6 +161,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
         device=str(device),
         config=OmegaConf.to_container(cfg, resolve=True),
         commit=commit,
+        run=run_id,
     )
     atomic_write_text(out_dir / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
     if interrupted:
