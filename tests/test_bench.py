@@ -561,7 +561,7 @@ def test_an_edited_record_is_refused(finished):
     lines[0] = json.dumps(rec, sort_keys=True)
     path.write_text("\n".join(lines) + "\n")
     before = files_of(out)
-    with pytest.raises(EvaluationError, match="line 1 is not a sealed record"):
+    with pytest.raises(EvaluationError, match="line 1 is not an intact evaluation unit record: its content does not match its seal"):
         evaluate(Counting(), track, out=out, name="steady", progress=False)
     assert files_of(out) == before
 
@@ -573,12 +573,12 @@ def test_a_record_without_its_seal_or_of_another_run_is_refused(finished, tmp_pa
     rec = json.loads(lines[1])
     rec.pop("sha256")
     path.write_text("\n".join([lines[0], json.dumps(rec), lines[2]]) + "\n")
-    with pytest.raises(EvaluationError, match="line 2 is not a sealed record"):
+    with pytest.raises(EvaluationError, match="line 2 is not an intact evaluation unit record: it carries no seal"):
         evaluate(Counting(), track, out=out, name="steady", progress=False)
     other = tmp_path / "other"
     evaluate(cut_batch, track, out=other, name="someone else", progress=False)
     path.write_text("\n".join([lines[0], lines[1], (other / LEDGER_FILE).read_text().splitlines()[2]]) + "\n")
-    with pytest.raises(EvaluationError, match="line 3 belongs to another evaluation"):
+    with pytest.raises(EvaluationError, match="line 3 belongs to another run"):
         evaluate(Counting(), track, out=out, name="steady", progress=False)
 
 

@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-from billiards.files import atomic_write_text, display_path, record_intact, sealed_record
+from billiards import files
+from billiards.files import LedgerKind, atomic_write_text, display_path
 
 from billiards import stats
 from .agents import Agent, AgentError, resolve_agent
@@ -316,52 +316,40 @@ def scorecard_markdown(card: dict) -> str:
 
 
 def run_identity(track: Track, agent_record: dict, limit: int | None) -> str:
-    """The hash every ledger record carries: the track (its version and fingerprint included),
-    the agent and the limit."""
-    body = json.dumps({"track": track.record(), "agent": agent_record, "limit": limit}, sort_keys=True)
-    return hashlib.sha256(body.encode()).hexdigest()[:16]
+    """The identity every ledger record carries (:func:`billiards.files.run_identity`): the track
+    (its version and fingerprint included), the agent and the limit."""
+    return files.run_identity({"track": track.record(), "agent": agent_record, "limit": limit})
+
+
+def _unit_problem(rec: dict) -> str | None:
+    """What is wrong with an evaluation unit record's shape, or None."""
+    unit = rec.get("unit")
+    if not (isinstance(unit, int) and not isinstance(unit, bool) and unit >= 0):
+        return f"its unit must be an integer >= 0, got {str(unit)[:40]!r}"
+    for key in ("decisions", "sims"):
+        if not (isinstance(rec.get(key), int) and not isinstance(rec.get(key), bool) and rec[key] >= 0):
+            return f"its {key} must be an integer >= 0"
+    if not (isinstance(rec.get("cpu_s"), (int, float)) and rec["cpu_s"] >= 0):
+        return "its cpu_s must be a number >= 0"
+    return None
+
+
+# the benchmark's ledger, on the one mechanism every ledger of the project uses (billiards.files)
+UNITS = LedgerKind(LEDGER_FILE, "evaluation unit record", lambda r: r["unit"], lambda r: f"unit {r['unit']}", _unit_problem,
+                   SCORECARD_JSON)
 
 
 def read_ledger(path: Path, run_id: str, repair: bool = True) -> dict[int, dict]:
-    """The finished units of a ledger by index. A torn last line (a kill mid-append) is cut off
-    the file (``repair``; else refused), so its unit is played again; any other line that is not
-    an intact record of this run is refused by name."""
-    if not path.is_file():
-        return {}
-    data = path.read_bytes()
-    lines = data.split(b"\n")
-    done: dict[int, dict] = {}
-    good_end = 0
-    for n, raw in enumerate(lines, 1):
-        if not raw.strip():
-            good_end += len(raw) + 1
-            continue
-        try:
-            rec = json.loads(raw)
-            ok = isinstance(rec, dict) and "sha256" in rec and record_intact(rec) and isinstance(rec.get("unit"), int)
-        except ValueError:
-            ok = False
-        last = n == len(lines) or (n == len(lines) - 1 and not lines[-1])
-        if not ok:
-            if last and not data.endswith(b"\n") and repair:
-                with open(path, "r+b") as f:  # the torn tail of a killed append: cut, and the unit played again
-                    f.truncate(good_end)
-                break
-            raise EvaluationError(f"{display_path(path)}: line {n} is not a sealed record of an evaluation unit; "
-                                  f"the ledger was edited or damaged (move the directory aside to start again)")
-        if rec.get("run") != run_id:
-            raise EvaluationError(f"{display_path(path)}: line {n} belongs to another evaluation (run {rec.get('run')!r}, "
-                                  f"this one is {run_id}); a ledger holds one agent on one track version")
-        done[rec["unit"]] = rec
-        good_end += len(raw) + 1
-    return done
-
-
-def _append(path: Path, record: dict) -> None:
-    with open(path, "a") as f:
-        f.write(json.dumps(sealed_record(record), sort_keys=True) + "\n")
-        f.flush()
-        os.fsync(f.fileno())
+    """The finished units of a ledger by index (:func:`billiards.files.read_ledger`): every record
+    sealed, of this run, each unit once; a torn last line (a kill mid-append) is cut off the file
+    (``repair``; else left out) so its unit is played again; anything else is refused by name."""
+    try:
+        scan = files.read_ledger(path, UNITS, run_id, repair=repair)
+    except files.LedgerError as err:
+        raise EvaluationError(f"{err} (move the directory aside to start the evaluation again)") from None
+    if scan.torn is not None and not repair:
+        raise EvaluationError(f"{display_path(path)}: its last line is torn (an interrupted append): resume the evaluation")
+    return {r["unit"]: r for r in scan.records}
 
 
 def claim_directory(out: Path, identity: dict) -> None:
@@ -463,10 +451,10 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
             except Exception as err:
                 raise EvaluationError(f"agent {agent.name} failed on {unit_word[:-1]} {unit} of {full.name}: "
                                       f"{type(err).__name__}: {err} ({len(done)} finished units kept)") from err
-            rec = {"unit": unit, "run": run_id, **rec}
-            done[unit] = rec
+            rec = {"unit": unit, **rec}
             if ledger is not None:
-                _append(ledger, rec)
+                rec = files.append_record(ledger, rec, run_id)
+            done[unit] = rec
             bar.update(1)
     except KeyboardInterrupt:
         interrupted = True
