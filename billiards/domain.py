@@ -24,7 +24,7 @@ Contents
   bonus) or :func:`gentle_power_bonus` (a power-based alternative), :func:`near_miss_bonus`,
   summed by :func:`shaped_reward`; :func:`check_coefficient` checks their coefficients.
 
-The constants are the paper's as its authors configured them (``physics_reference.md`` §10):
+The constants are the paper's as its authors configured them (``docs/physics.md`` §10):
 the aim window capped at 80 degrees, the gentle bonus 0.2 exp(-(d - 0.2)^2 / (2 0.1^2)), the
 near-miss bonus 0.05 exp(-gap / 0.03).
 """
@@ -38,6 +38,7 @@ import numpy as np
 
 from billiards import numerics
 from billiards.physics import DEFAULT_PARAMS, unhit_red_gap
+from billiards.physics.checks import finite_number
 from billiards.physics.core import N_BALLS, RED1, RED2, WHITE, YELLOW  # noqa: F401  (the simulator's ball order)
 from billiards.physics.core import N_STATE as BALL_STATE_DIM  # x, y, vx, vy, wx, wy, wz
 OBS_DIM = N_BALLS * BALL_STATE_DIM  # 28
@@ -310,14 +311,9 @@ def check_coefficient(name: str, value: float, strict: bool = False) -> float:
     """A shaping coefficient as a float, or a ValueError naming it if it is not a number, NaN,
     inf or negative (or zero when ``strict``, for length scales). Every shaping entry point --
     the functions below, make_env, the gymnasium env and the transforms -- checks with it, so
-    no such value reaches a reward."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(x) or x < 0 or (strict and x == 0):
-        raise ValueError(f"{name} must be a finite number {'> 0' if strict else '>= 0'}, got {value!r}")
-    return x
+    no such value reaches a reward (:func:`billiards.physics.checks.finite_number`: a real
+    number, not a boolean or a string)."""
+    return finite_number(value, name, 0.0, lo_open=strict)
 
 
 def foul_penalty(foul: np.ndarray, c: float) -> np.ndarray:

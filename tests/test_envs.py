@@ -390,8 +390,8 @@ def test_the_power_gentle_bonus_reads_the_commanded_power_under_noise_in_both_en
     rng = np.random.default_rng(0)
     gym_scored = trl_scored = 0
     for _ in range(400):
-        target, _ = domain.aim_window(gym_env.positions)
-        action = np.array([target, rng.uniform(0.2, 0.9), 0.0, 0.0])
+        target, _ = domain.aim_window(gym_env.positions)  # u in [-1, 1] (the aim constraint), spread by the table
+        action = np.array([target / np.pi, rng.uniform(0.2, 0.9), 0.0, 0.0])
         _, reward, terminated, truncated, info = gym_env.step(action)
         p_cmd, p_played = info["commanded_action"][1], info["raw_action"][1]
         assert p_cmd != p_played
@@ -400,7 +400,7 @@ def test_the_power_gentle_bonus_reads_the_commanded_power_under_noise_in_both_en
         if terminated or truncated:
             gym_env.reset()
         target, _ = domain.aim_window(td["positions"][0].numpy())
-        td["action"] = torch.tensor([[target, rng.uniform(0.2, 0.9), 0.0, 0.0]])
+        td["action"] = torch.tensor([[target / np.pi, rng.uniform(0.2, 0.9), 0.0, 0.0]])
         full, td = trl_env.step_and_maybe_reset(td)
         score = float(full["next", "score"][0, 0])
         expected = score * (1 + beta * (1 - float(full["action"][0, 1])))

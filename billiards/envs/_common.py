@@ -27,6 +27,7 @@ from billiards.physics import (
     random_racks,
     simulate_batch,
 )
+from billiards.physics.checks import boolean, integer, one_of, real_array
 from billiards.physics.noise import NoiseModel
 
 STARTS = ("random", "canonical")
@@ -42,15 +43,15 @@ PARADIGMS = {
 }
 
 
+MAX_SHOTS = 10**9  # the longest inning an env plays (the shot counter's specs are int64)
+
+
 def check_inning_options(start: str, on_miss: str, max_shots: int) -> int:
-    """Validate the inning options; returns max_shots as an int."""
-    if start not in STARTS:
-        raise ValueError(f"start must be one of {STARTS}, got {start!r}")
-    if on_miss not in ON_MISS:
-        raise ValueError(f"on_miss must be one of {ON_MISS}, got {on_miss!r}")
-    if int(max_shots) != max_shots or max_shots < 1:
-        raise ValueError(f"max_shots must be a positive integer, got {max_shots!r}")
-    return int(max_shots)
+    """Validate the inning options; returns max_shots as an int (an integer, not a boolean or
+    a float, in [1, MAX_SHOTS])."""
+    one_of(start, "start", STARTS)
+    one_of(on_miss, "on_miss", ON_MISS)
+    return integer(max_shots, "max_shots", 1, MAX_SHOTS)
 
 
 def resolve_paradigm(paradigm: str | None, start: str | None, on_miss: str | None) -> tuple[str, str]:
@@ -114,50 +115,49 @@ def with_levels(obs: np.ndarray, levels: np.ndarray | None) -> np.ndarray:
 
 
 def check_flag(name: str, value) -> bool:
-    """A boolean option as a bool, or a TypeError: ``constrain_aim="no"`` is not a boolean
-    (``bool("no")`` would be True)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be True or False, got {value!r}")
-    return bool(value)
+    """A boolean option as a bool, or a TypeError (:func:`billiards.physics.checks.boolean`):
+    ``constrain_aim="no"`` is not a boolean (``bool("no")`` would be True)."""
+    return boolean(value, name)
 
 
 def validate_action(action, expected_shape: tuple[int, ...]) -> np.ndarray:
     """The action as a float64 array of exactly ``expected_shape``, or a ValueError that names
-    the key ``"action"`` and the expected shape. Checks shape and finiteness here; the
-    simulator then checks the ranges of p, a and b (also naming ``action``)."""
+    the key ``"action"`` and the expected shape (:func:`billiards.physics.checks.real_array`:
+    real numbers, no masked array, a tensor's values). Checks type, shape and finiteness here;
+    the simulator then checks the ranges of p, a and b (also naming ``action``), and
+    :func:`check_aim_offset` the u of the aim constraint."""
     if action is None:
         raise ValueError(f'missing "action": expected a tensor of shape {expected_shape} = (theta, p, a, b) per shot')
-    if hasattr(action, "detach"):  # a torch tensor, possibly part of a graph: its values
-        action = action.detach().cpu()
-    try:
-        raw = np.asarray(action)
-    except (TypeError, ValueError, RuntimeError) as err:
-        raise ValueError(f'"action" must be numeric with shape {expected_shape}; got {type(action).__name__}: {err}') from None
-    if raw.dtype.kind not in "iuf":
-        raise ValueError(f'"action" must hold real numbers (shape {expected_shape}); got {type(action).__name__} of dtype {raw.dtype}')
-    arr = raw.astype(np.float64, copy=False)
-    if arr.shape != tuple(expected_shape):
-        raise ValueError(
-            f'"action" must have shape {tuple(expected_shape)} = (theta, p, a, b) per shot; got shape {arr.shape}'
-        )
-    if not np.isfinite(arr).all():
-        rows = np.unique(np.argwhere(~np.isfinite(arr.reshape(-1, arr.shape[-1])))[:, 0]).tolist()
-        raise ValueError(
-            f'"action" of shape {tuple(expected_shape)} has non-finite (NaN/inf) entries in row(s) {rows[:8]}'
-        )
-    return arr
+    return real_array(action, '"action"', tuple(expected_shape), finite=True, note=" = (theta, p, a, b) per shot")
+
+
+def check_aim_offset(action: np.ndarray) -> np.ndarray:
+    """``action`` (..., 4) whose first coordinate is the aim constraint's u, or a ValueError
+    naming ``"action"`` if some u lies outside [-1, 1]: u chooses an aim inside the window
+    where the nearest red is hit first (:func:`billiards.domain.constrained_theta`), and the
+    action space says so. Every env that takes u checks it here (the gymnasium envs, the
+    two-player env and the TorchRL ``AimConstraint``)."""
+    u = action[..., 0]
+    if not (np.abs(u) <= 1.0).all():
+        bad = np.flatnonzero(~(np.abs(u.reshape(-1)) <= 1.0))
+        raise ValueError(f'"action" has the aim constraint: u = action[..., 0] must lie in [-1, 1] (the aim window of '
+                         f'the nearest red), got {u.reshape(-1)[bad[0]].item()!r}'
+                         + (f" in row {bad[0]}" if u.size > 1 else ""))
+    return action
 
 
 def unnormalize_checked(x: np.ndarray, constrain_aim: bool = False) -> np.ndarray:
     """The normalised action x (..., 4) as the raw one (:func:`billiards.domain.unnormalize_action`),
     or a ValueError naming ``"action"`` if a power or tip coordinate x1, x2, x3 lies outside
-    [-1, 1] (the aim coordinate x0 may: theta wraps, and a u beyond +-1 aims outside the
-    window)."""
+    [-1, 1], or, with the aim constraint, the aim coordinate u = x0 (:func:`check_aim_offset`;
+    without it x0 may: theta wraps)."""
     x = np.asarray(x, dtype=np.float64)
     if np.any(np.abs(x[..., 1:]) > 1.0):
         bad = x.reshape(-1, x.shape[-1])
         row = bad[np.any(np.abs(bad[:, 1:]) > 1.0, axis=1)][0]
         raise ValueError(f'"action" is normalised: x1, x2, x3 (power, tip offsets) must lie in [-1, 1]; got {row.tolist()}')
+    if constrain_aim:
+        check_aim_offset(x)
     return domain.unnormalize_action(x, constrain_aim)
 
 

@@ -26,10 +26,12 @@ import numpy as np
 
 from billiards import domain
 from billiards.physics import PhysicsParams, check_positions, get_params
+from billiards.physics.checks import one_of, real_array
 from billiards.physics.noise import NoiseModel, get_noise
 
 from ._common import (
     Shaping,
+    check_aim_offset,
     check_flag,
     check_inning_options,
     initial_racks,
@@ -72,7 +74,7 @@ class Billiards4BallInningEnv(gym.Env):
     paper's raw box (theta, p, a, b): theta in [0, 2pi] (any real is accepted and wrapped),
     power p in [0, 1], tip offsets a, b in [-1, 1]. With ``constrain_aim`` the first
     coordinate is u in [-1, 1] and theta = theta_target + u * asin(min(1, 2R/d))
-    (:func:`billiards.domain.constrained_theta`).
+    (:func:`billiards.domain.constrained_theta`); a u outside [-1, 1] is refused.
 
     Reward: the carom score in {0, 1}, plus the shaping terms whose coefficient is non-zero
     (:func:`billiards.domain.shaped_reward`): ``-foul_penalty * foul``,
@@ -139,8 +141,7 @@ class Billiards4BallInningEnv(gym.Env):
             raise ValueError("give the physics once: physics= (or its older spelling params=), not both")
         params = get_params(physics if physics is not None else params)
         self.max_shots = check_inning_options(start, on_miss, max_shots)
-        if render_mode not in (None, "rgb_array", "human"):
-            raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
+        render_mode = one_of(render_mode, "render_mode", (None, "rgb_array", "human"))
         self._window = _open_window() if render_mode == "human" else None
         self._last_shot = None
         self.start, self.on_miss, self.params, self.render_mode = start, on_miss, params, render_mode
@@ -205,10 +206,7 @@ class Billiards4BallInningEnv(gym.Env):
             unknown = sorted(map(repr, set(options) - RESET_OPTIONS)) if isinstance(options, dict) else [repr(options)]
             raise ValueError(f"reset options may only be {sorted(RESET_OPTIONS)}; got {', '.join(unknown)}")
         if options.get("positions") is not None:
-            pos = np.asarray(options["positions"], dtype=np.float64)
-            if pos.shape != (4, 2):
-                raise ValueError(f'options["positions"] must have shape (4, 2); got {pos.shape}')
-            check_positions(pos[None], self.params, name="positions")
+            pos = reset_positions(options["positions"], self.params)
             self._positions = pos.copy()
         else:
             self._positions = initial_racks(self.np_random, self.start, 1, self.params)[0]
@@ -223,6 +221,8 @@ class Billiards4BallInningEnv(gym.Env):
         act = validate_action(action, (domain.ACTION_DIM,))[None]
         if self.normalize_actions:
             act = unnormalize_checked(act, self.constrain_aim)
+        elif self.constrain_aim:
+            check_aim_offset(act)
         return domain.raw_action(act, self._positions[None], self.params.ball_radius, self.constrain_aim)
 
     def _info(self, shots=None, commanded=None) -> dict:
@@ -290,6 +290,14 @@ class Billiards4BallInningEnv(gym.Env):
             self._window.close()
             self._window = None
         super().close()
+
+
+def reset_positions(positions, params: PhysicsParams) -> np.ndarray:
+    """``reset(options={"positions": ...})``'s table as a (4, 2) float64 array, or a ValueError
+    naming it (real numbers of that shape, every ball on the table and apart)."""
+    pos = real_array(positions, 'options["positions"]', (4, 2), note=" (white, yellow, red1, red2 × x, y)")
+    check_positions(pos[None], params, name="positions")
+    return pos
 
 
 class _Window:

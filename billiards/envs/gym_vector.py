@@ -26,11 +26,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from billiards import domain
-from billiards.physics import check_positions
 from billiards.physics.api import random_racks_each
+from billiards.physics.checks import integer, real_array
 
-from ._common import initial_racks, next_levels, play_shots, unnormalize_checked, validate_action
-from .gym_env import INFO_KEYS, RESET_OPTIONS, Billiards4BallInningEnv
+from ._common import check_aim_offset, initial_racks, next_levels, play_shots, unnormalize_checked, validate_action
+from .gym_env import INFO_KEYS, RESET_OPTIONS, Billiards4BallInningEnv, reset_positions
 
 
 class Billiards4BallVectorEnv(VectorEnv):
@@ -41,8 +41,7 @@ class Billiards4BallVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(self, num_envs: int, render_mode: str | None = None, **kwargs):
-        if int(num_envs) != num_envs or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        num_envs = integer(num_envs, "num_envs", 1)
         if render_mode is not None:
             raise ValueError(f'the batched vector env does not render; use gymnasium.make_vec(..., '
                              f'vectorization_mode="sync") for render_mode={render_mode!r}')
@@ -101,10 +100,7 @@ class Billiards4BallVectorEnv(VectorEnv):
             raise ValueError(f"reset options may only be {sorted(RESET_OPTIONS)} (and reset_mask); got {', '.join(unknown)}")
         positions = options.get("positions")
         if positions is not None:
-            positions = np.asarray(positions, dtype=np.float64)
-            if positions.shape != (4, 2):
-                raise ValueError(f'options["positions"] must have shape (4, 2); got {positions.shape}')
-            check_positions(positions[None], self.one.params, name="positions")
+            positions = reset_positions(positions, self.one.params)
         rows = np.flatnonzero(mask)
         for i in rows:
             if seeds[i] is not None:
@@ -120,10 +116,12 @@ class Billiards4BallVectorEnv(VectorEnv):
         rewards, terminated, truncated = np.zeros(B), np.zeros(B, dtype=bool), np.zeros(B, dtype=bool)
         shots = commanded = None
         if rows.size:
-            act = np.asarray(actions)
+            act = real_array(actions, '"action"')  # real numbers (the shape is checked on the rows played)
             act = validate_action(act[rows] if act.shape[:1] == (B,) else act, (rows.size, domain.ACTION_DIM))
             if one.normalize_actions:
                 act = unnormalize_checked(act, one.constrain_aim)
+            elif one.constrain_aim:
+                check_aim_offset(act)
             commanded = domain.raw_action(act, self._positions[rows], one.params.ball_radius, one.constrain_aim)
             rng = None if one.noise.is_exact else [self._rng(i) for i in rows]  # each inning's own noise
             shots = play_shots(self._positions[rows], commanded, self._shot[rows], params=one.params, noise=one.noise,

@@ -38,9 +38,10 @@ import numpy as np
 
 from billiards import domain
 from billiards.physics import get_params
+from billiards.physics.checks import integer, one_of
 from billiards.physics.noise import get_noise, noise_level
 
-from ._common import check_flag, initial_racks, play_shots, unnormalize_checked, validate_action
+from ._common import MAX_SHOTS, check_flag, initial_racks, play_shots, unnormalize_checked, validate_action
 
 AGENTS = ("white", "yellow")
 SWAP = np.array([1, 0, 2, 3])  # the cue balls' slots exchanged: yellow's view, and back
@@ -68,14 +69,10 @@ class SaguEnv:
 
     def __init__(self, *, target: int = 10, max_innings: int = 200, start: str = "canonical", foul_penalty: float = 1.0,
                  noise=None, physics=None, constrain_aim: bool = False, extra_features: bool = False):
-        if not (isinstance(target, (int, np.integer)) and target >= 1):
-            raise ValueError(f"target must be an integer >= 1, got {target!r}")
-        if not (isinstance(max_innings, (int, np.integer)) and max_innings >= 1):
-            raise ValueError(f"max_innings must be an integer >= 1, got {max_innings!r}")
-        if start not in STARTS:
-            raise ValueError(f"start must be one of {STARTS}, got {start!r}")
+        self.target = integer(target, "target", 1, MAX_SHOTS)
+        self.max_innings = integer(max_innings, "max_innings", 1, MAX_SHOTS)
+        self.start = one_of(start, "start", STARTS)
         self.foul_penalty = domain.check_coefficient("foul_penalty", foul_penalty)
-        self.target, self.max_innings, self.start = int(target), int(max_innings), start
         self.noise, self.params = get_noise(noise), get_params(physics)
         self.constrain_aim = check_flag("constrain_aim", constrain_aim)
         self.extra_features = check_flag("extra_features", extra_features)

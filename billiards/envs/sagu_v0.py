@@ -19,6 +19,8 @@ import numpy as np
 from pettingzoo import AECEnv
 from pettingzoo.utils import wrappers
 
+from billiards.physics.checks import one_of
+
 from .sagu import AGENTS, SaguEnv, shooter_view
 
 FIRST = ("white", "yellow")
@@ -43,10 +45,8 @@ class raw_env(AECEnv):  # noqa: N801  (PettingZoo's convention: a module's env()
 
     def __init__(self, *, first: str = "white", render_mode: str | None = None, **game):
         super().__init__()
-        if first not in FIRST:
-            raise ValueError(f"first must be one of {FIRST}, got {first!r}")
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        one_of(first, "first", FIRST)
+        one_of(render_mode, "render_mode", (None, "rgb_array"))
         self.game = SaguEnv(**game)
         self.first, self.render_mode = first, render_mode
         self.possible_agents = list(AGENTS)
@@ -54,20 +54,21 @@ class raw_env(AECEnv):  # noqa: N801  (PettingZoo's convention: a module's env()
         self.agents: list[str] = []
 
     def observation_space(self, agent: str):
+        one_of(agent, "agent", AGENTS)
         return self.game.observation_space
 
     def action_space(self, agent: str):
+        one_of(agent, "agent", AGENTS)
         return self.game.action_space
 
     def observe(self, agent: str) -> np.ndarray:
-        return self.game.observe(AGENTS.index(agent))
+        return self.game.observe(AGENTS.index(one_of(agent, "agent", AGENTS)))
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> None:
         if seed is not None:
             self._rng = np.random.default_rng(seed)
         first = (options or {}).get("first", self.first)  # other keys are ignored, as PettingZoo's API test expects
-        if first not in FIRST:
-            raise ValueError(f'options["first"] must be one of {FIRST}, got {first!r}')
+        one_of(first, 'options["first"]', FIRST)
         self.game.reset(self._rng, AGENTS.index(first))
         self.agents = list(AGENTS)
         self.rewards = {a: 0.0 for a in self.agents}
@@ -92,8 +93,8 @@ class raw_env(AECEnv):  # noqa: N801  (PettingZoo's convention: a module's env()
         if self.terminations[agent] or self.truncations[agent]:
             self._was_dead_step(action)
             return
+        shot = self.game.shoot(action, self._rng)  # a refused action raises here, before anything changes
         self._cumulative_rewards[agent] = 0.0
-        shot = self.game.shoot(action, self._rng)
         other = AGENTS[1 - shot["player"]]
         self.rewards = {agent: shot["gained"], other: -shot["gained"]}
         self.infos = {a: self._info(a, shot) for a in self.agents}

@@ -57,6 +57,7 @@ from torchrl.envs import EnvBase
 from billiards.device import start_numba_threads
 from billiards.domain import ACTION_DIM, OBS_DIM, action_bounds, observation
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, check_positions, get_params
+from billiards.physics.checks import ContractError, integer, real_array
 from billiards.physics.noise import NoiseModel, get_noise
 
 from ._common import check_inning_options, initial_racks, next_levels, play_shots, validate_action
@@ -98,8 +99,8 @@ def exact_positions(tensordict: TensorDictBase) -> np.ndarray | None:
 
 
 def _exact_positions(pos_t: torch.Tensor, bits) -> np.ndarray:
+    pos = real_array(pos_t, '"positions"')  # real numbers (not complex, boolean or on the meta device), float64
     pos_t = pos_t.detach().cpu()
-    pos = pos_t.to(torch.float64).numpy()
     use_exact = np.zeros(pos.shape[:-2], dtype=bool)
     if bits is not None and bits.shape == pos_t.shape and bits.dtype == torch.int64:
         exact = np.ascontiguousarray(bits.detach().cpu().numpy()).view(np.float64)
@@ -113,6 +114,17 @@ def _exact_positions(pos_t: torch.Tensor, bits) -> np.ndarray:
             f'"{BITS_KEY}" (a dtype-casting transform such as DoubleToFloat rounded it: leave "positions" out of its keys)'
         )
     return pos
+
+
+def check_batch_size(batch_size) -> torch.Size:
+    """``batch_size`` as ``torch.Size([B])``: B an integer >= 1 (a Python or NumPy integer, not
+    a boolean or a float), alone or as the only entry of a list, tuple or ``torch.Size``."""
+    what = "an integer B >= 1 or [B] (one batch dimension)"
+    if isinstance(batch_size, (list, tuple)):  # torch.Size is a tuple
+        if len(batch_size) != 1:
+            raise ContractError(f"batch_size must be {what}, got {list(batch_size)!r}")
+        batch_size = batch_size[0]
+    return torch.Size([integer(batch_size, "batch_size", 1, what=what)])
 
 
 def _bool_spec(shape) -> Categorical:
@@ -165,11 +177,7 @@ class BilliardsEnv(EnvBase):
         noise: NoiseModel | str | dict | None = None,
     ):
         self.noise = get_noise(noise)
-        if isinstance(batch_size, int):
-            batch_size = [batch_size]
-        batch_size = torch.Size(batch_size)
-        if len(batch_size) != 1 or batch_size[0] < 1:
-            raise ValueError(f"BilliardsEnv needs a 1-D batch_size [B] with B >= 1, got {list(batch_size)}")
+        batch_size = check_batch_size(batch_size)
         super().__init__(device="cpu", batch_size=batch_size)
         self.max_shots = check_inning_options(start, on_miss, max_shots)
         # numba's pool now, not on the first parallel batch, whose start would reset torch's thread count
@@ -238,10 +246,7 @@ class BilliardsEnv(EnvBase):
         shot = tensordict.get("shot", None)
         if positions is None or shot is None:
             raise KeyError('BilliardsEnv.step needs "positions" and "shot" in the input: call env.reset() first')
-        shot = shot.detach().cpu()
-        if shot.dtype.is_floating_point or shot.dtype == torch.bool or shot.is_complex():
-            raise ValueError(f'"shot" must be an integer tensor (shots played in the inning), got {shot.dtype}')
-        shot = shot.numpy().reshape(B)
+        shot = real_array(shot, '"shot"', [(B, 1), (B,)], integer=True, note=" (shots played in each inning)").reshape(B)
         ended = (shot < 0) | (shot >= self.max_shots)
         if ended.any():
             bad = np.flatnonzero(ended)[:8].tolist()
@@ -279,10 +284,10 @@ class BilliardsEnv(EnvBase):
         if levels is None:
             raise KeyError('BilliardsEnv.step under variable noise needs "noise_level" in the input (the level '
                            'env.reset() or the last step drew for each inning)')
-        levels = levels.detach().cpu().to(torch.float64).numpy().reshape(self.batch_size[0])
-        if not (np.isfinite(levels).all() and (levels >= 0).all()):
-            raise ValueError(f'"noise_level" must hold finite levels >= 0 (multipliers of the noise\'s sigmas), got {levels}')
-        return levels
+        B, high = self.batch_size[0], self.noise.level_range[1]
+        # a level up to the top of the noise's range (as the float32 the env told it rounds it); 0 plays exactly
+        top = max(high, float(np.float32(high)))
+        return real_array(levels, '"noise_level"', [(B, 1), (B,)], finite=True, lo=0.0, hi=top).reshape(B)
 
     def _output(self, *, positions, shot, reward=None, terminated, truncated, **info) -> TensorDictBase:
         B = self.batch_size[0]
@@ -351,10 +356,10 @@ def reset_to(env: EnvBase, positions) -> TensorDictBase:
     transforms see the reset). Shorthand for ``env.reset(TensorDict(positions=...),
     set_state=True)``.
     """
-    positions = torch.as_tensor(np.asarray(positions, dtype=np.float64))
+    positions = torch.as_tensor(real_array(positions, "positions", [(4, 2), (*env.batch_size, 4, 2)]))
     if positions.ndim == 2:
         positions = positions.expand(*env.batch_size, 4, 2).clone()
     return env.reset(TensorDict({"positions": positions}, batch_size=env.batch_size), set_state=True)
 
 
-__all__ = ["BITS_KEY", "INFO_KEYS", "BilliardsEnv", "exact_positions", "reset_to"]
+__all__ = ["BITS_KEY", "INFO_KEYS", "BilliardsEnv", "check_batch_size", "exact_positions", "reset_to"]

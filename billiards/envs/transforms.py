@@ -35,9 +35,18 @@ from torchrl.envs import Compose, Transform, TransformedEnv
 
 from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, get_params
+from billiards.physics.checks import finite_number
 from billiards.physics.config import warn_physics_mismatch
 
-from ._common import EnvOptions, Shaping, check_flag, resolve_paradigm, unnormalize_checked, validate_action
+from ._common import (
+    EnvOptions,
+    Shaping,
+    check_aim_offset,
+    check_flag,
+    resolve_paradigm,
+    unnormalize_checked,
+    validate_action,
+)
 from .torchrl_env import BilliardsEnv, exact_positions
 
 
@@ -66,7 +75,7 @@ class _ActionMap(Transform):
             if self.missing_tolerance:
                 return tensordict
             raise KeyError(f'{type(self).__name__} needs "action" in the input tensordict')
-        x = validate_action(_np(action), (*tensordict.batch_size, domain.ACTION_DIM))
+        x = validate_action(action, (*tensordict.batch_size, domain.ACTION_DIM))
         tensordict.set("action", torch.from_numpy(self._map(x, tensordict)))
         return tensordict
 
@@ -86,16 +95,19 @@ class AimConstraint(_ActionMap):
     ``low[0] = -1, high[0] = 1``; p, a and b pass through unchanged. The mapped action sent
     to the simulator is float64 so theta keeps full precision.
 
+    A u outside [-1, 1] is refused with a ValueError naming ``"action"``
+    (:func:`~billiards.envs._common.check_aim_offset`, as in the gymnasium envs).
+
     Args:
         R: ball radius (m), the simulator's by default.
     """
 
     def __init__(self, R: float = DEFAULT_PARAMS.ball_radius):
         super().__init__()
-        self.R = float(R)
+        self.R = finite_number(R, "R", 0.0, lo_open=True, what="a finite ball radius > 0 (m)")
 
     def _map(self, u_action, tensordict):
-        return domain.aim_action(u_action, exact_positions(tensordict), self.R)
+        return domain.aim_action(check_aim_offset(u_action), exact_positions(tensordict), self.R)
 
     def transform_input_spec(self, input_spec: Composite) -> Composite:
         input_spec = input_spec.clone()
@@ -117,7 +129,7 @@ class NormalizedActions(_ActionMap):
 
     def __init__(self, constrain_aim: bool = False):
         super().__init__()
-        self.constrain_aim = bool(constrain_aim)
+        self.constrain_aim = check_flag("constrain_aim", constrain_aim)
 
     def _map(self, x, tensordict):
         return unnormalize_checked(x, self.constrain_aim)

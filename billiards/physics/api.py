@@ -13,8 +13,10 @@ Action convention (one shot): ``(theta, p, a, b)``
   (clockwise spin seen from above), b > 0 is above centre (topspin).
 
 Anything else (NaN/inf, p outside [0, 1], a or b outside [-1, 1], wrong shapes, balls off the
-table or overlapping by more than ``POSITION_TOL``) raises :class:`ValueError`; nothing is
-clamped silently.
+table or overlapping by more than ``POSITION_TOL``; booleans, complex numbers, strings or
+masked arrays in place of real numbers) raises :class:`ValueError`; nothing is clamped or
+dropped silently. The arguments' types, shapes and ranges are checked by
+:mod:`billiards.physics.checks`, the envs' checks too.
 
 Every state this accepts is one the simulator keeps its invariants from: a shot from it ends
 with every ball on the table and no two overlapping beyond ``POSITION_TOL``, so its rest
@@ -34,6 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import core
+from .checks import ContractError, finite_number, generator, integer, real_array
 from .params import DEFAULT_PARAMS, PhysicsParams, get_params
 from .rules import carom_outcome
 
@@ -133,22 +136,16 @@ class BatchResult(NamedTuple):
 # ----------------------------------------------------------------------------- validation
 
 
-def _as_float_array(x, name: str) -> np.ndarray:
-    """``x`` as float64, or a ValueError naming ``name`` unless it holds real numbers (integers or
-    floats: not strings, booleans, complex numbers or objects)."""
-    try:
-        raw = np.asarray(x)
-    except (TypeError, ValueError, RuntimeError) as err:
-        raise ValueError(f"{name} must be numeric, got {type(x).__name__}: {err}") from None
-    if raw.dtype.kind not in "iuf":
-        raise ValueError(f"{name} must hold real numbers, got {type(x).__name__} of dtype {raw.dtype}")
-    return raw.astype(np.float64, copy=False)
+ACTION_NOTE = " = (theta, p, a, b)"
+POSITIONS_NOTE = " (white, yellow, red1, red2 × x, y)"
 
 
-def check_actions(actions: np.ndarray, name: str = "action") -> None:
-    """Raise ValueError unless actions is (N, 4) of finite (theta, p, a, b) inside the convention."""
-    if actions.ndim != 2 or actions.shape[1] != 4:
-        raise ValueError(f"{name} must have shape (4,) or (N, 4) = (theta, p, a, b); got shape {actions.shape}")
+def check_actions(actions, name: str = "action") -> None:
+    """Raise ValueError unless actions is one action (4,) or N actions (N, 4) of finite
+    (theta, p, a, b) inside the convention (real numbers: see :func:`checks.real_array`)."""
+    actions = real_array(actions, name, [(4,), (None, 4)], note=ACTION_NOTE)
+    if actions.ndim == 1:
+        actions = actions[None]
     code, n, k = core.check_actions(np.ascontiguousarray(actions, dtype=np.float64))
     if code == core.ERR_OK:
         return
@@ -165,11 +162,9 @@ def check_positions(positions: np.ndarray, params: PhysicsParams = DEFAULT_PARAM
     """Raise ValueError unless positions is one rack (4, 2) or N racks (N, 4, 2) of finite,
     on-table, non-overlapping balls."""
     params = get_params(params)  # a preset's name is accepted wherever parameters are
-    positions = _as_float_array(positions, name)
-    if positions.shape == (4, 2):
+    positions = real_array(positions, name, [(4, 2), (None, 4, 2)], note=POSITIONS_NOTE)
+    if positions.ndim == 2:
         positions = positions[None]
-    if positions.ndim != 3 or positions.shape[1:] != (4, 2):
-        raise ValueError(f"{name} must have shape (4, 2) or (N, 4, 2) (white, yellow, red1, red2 × x, y); got {positions.shape}")
     code, n, k, j = core.check_positions(np.ascontiguousarray(positions, dtype=np.float64), params.array, POSITION_TOL)
     if code == core.ERR_OK:
         return
@@ -200,7 +195,7 @@ def action_to_cue(action, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
     Accepts (4,) or (N, 4) and returns the same shape. Validates as described in the module.
     """
     params = get_params(params)  # a preset's name is accepted wherever parameters are
-    arr = _as_float_array(action, "action")
+    arr = real_array(action, "action", [(4,), (None, 4)], note=ACTION_NOTE)
     single = arr.ndim == 1
     actions = np.ascontiguousarray(arr.reshape(1, -1) if single else arr)
     check_actions(actions)
@@ -231,6 +226,7 @@ def canonical_rack(params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
 
 def random_rack(rng: np.random.Generator, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarray:
     """A uniform random rack, (4, 2) (see :func:`random_racks`)."""
+    generator(rng, "rng")
     params = get_params(params)  # a preset's name is accepted wherever parameters are
     return random_racks(rng, 1, params)[0]
 
@@ -245,6 +241,8 @@ def random_racks(rng: np.random.Generator, n: int, params: PhysicsParams = DEFAU
     (the paper's sampling on ``korean_medium``: m = 5 mm, clearance 2 mm; 0 and 0 on
     ``international``). Raises ValueError if some rack is still not placed after
     ``RACK_ATTEMPTS`` rounds (a table barely larger than four balls)."""
+    generator(rng, "rng")
+    n = integer(n, "n", lo=0, what="an integer >= 0 (the number of racks)")
     return _place_racks(lambda todo: rng.random((todo.size, 4, 2)), n, params)
 
 
@@ -252,6 +250,8 @@ def random_racks_each(rngs, params: PhysicsParams = DEFAULT_PARAMS) -> np.ndarra
     """One rack per generator of ``rngs``, (len(rngs), 4, 2): row i is ``random_racks(rngs[i], 1,
     params)[0]`` bit for bit (the same draws from each generator, which it advances alike),
     with the rejection test run on all the racks at once."""
+    for i, rng in enumerate(rngs):
+        generator(rng, f"rngs[{i}]")
     return _place_racks(lambda todo: np.stack([rngs[i].random((4, 2)) for i in todo]), len(rngs), params)
 
 
@@ -287,9 +287,9 @@ def _place_racks(draw, n: int, params: PhysicsParams) -> np.ndarray:
 
 
 def _prepare_batch(positions, actions, params: PhysicsParams):
-    pos = np.ascontiguousarray(_as_float_array(positions, "positions"))
-    act = np.ascontiguousarray(_as_float_array(actions, "actions"))
-    if pos.ndim != 3 or act.ndim != 2 or pos.shape[0] != act.shape[0]:
+    pos = np.ascontiguousarray(real_array(positions, "positions", (None, 4, 2), note=POSITIONS_NOTE))
+    act = np.ascontiguousarray(real_array(actions, "actions", (None, 4), note=ACTION_NOTE))
+    if pos.shape[0] != act.shape[0]:
         raise ValueError(
             f"simulate_batch needs positions (N, 4, 2) and actions (N, 4) with the same N; "
             f"got {pos.shape} and {act.shape}"
@@ -308,12 +308,8 @@ def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> 
     :func:`billiards.physics.trajectory` needs to draw the paths).
     """
     params = get_params(params)  # a preset's name is accepted wherever parameters are
-    pos = _as_float_array(positions, "positions")
-    act = _as_float_array(action, "action")
-    if pos.shape != (4, 2):
-        raise ValueError(f"positions must have shape (4, 2) (white, yellow, red1, red2 × x, y); got {pos.shape}")
-    if act.shape != (4,):
-        raise ValueError(f"action must have shape (4,) = (theta, p, a, b); got {act.shape}")
+    pos = real_array(positions, "positions", (4, 2), note=POSITIONS_NOTE)
+    act = real_array(action, "action", (4,), note=ACTION_NOTE)
     ok, raw = core.checked_shot(np.ascontiguousarray(pos), np.ascontiguousarray(act), params.array, POSITION_TOL)
     if not ok:
         check_actions(act[None])  # raise with the message
@@ -357,15 +353,26 @@ def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -
     )
 
 
+MIN_DT = 1e-4  # seconds: trajectory's finest time step
+MAX_FRAMES = 1_000_000  # trajectory's most samples of one shot (32 bytes per ball each)
+
+
 def trajectory(result: ShotResult, dt: float = 1.0 / 60.0, params: PhysicsParams = DEFAULT_PARAMS):
     """Sample every ball's centre along a simulated shot for drawing.
 
     Returns (times (T,), xy (T, 4, 2)): a uniform grid of step dt plus every event time, each
-    position evolved with the closed forms from the last event before it.
+    position evolved with the closed forms from the last event before it. ``dt`` is a number
+    of seconds, at least ``MIN_DT`` (0.1 ms), and the shot's grid at most ``MAX_FRAMES``
+    samples long; anything else raises ValueError.
     """
     params = get_params(params)  # a preset's name is accepted wherever parameters are
-    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
-        raise ValueError(f"trajectory needs a finite time step dt > 0, got {dt!r}")
+    if not isinstance(result, ShotResult):
+        raise ContractError(f"result must be a ShotResult (what simulate_shot returns), got {type(result).__name__}")
+    dt = finite_number(dt, "dt", MIN_DT, what=f"a finite time step of at least {MIN_DT:g} s")
+    frames = math.ceil(result.duration / dt) + result.event_time.size + 1
+    if frames > MAX_FRAMES:
+        raise ContractError(f"dt must be at least {result.duration / MAX_FRAMES:.3g} s for this {result.duration:.3g} s "
+                            f"shot (at most {MAX_FRAMES:,} frames), got {dt!r}")
     grid = np.arange(0.0, result.duration, dt)
     times = np.unique(np.concatenate([grid, result.event_time, [result.duration]]))
     seg = np.searchsorted(result.event_time, times, side="right") - 1

@@ -38,15 +38,37 @@ from typing import Any, List, Optional
 
 import numpy as np
 
-from .params import DEFAULT_PARAMS, PhysicsParams
+from .checks import ContractError, finite_number, real_array
+from .params import DEFAULT_PARAMS, UPPER_BOUNDS, PhysicsParams
 
 
 SIGMA_FIELDS = ("sigma_aim_deg", "sigma_speed", "sigma_tip_mm")
+# The largest standard deviation of each error a model may play (its sigma times its top
+# level): an aim error of a right angle, a speed error of the fastest cue any table allows
+# (PhysicsParams' bound on cue_speed_max), a tip error of the largest ball's radius. Past these
+# the shot played has nothing to do with the shot commanded (and 1e308 would overflow to inf).
+SIGMA_CAPS = {
+    "sigma_aim_deg": (90.0, "degrees: a right angle"),
+    "sigma_speed": (UPPER_BOUNDS["cue_speed_max"], "m/s: the fastest cue speed any table allows"),
+    "sigma_tip_mm": (1e3 * UPPER_BOUNDS["ball_radius"], "mm: the largest ball radius any table allows"),
+}
+MAX_LEVEL = 100.0  # the highest level (multiplier of the sigmas) a variable model may draw
 
 
 def _is_level(value) -> bool:
     """A finite real number >= 0 (a standard deviation, a multiplier of one)."""
-    return isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= 0
+    return isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, (bool, np.bool_)) \
+        and math.isfinite(value) and value >= 0
+
+
+def sigma_cap_error(name: str, sigma: float, top: float = 1.0) -> str | None:
+    """What is wrong with a sigma ``sigma`` of field ``name`` played up to level ``top`` (1 for
+    fixed noise) if it passes its cap (:data:`SIGMA_CAPS`), else None."""
+    cap, unit = SIGMA_CAPS[name]
+    if sigma * top <= cap:
+        return None
+    levels = f" times the top level {top:g} of level_range" if top != 1 else ""
+    return f"{name}{levels} must be at most {cap:g} ({unit}), got {sigma * top:g}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,15 +87,19 @@ class NoiseModel:
 
     def __post_init__(self) -> None:
         for name in SIGMA_FIELDS:
-            value = getattr(self, name)
-            if not _is_level(value):
-                raise ValueError(f"NoiseModel.{name} must be a finite number >= 0, got {value!r}")
+            finite_number(getattr(self, name), f"NoiseModel.{name}", 0.0, SIGMA_CAPS[name][0],
+                          what="a finite number >= 0", note=SIGMA_CAPS[name][1])
+        top = 1.0
         if self.level_range is not None:
             levels = tuple(self.level_range) if isinstance(self.level_range, (tuple, list)) else ()
-            if not (len(levels) == 2 and all(map(_is_level, levels)) and levels[0] <= levels[1]):
-                raise ValueError(f"NoiseModel.level_range must be (low, high), finite numbers with 0 <= low <= high, "
-                                 f"got {self.level_range!r}")
+            if not (len(levels) == 2 and all(map(_is_level, levels)) and levels[0] <= levels[1] <= MAX_LEVEL):
+                raise ContractError(f"NoiseModel.level_range must be (low, high), finite numbers with 0 <= low <= high "
+                                    f"<= {MAX_LEVEL:g}, got {self.level_range!r}")
             object.__setattr__(self, "level_range", (float(levels[0]), float(levels[1])))
+            top = self.level_range[1]
+        for name in SIGMA_FIELDS:
+            if err := sigma_cap_error(name, getattr(self, name), top):
+                raise ContractError(f"NoiseModel.{err}")
 
     @property
     def is_variable(self) -> bool:
@@ -163,9 +189,7 @@ class NoiseModel:
             levels = self.draw_levels(actions.shape[:-1], rng)
         if levels is None:
             return self.apply(actions, z, params)
-        levels = np.broadcast_to(np.asarray(levels, dtype=np.float64), actions.shape[:-1])
-        if not (np.isfinite(levels).all() and (levels >= 0).all()):
-            raise ValueError(f"noise levels must be finite multipliers >= 0, got {levels!r}")
+        levels = np.broadcast_to(real_array(levels, "levels", finite=True, lo=0.0), actions.shape[:-1])
         played = self.apply(actions, z * levels[..., None], params)
         exact = levels == 0
         played[exact] = actions[exact]  # level 0: the commanded shot, bit for bit
@@ -254,8 +278,10 @@ def noise_errors(node: Any) -> list[str]:
                 f"(choose one with noise=<name>)"]
     for key, field in CONFIG_FIELDS.items():
         value = node.get(key)
-        if value is not None and not (math.isfinite(value) and value >= 0):
+        if value is not None and not _is_level(value):
             return [f"noise.{key} must be a finite number >= 0 (a standard deviation), got {value!r}"]
+        if value is not None and (err := sigma_cap_error(field, value)):
+            return [f"noise.{key}: {err}"]
     scale = node.get("scale")
     if scale is not None and not _is_level(scale):
         return [f"noise.scale must be a finite number >= 0 (a multiplier of the preset's sigmas; 1 keeps them), "
@@ -266,6 +292,10 @@ def noise_errors(node: Any) -> list[str]:
         if not (len(levels) == 2 and all(map(_is_level, levels)) and levels[0] <= levels[1]):
             return [f"noise.level_range must be [low, high], finite numbers with 0 <= low <= high (each shot's "
                     f"multiplier of the sigmas is drawn uniformly from it), got {levels!r}"]
+    try:  # the sigmas the preset, the overrides, the scale and the levels make together, within their caps
+        noise_from_config(node)
+    except ValueError as err:
+        return [f"noise: {err}"]
     return []
 
 
@@ -281,5 +311,5 @@ def noise_record(model: NoiseModel) -> dict:
     return record
 
 
-__all__ = ["CONFIG_FIELDS", "NOISE_PRESETS", "SIGMA_FIELDS", "NoiseConfig", "NoiseModel", "get_noise", "noise_errors", "noise_level",
-           "noise_from_config", "noise_record"]
+__all__ = ["CONFIG_FIELDS", "MAX_LEVEL", "NOISE_PRESETS", "SIGMA_CAPS", "SIGMA_FIELDS", "NoiseConfig", "NoiseModel",
+           "get_noise", "noise_errors", "noise_from_config", "noise_level", "noise_record", "sigma_cap_error"]

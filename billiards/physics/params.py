@@ -1,7 +1,7 @@
 """Physical parameters of the table, balls, cushions and cue, in one immutable object.
 
 Two named presets (:data:`PRESETS`), the single source of truth for every table the project
-plays (``shared/physics_reference.md`` §10):
+plays (``docs/physics.md`` §10):
 
 * ``korean_medium`` -- **the default**: the table and values the paper's authors published
   (1.27 x 2.54 m, 65.5 mm balls, mu_r = 0.018, spin decay 50 rad/s^2, e_b = 0.94, f_c = 0.20,
@@ -27,9 +27,11 @@ from functools import cached_property
 
 import numpy as np
 
+from .checks import boolean, finite_number, integer, one_of
+
 # Ball–ball contact models.
-BALL_BALL_RESTITUTION = 0  # equal-mass restitution exchange (reference §4b), the default
-BALL_BALL_ELASTIC = 1  # frictionless elastic, e = 1 (reference §4a)
+BALL_BALL_RESTITUTION = 0  # equal-mass restitution exchange (docs/physics.md §4b), the default
+BALL_BALL_ELASTIC = 1  # frictionless elastic, e = 1 (docs/physics.md §4a)
 BALL_BALL_MODELS = {"restitution": BALL_BALL_RESTITUTION, "elastic": BALL_BALL_ELASTIC}
 
 # Slots of the packed parameter vector.
@@ -51,6 +53,40 @@ UPPER_BOUNDS = {
 }
 MAX_TIME_BOUND = 3600.0  # seconds of one shot (or inf: to rest)
 MAX_EVENTS_BOUND = 10_000_000  # events of one shot (the kernel's counter is an int64; the default is 5,000)
+POSITIVE = ("table_width", "table_length", "ball_radius", "ball_mass", "g", "cue_mass", "cue_speed_max",
+            "cushion_height", "min_dist", "u_slide", "u_roll", "u_spin")
+NON_NEGATIVE = ("f_cushion", "cue_end_mass", "rack_margin", "rack_clearance")
+
+
+def _positive(high: float):
+    return lambda v, name: finite_number(v, name, 0.0, high, lo_open=True, what="a finite positive number",
+                                         note="a physical bound")
+
+
+def _non_negative(high: float):
+    return lambda v, name: finite_number(v, name, 0.0, high, what="a finite number >= 0", note="a physical bound")
+
+
+def _fraction(note: str = ""):
+    return lambda v, name: finite_number(v, name, 0.0, 1.0, what=f"a finite number in [0, 1]{note}")
+
+
+# The type and range of every field of PhysicsParams, in one place (checked by __post_init__
+# in this order; the relations between fields, such as a rack that fits its table, after it).
+FIELD_CHECKS = {
+    **{name: _positive(UPPER_BOUNDS[name]) for name in POSITIVE},
+    **{name: _non_negative(UPPER_BOUNDS[name]) for name in NON_NEGATIVE},
+    "e_ball": _fraction(),
+    "e_cushion": _fraction(),
+    "max_english": _fraction(" (a miscue beyond)"),
+    "squirt": boolean,
+    "ball_ball": lambda v, name: one_of(v, name, tuple(BALL_BALL_MODELS)),
+    "max_time": lambda v, name: finite_number(v, name, 0.0, MAX_TIME_BOUND, lo_open=True, allow_inf=True,
+                                              what=f"a number of seconds in (0, {MAX_TIME_BOUND:g}] or inf "
+                                                   "(run every shot to rest)"),
+    "max_events": lambda v, name: integer(v, name, 1, MAX_EVENTS_BOUND),
+    "rack": lambda v, name: one_of(v, name, RACKS),
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,7 +118,7 @@ class PhysicsParams:
     cue_mass: float = 0.55
     cue_speed_max: float = 4.5  # cue speed at power p = 1 (m/s)
     max_english: float = 1.0  # tip offset radius at |(a, b)| = 1, fraction of R
-    squirt: bool = False  # cue-ball deflection from side spin (reference §1.3)
+    squirt: bool = False  # cue-ball deflection from side spin (docs/physics.md §1.3)
     cue_end_mass: float = 0.170097 / 30.0  # m_e, only used with squirt
     # models and numerics
     ball_ball: str = "restitution"  # "restitution" (§4b) or "elastic" (§4a)
@@ -95,44 +131,10 @@ class PhysicsParams:
     rack_clearance: float = 0.002  # random racks: every pair of centres at least 2R + clearance apart (m)
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):  # numbers are real numbers (not strings, booleans, complex)
-            value = getattr(self, f.name)
-            if f.type in ("float", "int", float, int) and (isinstance(value, bool) or not isinstance(value, (int, float))):
-                raise ValueError(f"PhysicsParams.{f.name} must be a real number, got {value!r}")
-        positive = [
-            "table_width", "table_length", "ball_radius", "ball_mass", "g", "cue_mass",
-            "cue_speed_max", "cushion_height", "min_dist", "u_slide", "u_roll", "u_spin",
-        ]
-        for name in positive:
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"PhysicsParams.{name} must be a finite positive number, got {value!r}")
-        for name in ["f_cushion", "cue_end_mass", "rack_margin", "rack_clearance"]:
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"PhysicsParams.{name} must be finite and >= 0, got {value!r}")
-        for name in ["e_ball", "e_cushion"]:
-            value = getattr(self, name)
-            if not (0.0 <= value <= 1.0):
-                raise ValueError(f"PhysicsParams.{name} must lie in [0, 1], got {value!r}")
-        if not 0.0 <= self.max_english <= 1.0:
-            raise ValueError(f"PhysicsParams.max_english must lie in [0, 1] (miscue beyond), got {self.max_english!r}")
+        for name, check in FIELD_CHECKS.items():  # each field typed and ranged here, once
+            check(getattr(self, name), f"PhysicsParams.{name}")
         if not self.ball_radius < self.cushion_height < 2 * self.ball_radius:
             raise ValueError("PhysicsParams.cushion_height must lie between R and 2R for the Han cushion model")
-        if self.ball_ball not in BALL_BALL_MODELS:
-            raise ValueError(f"PhysicsParams.ball_ball must be one of {sorted(BALL_BALL_MODELS)}, got {self.ball_ball!r}")
-        if not (self.max_time > 0 and not math.isnan(self.max_time)):
-            raise ValueError(f"PhysicsParams.max_time must be > 0 seconds (inf: run every shot to rest), got {self.max_time!r}")
-        if self.rack not in RACKS:
-            raise ValueError(f"PhysicsParams.rack must be one of {RACKS}, got {self.rack!r}")
-        for name, high in UPPER_BOUNDS.items():
-            if not getattr(self, name) <= high:
-                raise ValueError(f"PhysicsParams.{name} must be at most {high:g} (a physical bound), got {getattr(self, name)!r}")
-        if not (self.max_time <= MAX_TIME_BOUND or math.isinf(self.max_time)):
-            raise ValueError(f"PhysicsParams.max_time must be at most {MAX_TIME_BOUND:g} s or inf, got {self.max_time!r}")
-        events = self.max_events
-        if isinstance(events, bool) or not float(events).is_integer() or not 1 <= events <= MAX_EVENTS_BOUND:
-            raise ValueError(f"PhysicsParams.max_events must be an integer in [1, {MAX_EVENTS_BOUND:,}], got {events!r}")
         # Random racks need room for four balls with the margin and clearance; the opening rack
         # is checked by canonical_rack's own layout (see billiards.physics.api).
         inner_w = self.table_width - 2 * (self.ball_radius + self.rack_margin)
@@ -219,13 +221,16 @@ class PhysicsParams:
         return base_name + "".join(f"+{k}={v}" for k, v in diff.items())
 
 
+assert list(FIELD_CHECKS) != [] and set(FIELD_CHECKS) == {f.name for f in dataclasses.fields(PhysicsParams)}
+
+
 def _diff(base: PhysicsParams, other: PhysicsParams) -> dict:
     return {f.name: getattr(other, f.name) for f in dataclasses.fields(PhysicsParams)
             if getattr(other, f.name) != getattr(base, f.name)}
 
 
 PRESETS: dict[str, PhysicsParams] = {
-    # The paper's table and values (physics_reference.md §10): the field defaults.
+    # The paper's table and values (docs/physics.md §10): the field defaults.
     "korean_medium": PhysicsParams(),
     # pooltool's BILLIARD table and BILLIARD_GENERIC balls (the project's defaults before §10).
     "international": PhysicsParams(
