@@ -134,26 +134,47 @@ def wilson(successes: float, n: int, confidence: float = 0.95) -> list[float]:
     return [_round(max(0.0, centre - half)), _round(min(1.0, centre + half))]
 
 
-def elo_against(results: list[tuple[float, float]], prior_games: float = 1.0) -> float:
-    """The Elo rating that makes the expected score against the opponents equal the score
-    reached: ``results`` are (opponent's rating, score in [0, 1]) per match; one virtual draw
-    against each distinct opponent keeps it finite when every match was won or lost."""
-    ratings = [r for r, _ in results]
-    scores = [s for _, s in results]
-    for r in sorted(set(ratings)):
-        ratings += [r] * int(prior_games)
-        scores += [0.5] * int(prior_games)
-    ratings_a, scores_a = np.asarray(ratings), np.asarray(scores)
+def elo_for_score(opponents, score: float) -> float:
+    """The Elo rating whose mean expected score against ``opponents`` (their ratings, one per
+    match) equals ``score`` in (0, 1) (bisection: the expected score grows with the rating)."""
+    ratings = np.asarray(opponents, dtype=np.float64)
 
     def excess(x: float) -> float:
-        return float((1 / (1 + 10 ** ((ratings_a - x) / 400)) - scores_a).sum())
+        return float((1 / (1 + 10 ** ((ratings - x) / 400))).mean() - score)
 
-    lo, hi = ratings_a.min() - 2000, ratings_a.max() + 2000
-    for _ in range(200):  # bisection: the expected score grows with the rating
+    lo, hi = ratings.min() - 2000, ratings.max() + 2000
+    for _ in range(200):
         mid = (lo + hi) / 2
         lo, hi = (mid, hi) if excess(mid) < 0 else (lo, mid)
     return _round((lo + hi) / 2, 1)
 
 
-__all__ = ["aggregate", "bootstrap_ci", "elo_against", "iqm", "performance_profile", "probability_of_improvement",
-           "summary", "wilson"]
+def _with_prior(results: list[tuple[float, float]], prior_games: int) -> tuple[list[float], list[float]]:
+    ratings = [r for r, _ in results]
+    scores = [s for _, s in results]
+    for r in sorted(set(ratings)):
+        ratings += [r] * int(prior_games)
+        scores += [0.5] * int(prior_games)
+    return ratings, scores
+
+
+def elo_against(results: list[tuple[float, float]], prior_games: int = 1) -> float:
+    """The Elo rating that makes the expected score against the opponents equal the score
+    reached: ``results`` are (opponent's rating, score in [0, 1]) per match; one virtual draw
+    against each distinct opponent keeps it finite when every match was won or lost."""
+    ratings, scores = _with_prior(results, prior_games)
+    return elo_for_score(ratings, float(np.mean(scores)))
+
+
+def elo_interval(results: list[tuple[float, float]], prior_games: int = 1, confidence: float = 0.95) -> list[float]:
+    """The 95 % interval of :func:`elo_against`: the ratings whose expected scores are the ends
+    of the Wilson interval of the score reached (with the same virtual draws)."""
+    ratings, _ = _with_prior(results, prior_games)
+    n, extra = len(results), len(ratings) - len(results)
+    lo, hi = wilson(sum(s for _, s in results), n, confidence)
+    mix = lambda p: (p * n + 0.5 * extra) / (n + extra)  # noqa: E731
+    return [elo_for_score(ratings, mix(lo)), elo_for_score(ratings, mix(hi))]
+
+
+__all__ = ["aggregate", "bootstrap_ci", "elo_against", "elo_for_score", "elo_interval", "iqm", "performance_profile",
+           "probability_of_improvement", "summary", "wilson"]

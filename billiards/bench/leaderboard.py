@@ -160,8 +160,11 @@ def _row(track, cards: list[dict]) -> dict:
     row["seeds"] = len(runs)
     if track.protocol == "match":
         card = first
-        row.update(score=card["elo"], win_rate=card["match"]["win_rate"], ci95=card["match"]["ci95"],
-                   matches=card["match"]["matches"], by_opponent=card["match"]["by_opponent"])
+        ratings = dict(track.ratings)
+        opponents = [track.opponents[u // track.units] for u in range(len(card["values"]))]
+        results = [(ratings[o], v) for o, v in zip(opponents, card["values"])]
+        row.update(score=stats.elo_against(results), elo_ci95=stats.elo_interval(results), win_rate=card["match"]["win_rate"],
+                   ci95=card["match"]["ci95"], matches=card["match"]["matches"], by_opponent=card["match"]["by_opponent"])
     else:
         if len(runs) == 1:
             summary = stats.summary(runs[0])
@@ -238,7 +241,7 @@ def markdown(board: dict) -> str:
                   "| status | earlier figure |", "|---|---|---|---|---|---|---|---|---|---|"]
         for i, r in enumerate(t["rows"], 1):
             if track.protocol == "match":
-                main = f"{r['score']:.0f}"
+                main = f"{r['score']:.0f} [{r['elo_ci95'][0]:.0f}, {r['elo_ci95'][1]:.0f}]"
                 more = f"{100 * r['win_rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}]"
             else:
                 fmt = (lambda v: f"{100 * v:.2f} %") if track.protocol == "p1" else (lambda v: f"{v:.3f}") if \
@@ -283,15 +286,25 @@ def draw_figure(board: dict, path: Path) -> Path:
         scale = 100.0 if TRACKS[name].protocol == "p1" else 1.0
         score = np.array([r["score"] for r in rows]) * (scale if TRACKS[name].protocol != "match" else 1)
         if TRACKS[name].protocol == "match":
-            lo = hi = np.zeros(len(rows))
+            lo = score - np.array([r["elo_ci95"][0] for r in rows])
+            hi = np.array([r["elo_ci95"][1] for r in rows]) - score
         else:
             lo = score - np.array([r["ci95"][0] for r in rows]) * scale
             hi = np.array([r["ci95"][1] for r in rows]) * scale - score
         colors = ["tab:blue" if r["compute"] == "observation" else "tab:orange" for r in rows]
-        ax.barh(y, score, xerr=[lo, hi], color=colors, capsize=2)
-        ax.set_yticks(y, [r["row"][:60] for r in rows], fontsize=6)
+        if TRACKS[name].protocol == "match":  # ratings: dots with their intervals, not bars from 0
+            ax.errorbar(score, y, xerr=[lo, hi], fmt="none", ecolor="black", capsize=2)
+            ax.scatter(score, y, c=colors, zorder=3)
+        else:
+            ax.barh(y, score, xerr=[lo, hi], color=colors, capsize=2)
+        ax.set_yticks(y, [r["row"] if len(r["row"]) <= 48 else r["row"][:46] + "..." for r in rows], fontsize=6)
         ax.set_title(f"{name}: {board['tracks'][name]['metric'].replace('_', ' ')}" + (" (%)" if scale == 100 else ""), fontsize=8)
         ax.tick_params(axis="x", labelsize=6)
+    from matplotlib.patches import Patch
+
+    axes[0, 0].legend(handles=[Patch(color="tab:blue", label="observation only"),
+                               Patch(color="tab:orange", label="searches with the simulator (400 / decision)")],
+                      fontsize=6, loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=110, metadata={"Software": None})
     plt.close(fig)
@@ -318,7 +331,7 @@ def draw_profiles(board: dict, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     names = [n for n in ("innings-v1", "p1-exact-v1", "p3-exact-v1", "p3-fastfiz-v1") if board["tracks"][n].get("profiles")]
-    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(names), figsize=(4.6 * len(names), 4.2), squeeze=False)
     for ax, name in zip(axes[0], names):
         prof = board["tracks"][name]["profiles"]
         x = np.arange(len(prof["thresholds"]))
@@ -328,7 +341,7 @@ def draw_profiles(board: dict, path: Path) -> Path:
         ax.set_title(f"{name}: share of units above tau", fontsize=8)
         ax.set_ylim(-0.02, 1.02)
         ax.tick_params(axis="y", labelsize=6)
-    axes[0][-1].legend(fontsize=4.5, loc="upper right")
+        ax.legend(fontsize=4, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=110, metadata={"Software": None})
     plt.close(fig)

@@ -268,7 +268,9 @@ def score_records(track: Track, records: list[dict]) -> dict:
                         "points_against": round(float(np.mean([r["points"][1] for r in records])), 4),
                         "by_opponent": {o: round(float(np.mean([s for s, r in zip(scores, records) if r["opponent"] == o])), 4)
                                         for o in track.opponents if any(r["opponent"] == o for r in records)}}
-        out["elo"] = stats.elo_against([(ratings[r["opponent"]], s) for r, s in zip(records, scores)])
+        results = [(ratings[r["opponent"]], s) for r, s in zip(records, scores)]
+        out["elo"] = stats.elo_against(results)
+        out["elo_ci95"] = stats.elo_interval(results)
         out["values"] = scores
     return out
 
