@@ -138,6 +138,7 @@ LAYERS = [  # lowest first; a new top-level module or subpackage takes its place
     ("billiards.pictures", "billiards.report", "billiards.league"),
     ("billiards.bench",),
     ("billiards.campaign",),
+    ("billiards.web",),  # the viewer: plays agents (bench), leagues and runs, on top of everything
 ]
 
 

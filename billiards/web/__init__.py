@@ -1,0 +1,22 @@
+"""The viewer: a local web app to replay runs, try shots, ask agents and play matches
+(``python -m billiards.web``; docs/viewer.md).
+
+* :mod:`.app` -- the FastAPI app (:func:`create_app`): the JSON API and the page;
+* :mod:`.sim` -- one shot as the API answers it (exact simulation, noise, paths, outcome);
+* :mod:`.agents` -- the closed list of agents the page may ask, built once and kept;
+* :mod:`.runs` -- the recorded runs it replays, and the folders it may read;
+* :mod:`.match` -- matches between the person and a league player, saved as league ledgers;
+* ``static/`` -- the page (HTML, one script, one stylesheet; nothing from elsewhere).
+"""
+
+from __future__ import annotations
+
+
+def create_app(*args, **kwargs):
+    """:func:`billiards.web.app.create_app` (FastAPI is imported only when an app is made)."""
+    from .app import create_app as make
+
+    return make(*args, **kwargs)
+
+
+__all__ = ["create_app"]

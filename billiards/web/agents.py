@@ -1,0 +1,231 @@
+"""The agents the page may ask for a shot: a closed list, built by the benchmark's own
+:func:`billiards.bench.agents.resolve_agent` and kept once built.
+
+The list (:func:`catalogue`): the three baselines, ``search:h2`` (depth-2 lookahead over
+geometric draws), ``search:h2/base`` (the same over the shipped ``base`` ensemble),
+``search:default`` (what ``search.py`` plays under the request's noise: the robust search over
+the noise's shot ranker under noise), every league player of ``conf/match.yaml``
+(``league:<name>``) and every shipped policy under ``results/policies``. Nothing else is
+resolved: a spec naming code (``file.py:name``, ``module:name``, ``sb3:...``) is refused before
+the benchmark sees it.
+
+A built agent is kept per (spec, physics, noise) and used by one request at a time (its own
+lock); it is reseeded with the request's seed before it answers, so the same request gets the
+same shot. For a search, what it considered is read cheaply on the side: the proposer's first
+candidates for the table (each simulated once, exactly: a few hundred shots, about a
+millisecond) and the search's own statistics of its choice (its value, its predicted reward
+``r1``, its simulations and the table it predicts). Under execution noise the chosen shot is
+replayed ``replays`` times with the noise: the share that scores and where the cue ball ends.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import OrderedDict
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from billiards import domain
+from billiards.files import ROOT
+from billiards.physics import get_params, simulate_batch
+from billiards.physics.noise import get_noise
+
+BUDGET = 400  # simulations per decision of the searches (the benchmark's tracks')
+SEARCHES = {
+    "search:h2": "depth-2 lookahead (h2) over geometric draws, 400 simulations",
+    "search:h2/base": "h2 over the shipped base ensemble (three trained policies), 400 simulations",
+    "search:default": "what search.py plays under this noise (exact: h2; noisy: the robust search over the noise's shot ranker)",
+}
+BASELINE_NOTES = {
+    "random": "uniform in the action box",
+    "nearest": "a full-ball hit on the nearest red at half power",
+    "random_aim": "uniform inside the nearest red's aim window",
+}
+MAX_CACHED = 12
+TOP_CANDIDATES = 12
+
+
+class UnknownAgent(ValueError):
+    """A spec outside the closed list."""
+
+
+def policy_specs(root: Path = ROOT) -> list[str]:
+    """The shipped policies: ``results/policies/<name>/seed<k>.pt``, as repository paths."""
+    return sorted(str(p.relative_to(root)) for p in (root / "results" / "policies").glob("*/*.pt"))
+
+
+_CATALOGUE: dict = {}
+
+
+def catalogue(root: Path = ROOT) -> dict[str, dict]:
+    """spec -> {kind, note} for every agent the page may ask (read once a process)."""
+    if root not in _CATALOGUE:
+        _CATALOGUE[root] = _catalogue(root)
+    return _CATALOGUE[root]
+
+
+def league_names(root: Path = ROOT) -> list[str]:
+    """The league players of ``conf/match.yaml`` (the play view's opponents)."""
+    return [spec.split(":", 1)[1] for spec in catalogue(root) if spec.startswith("league:")]
+
+
+def _catalogue(root: Path) -> dict[str, dict]:
+    from billiards.bench.agents import league_players
+
+    out: dict[str, dict] = {name: {"kind": "baseline", "note": note} for name, note in BASELINE_NOTES.items()}
+    out.update({spec: {"kind": "search", "note": note} for spec, note in SEARCHES.items()})
+    for name, cfg in league_players().items():
+        kind = cfg.get("kind", "search")
+        note = f"league player ({kind}" + (f", {cfg.get('search', 'robust')} search" if kind in ("search", "safety") else "") + ")"
+        out[f"league:{name}"] = {"kind": "league", "note": note}
+    out.update({spec: {"kind": "policy", "note": "a shipped trained policy"} for spec in policy_specs(root)})
+    return out
+
+
+class _Recorder:
+    """A proposer in front of the search's own: passes every call through and keeps the first
+    call's candidates of a decision (the search's first look at the table)."""
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.first = None
+
+    def propose(self, positions, k, rng, *args, **kwargs):
+        out = self.inner.propose(positions, k, rng, *args, **kwargs)
+        if self.first is None:
+            self.first = np.array(out, dtype=np.float64, copy=True)
+        return out
+
+    def __getattr__(self, name):  # everything else is the inner proposer's
+        return getattr(self.inner, name)
+
+
+class Entry:
+    """A built agent, its lock, and the hooks that read what its search considered."""
+
+    def __init__(self, spec: str, agent, physics: str, noise: str):
+        self.spec, self.agent, self.physics, self.noise = spec, agent, physics, noise
+        self.lock = threading.Lock()
+        self.recorder, self.last = None, None
+        actor = getattr(agent, "actor", None) or getattr(getattr(agent, "player", None), "actor", None)
+        if actor is not None and hasattr(actor, "proposer"):
+            self.recorder = _Recorder(actor.proposer)
+            actor.proposer = self.recorder
+            search = actor.search
+
+            def recorded(*args, **kwargs):
+                result = search(*args, **kwargs)
+                if self.last is None:
+                    self.last = result
+                return result
+
+            actor.search = recorded
+
+
+_CACHE: OrderedDict = OrderedDict()
+_BUILD = threading.Lock()  # building (Hydra's global state, the first compilations) one at a time
+
+
+def get_entry(spec: str, physics: str, noise: str, root: Path = ROOT) -> Entry:
+    """The built agent ``spec`` for this table and noise (built once; :class:`UnknownAgent` for a
+    spec outside the list, :class:`billiards.bench.agents.AgentError` when it cannot be built)."""
+    from billiards.bench.agents import resolve_agent
+
+    spec = str(spec).strip()
+    known = catalogue(root)
+    if spec not in known:
+        leagues = ", ".join(k for k in known if k.startswith("league:"))
+        raise UnknownAgent(f"unknown agent {spec!r}: the viewer offers random, nearest, random_aim, {', '.join(SEARCHES)}, "
+                           f"{leagues} and the shipped policies results/policies/<name>/seed<k>.pt (GET /api/config lists them all)")
+    key = (spec, physics, noise)
+    with _BUILD:
+        if key in _CACHE:
+            _CACHE.move_to_end(key)
+            return _CACHE[key]
+        track = SimpleNamespace(physics=physics, noise=noise, budget=BUDGET, name="web", tells_level=False)
+        agent = resolve_agent(str(root / spec) if known[spec]["kind"] == "policy" else spec, track)
+        entry = Entry(spec, agent, physics, noise)
+        _CACHE[key] = entry
+        while len(_CACHE) > MAX_CACHED:
+            _CACHE.popitem(last=False)
+        return entry
+
+
+def considered(entry: Entry, table: np.ndarray, params) -> dict | None:
+    """What a search considered for its last decision (see the module docstring), or None for
+    an agent that does not search."""
+    if entry.recorder is None:
+        return None
+    out: dict = {}
+    result = entry.last
+    if result is not None:
+        for key in ("value", "r1"):
+            v = getattr(result, key, None)
+            if v is not None:
+                out[key] = float(np.asarray(v).reshape(-1)[0])
+        out["sims"] = int(getattr(result, "n_sims", 0))
+        pos = getattr(result, "positions", None)
+        if pos is not None:
+            out["predicted_final"] = np.asarray(pos, dtype=np.float64).reshape(-1, 4, 2)[0].tolist()
+    cands = entry.recorder.first
+    if cands is not None and cands.shape[-1] == 4:
+        cands = cands[0] if cands.ndim == 3 else cands.reshape(-1, 4)  # (tables, K, 4): this table's
+        if len(cands):
+            res = simulate_batch(np.repeat(table[None], len(cands), axis=0), cands, params)
+            r = res.score.astype(float) - res.foul.astype(float)
+            order = np.lexsort((np.arange(len(cands)), -r))[:TOP_CANDIDATES]
+            out["candidates"] = {"count": int(len(cands)), "scoring": int(res.score.sum()), "fouling": int(res.foul.sum()),
+                                 "top": [{"action": cands[i].tolist(), "score": bool(res.score[i]), "foul": bool(res.foul[i]),
+                                          "final": res.positions[i].tolist()} for i in order]}
+    return out
+
+
+def noisy_replays(table: np.ndarray, action: np.ndarray, noise_name: str, params, n: int, seed: int,
+                  level: float | None) -> dict | None:
+    """The chosen shot replayed ``n`` times under the noise: the shares that score and foul and
+    every replay's cue-ball end position (None under exact play or for n = 0)."""
+    noise = get_noise(noise_name)
+    if noise.is_exact or n <= 0:
+        return None
+    rng = np.random.default_rng(seed + 7919)
+    levels = None
+    if noise.is_variable:
+        levels = np.full(n, 1.0 if level is None else level)
+    played = noise.perturb(np.repeat(action[None], n, axis=0), rng, params, levels=levels)
+    res = simulate_batch(np.repeat(table[None], n, axis=0), played, params)
+    return {"n": n, "score_share": float(res.score.mean()), "foul_share": float(res.foul.mean()),
+            "white_ends": np.round(res.positions[:, 0], 5).tolist(), "scored": res.score.astype(bool).tolist()}
+
+
+def ask(spec: str, positions, *, physics: str = "korean_medium", noise: str = "none", seed: int = 0,
+        level: float | None = None, replays: int = 50, root: Path = ROOT) -> dict:
+    """The agent's shot for the table ``positions`` (white to play), and what it considered."""
+    params = get_params(physics)
+    table = np.asarray(positions, dtype=np.float64)
+    entry = get_entry(spec, physics, noise, root)
+    if get_noise(noise).is_variable and level is None:
+        level = 1.0  # the shot's level, told to the agents that read it (fastfiz's sigmas)
+    with entry.lock:
+        agent = entry.agent
+        agent.reset(seed)
+        if entry.recorder is not None:
+            entry.recorder.first = None
+        entry.last = None
+        sims0 = agent.sims
+        obs = domain.observation(table[None])
+        levels = None if level is None or not get_noise(noise).is_variable else np.array([level])
+        t0 = time.perf_counter()
+        action = np.asarray(agent.act(obs, table[None], levels), dtype=np.float64).reshape(-1, 4)[0]
+        seconds = time.perf_counter() - t0
+        sims = int(agent.sims - sims0)
+        seen = considered(entry, table, params)
+    return {"agent": spec, "action": action.tolist(), "seconds": seconds, "sims": sims, "physics": physics, "noise": noise,
+            "level": level, "seed": seed, "considered": seen,
+            "noisy": noisy_replays(table, action, noise, params, replays, seed, level)}
+
+
+__all__ = ["BUDGET", "Entry", "UnknownAgent", "ask", "catalogue", "considered", "get_entry", "league_names", "noisy_replays",
+           "policy_specs"]

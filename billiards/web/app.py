@@ -1,0 +1,185 @@
+"""The viewer's server: the JSON API and the page (docs/viewer.md).
+
+:func:`create_app` builds the FastAPI app; ``python -m billiards.web`` serves it with uvicorn.
+Every endpoint that computes is a plain ``def`` (FastAPI runs it in its thread pool), so a slow
+agent or a league replay does not hold up the other requests. Bad input is a 4xx whose JSON
+``error`` says what is wrong (:data:`STATUS`): Bad Request for a body that is not JSON,
+Unprocessable Content for a value out of its range (balls overlapping or off the table, an
+action outside the box, an unknown preset or agent), Forbidden for a path outside the folders
+the viewer reads, Not Found for what does not exist, Conflict for a shot in a match that is over.
+"""
+
+from __future__ import annotations
+
+from http import HTTPStatus
+from pathlib import Path
+
+from fastapi import FastAPI, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse
+
+from billiards.files import ROOT, LedgerError
+
+from . import agents as web_agents
+from . import sim
+from .match import HUMAN, Matches, MatchError, MatchOver
+from .models import AgentRequest, MatchRequest, MatchShotRequest, ShotRequest
+from .runs import PathRefused, RunNotFound, RunStore
+
+# the answers' statuses, by name (HTTP's numbers)
+BAD, REFUSED, MISSING, CONFLICT = HTTPStatus.BAD_REQUEST, HTTPStatus.FORBIDDEN, HTTPStatus.NOT_FOUND, HTTPStatus.CONFLICT
+INVALID, FAILED = HTTPStatus.UNPROCESSABLE_ENTITY, HTTPStatus.INTERNAL_SERVER_ERROR
+STATUS = {"bad_json": BAD, "invalid": INVALID, "outside": REFUSED, "not_found": MISSING, "match_over": CONFLICT, "bug": FAILED}
+STATIC = Path(__file__).resolve().parent / "static"
+STATIC_FILES = {"app.js": "text/javascript", "style.css": "text/css"}
+DEFAULT_OUT = ROOT / "outputs" / "web"
+
+
+def _error(status: int, message: str, **extra) -> JSONResponse:
+    return JSONResponse({"error": message, **extra}, status_code=status)
+
+
+def _validation_message(errors: list[dict]) -> tuple[int, str]:
+    """(status, one readable sentence) for pydantic's errors: Bad Request for a body that is not JSON."""
+    if any(e.get("type") == "json_invalid" for e in errors):
+        e = next(e for e in errors if e.get("type") == "json_invalid")
+        return BAD, f"malformed JSON: {e.get('ctx', {}).get('error', e.get('msg'))}"
+    parts = []
+    for e in errors[:5]:
+        loc = ".".join(str(x) for x in e.get("loc", ()) if x != "body") or "body"
+        msg = str(e.get("msg", "invalid")).removeprefix("Value error, ")
+        parts.append(f"{loc}: {msg}")
+    return INVALID, "; ".join(parts)
+
+
+def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path = ROOT) -> FastAPI:
+    """The viewer's app: runs read from ``root/results``, ``out_dir`` (where played matches are
+    saved; None: not saved) and ``run_dirs``."""
+    app = FastAPI(title="billiards viewer", description="Korean 4-ball: shots, agents, replays and matches", version="1")
+    out = Path(out_dir) if out_dir is not None else None
+    store = RunStore(root, run_dirs, out)
+    matches = Matches(out)
+    app.state.store, app.state.matches = store, matches
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError):
+        status, message = _validation_message(list(exc.errors()))
+        return _error(status, message)
+
+    @app.exception_handler(Exception)
+    async def _failed(request: Request, exc: Exception):  # a bug, not bad input: said in JSON, and the server goes on
+        return _error(FAILED, f"{type(exc).__name__}: {exc}")
+
+    # ------------------------------------------------------------------------- the page
+
+    @app.get("/", include_in_schema=False)
+    def index():
+        return FileResponse(STATIC / "index.html", media_type="text/html")
+
+    @app.get("/static/{name}", include_in_schema=False)
+    def static(name: str):
+        if name not in STATIC_FILES:
+            return _error(MISSING, f"no static file {name!r}")
+        return FileResponse(STATIC / name, media_type=STATIC_FILES[name])
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    def favicon():
+        from fastapi import Response
+
+        return Response(status_code=204)
+
+    # ------------------------------------------------------------------------- the API
+
+    @app.get("/api/config")
+    def config():
+        """The presets (tables to draw, noise models), the agents and the league players."""
+        return JSONResponse({**sim.presets(), "agents": web_agents.catalogue(root), "opponents": web_agents.league_names(root),
+                             "default_physics": "korean_medium"})
+
+    @app.post("/api/shot")
+    def shot(body: ShotRequest):
+        """One shot, exactly: the final table, the outcome, every ball's path."""
+        try:
+            out = sim.shot(body.positions, body.action, physics=body.physics, noise=body.noise, seed=body.seed,
+                           level=body.level, shooter=body.shooter, dt=body.dt, with_paths=body.paths)
+        except ValueError as err:
+            return _error(INVALID, str(err))
+        return JSONResponse(out)
+
+    @app.post("/api/agent")
+    def agent(body: AgentRequest):
+        """An agent's shot for a table (white to play) and what it considered."""
+        from billiards.bench.agents import AgentError
+        from billiards.physics import check_positions
+
+        try:
+            check_positions(body.positions, body.physics)
+            out = web_agents.ask(body.agent, body.positions, physics=body.physics, noise=body.noise, seed=body.seed,
+                                 level=body.level, replays=body.replays, root=root)
+        except web_agents.UnknownAgent as err:
+            return _error(INVALID, str(err))
+        except (AgentError, ValueError) as err:
+            return _error(INVALID, f"agent {body.agent}: {err}")
+        return JSONResponse(out)
+
+    @app.get("/api/runs")
+    def runs():
+        """The recorded runs the replay view opens."""
+        return JSONResponse({"runs": store.list_runs(), "folders": [store.display(a) for a in store.allowed]})
+
+    @app.get("/api/run")
+    def run(path: str = Query(..., max_length=1000), unit: int | None = Query(None, ge=0, le=10**6)):
+        """A run's replayable shots (a league's match ``unit`` is played again)."""
+        try:
+            return JSONResponse(store.load(path, unit))
+        except PathRefused as err:
+            return _error(REFUSED, str(err))
+        except RunNotFound as err:
+            return _error(MISSING, str(err))
+        except (LedgerError, ValueError) as err:
+            return _error(INVALID, str(err))
+
+    @app.post("/api/match")
+    def new_match(body: MatchRequest):
+        """Start a match against a league player; the player's opening turns if it breaks."""
+        from billiards.bench.agents import AgentError
+
+        name, players = body.opponent.removeprefix("league:"), web_agents.league_names(root)
+        if name not in players:
+            return _error(INVALID, f"opponent: no league player {body.opponent!r}; players: {', '.join(players)}")
+        try:
+            m = matches.new(opponent=name, noise=body.noise, physics=body.physics, target=body.target, seed=body.seed,
+                            first=body.first, max_innings=body.max_innings)
+            shots = m.start()
+        except (AgentError, ValueError) as err:
+            return _error(INVALID, f"cannot start the match: {err}")
+        return JSONResponse({"state": m.state(), "shots": shots, "human": HUMAN})
+
+    @app.get("/api/match/{match_id}")
+    def get_match(match_id: str):
+        try:
+            return JSONResponse({"state": matches.get(match_id).state()})
+        except KeyError:
+            return _error(MISSING, f"no match {match_id!r} (matches live as long as the server)")
+
+    @app.post("/api/match/{match_id}/shot")
+    def match_shot(match_id: str, body: MatchShotRequest):
+        """The person's shot (the server applies the noise), then the league player's turns."""
+        try:
+            m = matches.get(match_id)
+        except KeyError:
+            return _error(MISSING, f"no match {match_id!r} (matches live as long as the server)")
+        try:
+            shots = m.human_shot(body.action)
+        except MatchOver as err:
+            return _error(CONFLICT, str(err))
+        except MatchError as err:
+            return _error(CONFLICT, str(err))
+        except ValueError as err:
+            return _error(INVALID, f"action: {err}")
+        return JSONResponse({"state": m.state(), "shots": shots})
+
+    return app
+
+
+__all__ = ["create_app"]

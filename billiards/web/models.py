@@ -1,0 +1,77 @@
+"""The API's request bodies (pydantic): shapes, types and ranges checked before anything runs;
+the simulator's own checks (balls on the table and apart, the action's box) follow in the
+handlers with its messages."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Optional
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from billiards.physics import PRESETS
+from billiards.physics.noise import NOISE_PRESETS
+
+Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+Ball = Annotated[list[Number], Field(min_length=2, max_length=2, description="x, y (m)")]
+Positions = Annotated[list[Ball], Field(min_length=4, max_length=4, description="white, yellow, red1, red2: (4, 2) metres")]
+Action = Annotated[list[Number], Field(min_length=4, max_length=4, description="theta (rad), p in [0, 1], a, b in [-1, 1]")]
+Seed = Annotated[int, Field(strict=True, ge=0, le=2**32 - 1)]
+
+
+def _preset(value: str, presets: dict, what: str) -> str:
+    if value not in presets:
+        raise ValueError(f"unknown {what} preset {value!r}; presets: {', '.join(presets)}")
+    return value
+
+
+class _Body(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class _Table(_Body):
+    physics: str = "korean_medium"
+    noise: str = "none"
+
+    @field_validator("physics")
+    @classmethod
+    def _physics(cls, v: str) -> str:
+        return _preset(v, PRESETS, "physics")
+
+    @field_validator("noise")
+    @classmethod
+    def _noise(cls, v: str) -> str:
+        return _preset(v, NOISE_PRESETS, "noise")
+
+
+class ShotRequest(_Table):
+    positions: Positions
+    action: Action
+    seed: Seed = 0
+    level: Optional[Annotated[float, Field(strict=True, ge=0.0, le=100.0, allow_inf_nan=False)]] = None
+    shooter: Literal[0, 1] = 0
+    dt: Annotated[float, Field(strict=True, ge=1 / 480, le=0.1)] = 1.0 / 60.0
+    paths: bool = True
+
+
+class AgentRequest(_Table):
+    positions: Positions
+    agent: Annotated[str, Field(min_length=1, max_length=200)]
+    seed: Seed = 0
+    level: Optional[Annotated[float, Field(strict=True, ge=0.0, le=100.0, allow_inf_nan=False)]] = None
+    replays: Annotated[int, Field(strict=True, ge=0, le=500)] = 50
+
+
+class MatchRequest(_Table):
+    noise: str = "fastfiz_x5"
+    opponent: Annotated[str, Field(min_length=1, max_length=100)] = "random"
+    target: Annotated[int, Field(strict=True, ge=1, le=50)] = 5
+    seed: Seed = 0
+    first: Literal["human", "agent"] = "human"
+    max_innings: Annotated[int, Field(strict=True, ge=1, le=1000)] = 200
+
+
+class MatchShotRequest(_Body):
+    action: Action
+
+
+__all__ = ["AgentRequest", "MatchRequest", "MatchShotRequest", "ShotRequest"]
