@@ -171,6 +171,12 @@ def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: Physi
     if ledger is not None and run is None:
         raise ValueError("run_p3 with a ledger needs the run's identity (run=billiards.files.run_identity(settings))")
     done = {s: r for s, r in read_chains(ledger, run, repair=True).items() if s in seeds}
+    todo = [s for s in seeds if s not in done]
+    if progress and todo:  # how long it may take, said before it starts (each chain reseeds the actor: no effect on results)
+        ms = _ms_per_decision(actor, params)
+        print(f"P3: {len(todo)} chain{'s' if len(todo) > 1 else ''} to play, each up to {cap:,} shots; at about {ms:.1f} ms a "
+              f"shot on the opening rack, {_duration(len(todo) * cap * ms / 1e3)} (most chains end far sooner)",
+              flush=True)
     bar = tqdm(total=len(seeds), initial=len(done), desc="P3 chains", unit="chain", disable=not progress, mininterval=1.0)
     for seed in seeds:
         if seed in done:
@@ -188,7 +194,7 @@ def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: Physi
         bar.set_postfix(seed=seed, chain=length, ms_shot=f"{ms:.1f}")
         left = sum(1 for s in seeds if s not in done)
         if progress and left and len(done) == 1:
-            bar.write(f"P3: {ms:.1f} ms per shot; the {left} chains left take at most {left * cap * ms / 6e4:.0f} min "
+            bar.write(f"P3: {ms:.1f} ms per shot; {_chains_left(left)} {_duration(left * cap * ms / 1e3)} "
                       f"(if every one reaches the {cap:,}-shot cap)")
     bar.close()
     recs = [done[s] for s in seeds]
@@ -198,6 +204,33 @@ def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: Physi
         if history:
             draw_last_shots(history, picture, params, title=f"last shots of the longest chain ({best['length']} points)")
     return _p3_result(recs, cap, actor.cfg.sims_per_decision)
+
+
+def _ms_per_decision(actor: SearchActor, params: PhysicsParams, decisions: int = 3) -> float:
+    """The actor's milliseconds per decision on the opening rack (after one untimed decision)."""
+    from billiards.physics.api import canonical_rack
+
+    table = canonical_rack(params)[None]
+    noise = getattr(actor, "noise", None)
+    args = (np.array([sum(noise.level_range) / 2]),) if noise is not None and noise.is_variable else ()  # a mid level
+    actor.search(table, *args)
+    t0 = time.perf_counter()
+    for _ in range(decisions):
+        actor.search(table, *args)
+    return 1e3 * (time.perf_counter() - t0) / decisions
+
+
+def _chains_left(n: int) -> str:
+    return "the chain left takes" if n == 1 else f"the {n} chains left take"
+
+
+def _duration(seconds: float) -> str:
+    """An upper bound in words: "under a minute", "at most 12 min", "at most 3.5 h"."""
+    if seconds < 60:
+        return "under a minute"
+    if seconds < 5400:
+        return f"at most {seconds / 60:.0f} min"
+    return f"at most {seconds / 3600:.1f} h"
 
 
 def _p3_result(recs: list[dict], cap: int, sims_per_decision: float, partial: bool = False) -> ProtocolResult:
