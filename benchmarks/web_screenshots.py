@@ -8,6 +8,10 @@ outputs/web) and drives the page with Playwright, Chromium started as the browse
 
 * ``viewer_replay.png``: a chain of the committed noisy P3 run results/noise/headline/h2_fastfiz_400_p3,
   its third-last shot part-way (commanded aim dashed white, played aim orange);
+* ``viewer_considered.png``: a chain of the position-aware search under fastfiz
+  (results/noisy_track/headline/position_fastfiz_p3), a shot with what the search considered:
+  its candidates (aim lines, listed), the recorded shot's 50 noisy replays (cue-ball ends) and
+  the value of their leaves;
 * ``viewer_lab.png``: the opening rack, ``search:default`` asked under fastfiz_x5 noise: its shot
   played (one noisy draw) over the cloud of its 50 noisy replays' cue-ball ends (green: scored);
 * ``viewer_play.png``: a match against the league's ``greedy`` under fastfiz_x5, after the first
@@ -29,6 +33,7 @@ from billiards.web import create_app  # noqa: E402
 from billiards.web.browser import launch, serving  # noqa: E402
 
 RUN = "results/noise/headline/h2_fastfiz_400_p3"
+CONSIDERED_RUN = "results/noisy_track/headline/position_fastfiz_p3"
 
 
 def wait(pg, condition: str, timeout_s: float = 120.0) -> None:
@@ -73,6 +78,22 @@ def main(argv=None) -> int:
         time.sleep(0.3)
         pg.screenshot(path=str(args.out / "viewer_replay.png"))
 
+        # replay with what the search considered: the position-aware search's chain, a shot before its end
+        pg.select_option("#run-select", CONSIDERED_RUN)
+        wait(pg, f"window.billiards.replay.path === '{CONSIDERED_RUN}' && window.billiards.replay.count > 0 && window.billiards.busy === 0")
+        units = pg.evaluate("Array.from(document.querySelectorAll('#unit-select option')).map(o => o.value)")
+        pg.select_option("#unit-select", units[1])
+        wait(pg, "window.billiards.replay.count > 0 && window.billiards.busy === 0")
+        for k in (1, 2, 3):
+            pg.click("#btn-next")
+            wait(pg, f"window.billiards.replay.index === {k} && window.billiards.busy === 0")
+        wait(pg, "window.billiards.replay.considered[3] !== undefined && window.billiards.busy === 0")
+        pg.click("#btn-end")
+        wait(pg, "window.billiards.anim.state === 'done'")
+        scrub(pg, 0.0)
+        time.sleep(0.3)
+        pg.screenshot(path=str(args.out / "viewer_considered.png"))
+
         # lab: an agent's shot under noise, with its noisy replays
         pg.click("#tabs button[data-view=lab]")
         pg.select_option("#lab-noise", "fastfiz_x5")
@@ -109,7 +130,7 @@ def main(argv=None) -> int:
     if errors:
         print("console errors:", errors, file=sys.stderr)
         return 1
-    for name in ("replay", "lab", "play"):
+    for name in ("replay", "considered", "lab", "play"):
         print("wrote", args.out / f"viewer_{name}.png")
     return 0
 

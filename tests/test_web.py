@@ -1,7 +1,10 @@
 """The viewer's JSON API (billiards.web) through FastAPI's TestClient: its shots are the
 simulator's bit for bit, bad input is a 4xx with a message and the next request still
-succeeds, agents answer, recorded runs list and replay exactly, paths outside the allowed
-folders are refused, a match plays to its end and is saved as a league ledger."""
+succeeds, agents answer, recorded runs list and replay exactly (P3 chains from their ledgers;
+benchmark scorecards' units, P1 innings and training evaluations played again, their scores
+equal to the recorded ones), a scorecard whose agent names code is refused, what a search
+considered is shown for a recorded shot, paths outside the allowed folders are refused, a match
+plays to its end and is saved as a league ledger."""
 
 from __future__ import annotations
 
@@ -30,6 +33,10 @@ from billiards.physics.noise import get_noise  # noqa: E402
 from billiards.web import create_app  # noqa: E402
 
 P3_RUN = "results/search/paper/table6/geometric/h2_p3"  # a committed exact P3 run (20 chains, their last shots)
+NOISY_P3 = "results/noisy_track/headline/position_fastfiz_p3"  # the position-aware search under fastfiz (a table value)
+P1_RUN = "results/noisy_track/runs/h2_fastfiz_p1"  # a committed P1: 20 innings x 50 shots of h2 under fastfiz
+SCORECARDS = "results/bench/scorecards"
+CODE_SPEC = "tests/test_web.py:GOOD"  # a spec that names code: never built by the viewer
 RACK = canonical_rack().tolist()
 GOOD = {"positions": RACK, "action": [1.0, 0.6, 0.2, -0.1]}
 
@@ -39,6 +46,13 @@ def extra_runs(tmp_path_factory):
     """A run directory given on the command line, holding a symlink that leads out of it."""
     d = tmp_path_factory.mktemp("runs")
     (d / "out").symlink_to(ROOT / "billiards")
+    code = d / "code_scorecard"  # a scorecard of a committed run, its agent spec changed to one that names code
+    code.mkdir()
+    src = ROOT / SCORECARDS / "p1-exact-v1" / "random"
+    ev = json.loads((src / "evaluation.json").read_text())
+    ev["agent"]["spec"] = CODE_SPEC
+    (code / "evaluation.json").write_text(json.dumps(ev))
+    (code / "units.jsonl").write_bytes((src / "units.jsonl").read_bytes())
     return d
 
 
@@ -111,6 +125,16 @@ BAD = [  # (id, method, url, json body or raw bytes, status, words the message h
     ("repo-file", "GET", "/api/run?path=pyproject.toml", None, 403, "outside"),
     ("missing", "GET", "/api/run?path=results/no_such_run", None, 404, "no run"),
     ("not-a-run", "GET", "/api/run?path=results/README.md", None, 404, "not a run"),
+    ("considered-two", "POST", "/api/considered", {"positions": RACK, "run": P3_RUN, "agent": "random"}, 422, "either run"),
+    ("considered-none", "POST", "/api/considered", {"positions": RACK}, 422, "either run"),
+    ("considered-outside", "POST", "/api/considered", {"positions": RACK, "run": "/etc"}, 403, "outside"),
+    ("considered-league", "POST", "/api/considered", {"positions": RACK, "run": "results/sagu/fastfiz_x5_run"}, 404,
+     "not a run whose agent"),
+    ("considered-table", "POST", "/api/considered", {"positions": [RACK[0], RACK[0], *RACK[2:]], "run": P3_RUN}, 422, "overlaps"),
+    ("considered-action", "POST", "/api/considered", {"positions": RACK, "run": P3_RUN, "commanded": [1.0, 2.0, 0.0, 0.0]},
+     422, "power p"),
+    ("unit-missing", "GET", f"/api/run?path={SCORECARDS}/p3-exact-v1/nearest&unit=99", None, 404, "no chain 99"),
+    ("p1-inning-missing", "GET", f"/api/run?path={P1_RUN}&unit=20", None, 404, "innings 0..19"),
 ]
 
 
@@ -198,6 +222,173 @@ def test_a_league_match_is_played_again_with_its_recorded_scores(client):
     unit = r.json()["units"][0]
     assert unit["reproduced"] and unit["replayed_scores"] == unit["record"]["scores"]
     assert unit["shots"][-1]["scores"] == [unit["record"]["scores"]["white"], unit["record"]["scores"]["yellow"]]
+
+
+def _replays_onto_each_other(client, shots, physics="korean_medium"):
+    """Every shot, played again exactly from its played action, scores as recorded and ends on
+    the next shot's table."""
+    for shot, nxt in zip(shots, shots[1:] + [None]):
+        r = client.post("/api/shot", json={"positions": shot["positions"], "action": shot["played"], "physics": physics,
+                                           "shooter": shot["shooter"], "paths": False})
+        assert r.status_code == 200, r.text
+        assert r.json()["result"]["score"] == shot["scored"]
+        if nxt is not None:
+            assert r.json()["final"] == nxt["positions"]
+
+
+def test_runs_list_every_kind_the_viewer_replays(client):
+    runs = {r["path"]: r for r in client.get("/api/runs").json()["runs"]}
+    card = runs[f"{SCORECARDS}/p3-exact-v1/nearest"]
+    assert card["kind"] == "scorecard" and card["replayable"] and card["units"] == 20 and card["agent"] == "nearest"
+    assert runs[P1_RUN]["kind"] == "p1" and runs[P1_RUN]["replayable"] and runs[P1_RUN]["units"] == 20
+    shipped = runs["results/training/noisy/aim_features_fastfiz/seed0"]
+    assert shipped["kind"] == "training" and shipped["replayable"] and shipped["policy"] == "results/policies/fastfiz_aim_features/seed0.pt"
+    unshipped = runs["results/training/table4/aim_s0"]
+    assert unshipped["kind"] == "training" and not unshipped["replayable"] and "no weights of this run were shipped" in unshipped["why_not"]
+    code = next(r for p, r in runs.items() if p.endswith("code_scorecard"))
+    assert not code["replayable"] and "names code to import" in code["why_not"]
+    big = runs["results/search/paper/table6/geometric/puct_p1"]  # 100 x 100 shots: under the cap, listed as replayable
+    assert big["kind"] == "p1" and big["replayable"]
+
+
+@pytest.mark.parametrize("run,unit", [(f"{SCORECARDS}/p3-exact-v1/nearest", 4), (f"{SCORECARDS}/p1-exact-v1/random", 57)])
+def test_a_scorecard_unit_is_played_again_with_the_ledger_s_scores(client, run, unit):
+    listing = client.get("/api/run", params={"path": run}).json()
+    assert listing["kind"] == "scorecard" and listing["replayable"] and not listing["considers"]
+    assert all(u["shots"] is None for u in listing["units"])
+    r = client.get("/api/run", params={"path": run, "unit": unit})
+    assert r.status_code == 200, r.text
+    got = r.json()["units"][0]
+    assert got["matches_ledger"] is True and got["differences"] == [] and "gives the ledger's record" in got["check"]
+    assert got["replayed"] == got["record"]  # the inning's points, or the chain's length and how it ended
+    if "points" in got["record"]:
+        assert len(got["shots"]) == 20 and sum(s["scored"] for s in got["shots"]) == got["record"]["points"]
+    else:
+        assert len(got["shots"]) == got["record"]["length"] + 1
+    _replays_onto_each_other(client, got["shots"])
+
+
+def test_a_scorecard_whose_agent_names_code_is_refused(client, extra_runs):
+    path = str(extra_runs / "code_scorecard")
+    listing = client.get("/api/run", params={"path": path}).json()
+    assert not listing["replayable"] and CODE_SPEC in listing["note"] and "never imports code" in listing["note"]
+    assert len(listing["units"]) == 100  # its innings are listed, with their recorded points
+    r = client.get("/api/run", params={"path": path, "unit": 0})
+    assert r.status_code == 422 and "cannot be played again" in r.json()["error"] and CODE_SPEC in r.json()["error"]
+    r = client.post("/api/considered", json={"positions": RACK, "run": path})
+    assert r.status_code == 422 and "names code" in r.json()["error"]
+    assert client.post("/api/shot", json=GOOD).status_code == 200
+
+
+def test_a_p1_search_run_is_played_again_with_its_points_per_inning(client):
+    recorded = json.loads((ROOT / P1_RUN / "results.json").read_text())["values"]
+    r = client.get("/api/run", params={"path": P1_RUN, "unit": 3})
+    assert r.status_code == 200, r.text
+    inning = r.json()["units"][0]
+    assert inning["matches_record"] is True and "every inning's points equal results.json's" in inning["check"]
+    assert inning["replayed"]["points"] == inning["record"]["points"] == recorded[3]
+    assert len(inning["shots"]) == 50 and any(s["noisy"] for s in inning["shots"])
+    _replays_onto_each_other(client, inning["shots"])
+    again = client.get("/api/run", params={"path": P1_RUN, "unit": 7}).json()["units"][0]  # the same replay, kept
+    assert again["replayed"]["points"] == recorded[7] and again["shots"][0]["caption"].startswith("inning 7,")
+
+
+def test_a_training_evaluation_is_played_again_with_its_shipped_policy(tmp_path):
+    """A training run whose weights are shipped (a policy under results/policies whose source
+    is the run) plays its evaluation again; its points equal eval.json's. The run here is made
+    in a repository copy of its own: a shipped policy re-sealed with that run as its source, the
+    run's eval.json written by billiards.evaluation.evaluate (the committed runs' eval.json were
+    written by older code: docs/reproducibility.md)."""
+    from billiards.evaluation import evaluate
+    from billiards.files import SEAL_KEY, load_tagged, save_tagged
+    from billiards.physics.config import params_from_config
+    from billiards.physics.noise import noise_from_config
+    from billiards.rl.checkpoint import CheckpointError
+    from billiards.rl.policy import POLICY_FORMAT, load_policy
+
+    root, name = tmp_path / "repo", "results/training/tiny/seed0"
+    run = root / name
+    run.mkdir(parents=True)
+    shipped = ROOT / "results/policies/fastfiz_aim_features/seed0.pt"
+    payload = load_tagged(shipped, POLICY_FORMAT, CheckpointError, "exported policy")
+    payload = {k: v for k, v in payload.items() if k != SEAL_KEY}
+    save_tagged(root / "results/policies/tiny/seed0.pt", {**payload, "source": name})
+    (run / "config.yaml").write_bytes((ROOT / "results/training/noisy/aim_features_fastfiz/seed0/config.yaml").read_bytes())
+    policy, cfg = load_policy(shipped)
+    evaluate(policy, n_innings=12, max_shots=6, seed=5, constrain_aim=cfg.env.constrain_aim, extra_features=cfg.env.extra_features,
+             env_kwargs=dict(params=params_from_config(cfg.physics)), noise=noise_from_config(cfg.get("noise"))).to_json(run / "eval.json")
+    recorded = json.loads((run / "eval.json").read_text())["points"]
+    client = TestClient(create_app(out_dir=None, root=root))
+    listed = {r["path"]: r for r in client.get("/api/runs").json()["runs"]}
+    assert listed[name]["replayable"] and listed[name]["policy"] == "results/policies/tiny/seed0.pt"
+    r = client.get("/api/run", params={"path": name, "unit": 4})
+    assert r.status_code == 200, r.text
+    inning = r.json()["units"][0]
+    assert inning["matches_record"] is True and inning["replayed"]["points"] == recorded[4] and len(inning["shots"]) == 6
+    _replays_onto_each_other(client, inning["shots"])
+
+
+def test_a_committed_training_run_with_shipped_weights_is_played_again(client):
+    """The committed noisy run's evaluation plays again; the answer says whether today's code
+    gives eval.json's points (it does not: that eval.json was written by older code), and a run
+    without shipped weights is refused with the sentence that says so."""
+    path = "results/training/noisy/aim_features_fastfiz/seed0"
+    inning = client.get("/api/run", params={"path": path, "unit": 0}).json()["units"][0]
+    assert isinstance(inning["matches_record"], bool) and inning["check"].startswith("played again")
+    assert len(inning["shots"]) == 10 and all(s["noisy"] for s in inning["shots"])
+    _replays_onto_each_other(client, inning["shots"])
+    r = client.get("/api/run", params={"path": "results/training/table4/aim_s0", "unit": 0})
+    assert r.status_code == 422 and "no weights of this run were shipped" in r.json()["error"]
+
+
+def test_what_a_search_considered_for_a_recorded_shot(client):
+    run = client.get("/api/run", params={"path": P3_RUN}).json()
+    assert run["considers"]
+    chain = run["units"][0]
+    shot = chain["shots"][0]
+    r = client.post("/api/considered", json={"run": P3_RUN, "positions": shot["positions"], "commanded": shot["commanded"],
+                                             "seed": chain["seed"]})
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["recorded"] == shot["commanded"] and isinstance(out["same_choice"], bool) and out["noisy"] is None  # exact play
+    cands = out["considered"]["candidates"]
+    assert cands["count"] >= len(cands["top"]) > 0 and out["considered"]["sims"] == 400
+    assert all(len(c["action"]) == 4 and isinstance(c["score"], bool) for c in cands["top"])
+    again = client.post("/api/considered", json={"run": P3_RUN, "positions": shot["positions"], "commanded": shot["commanded"],
+                                                 "seed": chain["seed"]}).json()
+    assert again["action"] == out["action"]  # reseeded: the same answer
+
+
+def test_what_the_position_aware_search_considered_under_noise(client):
+    run = client.get("/api/run", params={"path": NOISY_P3}).json()
+    chain = run["units"][0]
+    shot = chain["shots"][-2]
+    r = client.post("/api/considered", json={"run": NOISY_P3, "positions": shot["positions"], "commanded": shot["commanded"],
+                                             "seed": chain["seed"], "replays": 40})
+    assert r.status_code == 200, r.text
+    noisy, leave = r.json()["noisy"], r.json()["noisy"]["leave"]
+    assert noisy["n"] == len(noisy["white_ends"]) == len(leave["values"]) == 40 and r.json()["noise"] == "fastfiz"
+    assert leave["position"] == 8.0 and all(0 < v < 1 for v in leave["values"])
+    assert (leave["mean_if_scored"] is None) == (not any(noisy["scored"]))
+
+
+def test_what_a_scorecard_s_search_agent_considers(client):
+    run = f"{SCORECARDS}/p3-exact-v1/h2_geometric"
+    assert client.get("/api/run", params={"path": run}).json()["considers"]
+    r = client.post("/api/considered", json={"run": run, "positions": RACK, "seed": 7300000})
+    assert r.status_code == 200, r.text
+    assert r.json()["recorded"] is None and r.json()["considered"]["candidates"]["top"]
+
+
+@pytest.mark.slow
+def test_a_match_track_scorecard_unit_is_played_again_with_the_ledger_s_scores(client):
+    r = client.get("/api/run", params={"path": f"{SCORECARDS}/match-x5-v1/random", "unit": 11})
+    assert r.status_code == 200, r.text
+    match = r.json()["units"][0]
+    assert match["matches_ledger"] is True and match["replayed"] == match["record"]
+    last = match["shots"][-1]
+    assert last["scores"] == match["record"]["points"] and {s["agent_shot"] for s in match["shots"]} == {True, False}
+    _replays_onto_each_other(client, match["shots"][:1])
 
 
 # ----------------------------------------------------------------------------- a match

@@ -1,7 +1,9 @@
 """The viewer's page in a real browser: headless Chromium (Debian's ``chromium``) driven by
 Playwright, against the app served by uvicorn in a thread. It replays a committed P3 chain to
-its end (the end positions the page reports are the simulator's), plays a shot in the lab and a
-match against ``random`` to its end, with no console error. Skipped, saying why, where
+its end (the end positions the page reports are the simulator's), opens a benchmark scorecard's
+chain, played again by its search agent, and steps through it shot by shot with what the
+search considered, plays a shot in the lab and a match against ``random`` to its end, with no
+console error. Skipped, saying why, where
 Playwright or a Chromium binary is missing (``.ci/run`` installs both). Chromium is started as
 :mod:`billiards.web.browser` says (``/usr/bin/chromium`` or the first ``chromium`` on PATH,
 headless, no sandbox, no GPU, no background networking)."""
@@ -74,6 +76,40 @@ def test_replay_of_a_committed_p3_chain_ends_where_the_simulator_does(page):
         res = simulate_shot(np.array(shot["positions"]), np.array(shot["played"]), get_params(run["physics"]))
         assert finals[str(k)] == res.positions.tolist(), f"shot {k}"
     assert page.get_attribute("#table", "data-final") is not None
+    assert page.console_errors == []
+
+
+def test_a_scorecard_chain_played_again_steps_shot_by_shot(page):
+    """Chain 18 of h2's exact P3 scorecard (2 points, 3 shots): played again by its agent, the
+    page says it gives the ledger's record; each step's end is the simulator's, and each shot
+    shows what the search considered (its candidates drawn, listed)."""
+    run = "results/bench/scorecards/p3-exact-v1/h2_geometric"
+    page.click("#tabs button[data-view=replay]")
+    page.select_option("#speed", "4")
+    page.select_option("#run-select", run)
+    wait_until(page, f"window.billiards.replay.path === '{run}' && window.billiards.replay.count > 0 && window.billiards.busy === 0")
+    page.select_option("#unit-select", "18")
+    wait_until(page, "window.billiards.replay.unit === '18' && window.billiards.replay.count === 3 && window.billiards.busy === 0")
+    check = page.evaluate("window.billiards.replay.check")
+    assert check["reproduced"] is True and "gives the ledger's record" in check["check"]
+    assert "gives the ledger's record" in page.inner_text("#run-note")
+    unit = page.evaluate(f"fetch('/api/run?path={run}&unit=18').then(r => r.json())")["units"][0]
+    for k in range(3):
+        if k:
+            page.click("#btn-next")
+        wait_until(page, f"window.billiards.replay.index === {k} && window.billiards.replay.finals[{k}] !== undefined")
+        wait_until(page, f"window.billiards.replay.considered[{k}] !== undefined && window.billiards.busy === 0")
+        assert page.inner_text("#shot-label") == f"shot {k + 1} / 3"
+        considered = page.evaluate(f"window.billiards.replay.considered[{k}]")
+        assert considered["recorded"] == unit["shots"][k]["commanded"] and considered["considered"]["candidates"]["top"]
+        assert "candidates" in page.inner_text("#considered-info")
+        assert page.locator("#candidates tbody tr").count() == len(considered["considered"]["candidates"]["top"])
+    finals = page.evaluate("window.billiards.replay.finals")
+    for k, shot in enumerate(unit["shots"]):
+        assert finals[str(k)] == simulate_shot(np.array(shot["positions"]), np.array(shot["played"])).positions.tolist(), f"shot {k}"
+        if k + 1 < len(unit["shots"]):
+            assert finals[str(k)] == unit["shots"][k + 1]["positions"]
+    assert [s["scored"] for s in unit["shots"]] == [True, True, False]
     assert page.console_errors == []
 
 

@@ -5,6 +5,8 @@
 * :mod:`.sim` -- one shot as the API answers it (exact simulation, noise, paths, outcome);
 * :mod:`.agents` -- the closed list of agents the page may ask, built once and kept;
 * :mod:`.runs` -- the recorded runs it replays, and the folders it may read;
+* :mod:`.replays` -- runs whose records hold scores, not shots, played again shot by shot
+  (benchmark scorecards' units, search runs' P1 innings, training runs' evaluations);
 * :mod:`.match` -- matches between the person and a league player, saved as league ledgers;
 * ``static/`` -- the page (HTML, one script, one stylesheet; nothing from elsewhere).
 """

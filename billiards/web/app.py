@@ -11,9 +11,11 @@ the viewer reads, Not Found for what does not exist, Conflict for a shot in a ma
 
 from __future__ import annotations
 
+import threading
 from http import HTTPStatus
 from pathlib import Path
 
+import numpy as np
 from fastapi import FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
@@ -23,8 +25,8 @@ from billiards.files import ROOT, LedgerError
 from . import agents as web_agents
 from . import sim
 from .match import HUMAN, Matches, MatchError, MatchOver
-from .models import AgentRequest, MatchRequest, MatchShotRequest, ShotRequest
-from .runs import PathRefused, RunNotFound, RunStore
+from .models import AgentRequest, ConsideredRequest, MatchRequest, MatchShotRequest, ShotRequest
+from .runs import PathRefused, ReplayRefused, RunNotFound, RunStore
 
 # the answers' statuses, by name (HTTP's numbers)
 BAD, REFUSED, MISSING, CONFLICT = HTTPStatus.BAD_REQUEST, HTTPStatus.FORBIDDEN, HTTPStatus.NOT_FOUND, HTTPStatus.CONFLICT
@@ -52,6 +54,13 @@ def _validation_message(errors: list[dict]) -> tuple[int, str]:
     return INVALID, "; ".join(parts)
 
 
+def _quietly(fn) -> None:
+    try:
+        fn()
+    except Exception:  # noqa: BLE001 - a warm-up only: the request that needs it says what is wrong
+        pass
+
+
 def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path = ROOT) -> FastAPI:
     """The viewer's app: runs read from ``root/results``, ``out_dir`` (where played matches are
     saved; None: not saved) and ``run_dirs``."""
@@ -60,6 +69,9 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
     store = RunStore(root, run_dirs, out)
     matches = Matches(out)
     app.state.store, app.state.matches = store, matches
+    # which training runs have shipped weights: read from the policy files (torch loads them) on the side, so the
+    # page's first GET /api/runs does not wait for it
+    threading.Thread(target=_quietly, args=(store.policy_sources,), daemon=True, name="viewer-policies").start()
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError):
@@ -121,6 +133,50 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
         except (AgentError, ValueError) as err:
             return _error(INVALID, f"agent {body.agent}: {err}")
         return JSONResponse(out)
+
+    @app.post("/api/considered")
+    def considered(body: ConsideredRequest):
+        """What the agent of a recorded run (or of the list) considers for a recorded shot's table:
+        its candidates and estimates, asked again, and the recorded shot replayed under the noise."""
+        from billiards.bench.agents import AgentError
+        from billiards.envs.sagu import shooter_view
+        from billiards.physics import check_actions, check_positions
+
+        try:
+            if body.run is not None:
+                kind, real = store.kind_of(body.run)
+                if kind == "scorecard":
+                    entry = _scorecard_entry(real)
+                else:
+                    entry = web_agents.search_run_entry(real)
+            else:
+                entry = web_agents.get_entry(body.agent, body.physics, body.noise, root)
+            check_positions(shooter_view(np.asarray(body.positions, dtype=np.float64), body.shooter), entry.params)
+            if body.commanded is not None:
+                check_actions(np.asarray(body.commanded, dtype=np.float64))
+            out = web_agents.reconsider(entry, body.positions, body.commanded, shooter=body.shooter, seed=body.seed,
+                                        level=body.level, replays=body.replays)
+        except PathRefused as err:
+            return _error(REFUSED, str(err))
+        except RunNotFound as err:
+            return _error(MISSING, str(err))
+        except web_agents.UnknownAgent as err:
+            return _error(INVALID, str(err))
+        except (AgentError, ReplayRefused, LedgerError, ValueError) as err:
+            return _error(INVALID, str(err))
+        return JSONResponse({**out, "run": body.run})
+
+    def _scorecard_entry(real: Path):
+        from . import replays
+
+        ev, track, why = replays.read_scorecard(real)
+        spec = (ev.get("agent") or {}).get("spec")
+        refusal = why or replays.scorecard_refusal(spec, root)
+        if refusal:
+            raise ReplayRefused(f"this scorecard's agent cannot be built: {refusal}")
+        spec = spec.strip()
+        full = str(root / spec) if spec.endswith(".pt") and not Path(spec).is_absolute() else spec
+        return web_agents.bench_entry(full, track)
 
     @app.get("/api/runs")
     def runs():

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Optional
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from billiards.physics import PRESETS
 from billiards.physics.noise import NOISE_PRESETS
@@ -61,6 +61,29 @@ class AgentRequest(_Table):
     replays: Annotated[int, Field(strict=True, ge=0, le=500)] = 50
 
 
+class ConsideredRequest(_Table):
+    """What an agent considers for a recorded shot: the run it played in (``run``: a search run's
+    P3 or P1, or a benchmark scorecard's run; its own agent, table and noise) or an agent of the
+    list (``agent`` with ``physics`` and ``noise``), the table before the shot, the shot it
+    commanded (replayed under the noise), the shooter, the shot's noise level and the seed the
+    agent is reseeded with."""
+
+    positions: Positions
+    run: Optional[Annotated[str, Field(min_length=1, max_length=1000)]] = None
+    agent: Optional[Annotated[str, Field(min_length=1, max_length=200)]] = None
+    commanded: Optional[Action] = None
+    shooter: Literal[0, 1] = 0
+    seed: Seed = 0
+    level: Optional[Annotated[float, Field(strict=True, ge=0.0, le=100.0, allow_inf_nan=False)]] = None
+    replays: Annotated[int, Field(strict=True, ge=0, le=500)] = 50
+
+    @model_validator(mode="after")
+    def _one_agent(self):
+        if (self.run is None) == (self.agent is None):
+            raise ValueError("give either run (a recorded run's path: its own agent) or agent (one of /api/config's agents)")
+        return self
+
+
 class MatchRequest(_Table):
     noise: str = "fastfiz_x5"
     opponent: Annotated[str, Field(min_length=1, max_length=100)] = "random"
@@ -74,4 +97,4 @@ class MatchShotRequest(_Body):
     action: Action
 
 
-__all__ = ["AgentRequest", "MatchRequest", "MatchShotRequest", "ShotRequest"]
+__all__ = ["AgentRequest", "ConsideredRequest", "MatchRequest", "MatchShotRequest", "ShotRequest"]

@@ -5,13 +5,27 @@ Kinds (:func:`list_runs`):
 * ``p3``: a search run's P3 ledger (``chains.jsonl``, one chain a line, each with its
   ``last_shots``: the table, the commanded shot, whether it scored and, under noise, the shot
   played): every chain's last shots, replayed exactly from the played shot;
+* ``p1``: a search run's P1 (``results.json`` of protocol p1 beside ``config.yaml``): its
+  record holds each inning's points, not the shots, and its innings step together with one
+  search generator, so the first inning asked for plays the whole run again once
+  (:func:`billiards.web.replays.replay_p1`, at most 20,000 shots), kept for the others, and the
+  replay says whether its points per inning equal the record's;
 * ``league``: a league's ``matches.jsonl`` (``python match.py``): its records hold the scores, not
   the shots, so a match is replayed by playing it again (the league's players, seed, break and
   noise from ``league.json``; every match of a league depends only on its seed) and the replay
   says whether it reproduces the recorded scores;
 * ``web``: a match played in the viewer (``outputs/web/matches/...``): a ``matches.jsonl`` record
   that also holds every shot;
-* ``scorecard``: a benchmark scorecard (``results/bench``): its numbers per unit, no shots.
+* ``scorecard``: a benchmark scorecard's run (``results/bench/scorecards/<track>/<agent>/``:
+  ``evaluation.json`` and the ledger ``units.jsonl``): an inning, chain or match asked for is
+  played again by its agent on its seed (its whole unit: a block of innings plays together) and
+  the replay says whether the unit's record equals the ledger's; a spec that names code is
+  refused with the reason. A scorecard file without its ledger (``results/bench/recorded``) is
+  listed with its figures, nothing to replay;
+* ``training``: a training run's evaluation (``eval.json`` beside ``config.yaml``): where the
+  run's weights were shipped (``results/policies/<name>/seed<k>.pt`` whose ``source`` is the
+  run) its innings are played again with them and compared with ``eval.json``'s points; the
+  others are listed with the sentence that says they cannot be.
 
 Paths (:class:`RunStore`): only inside the repository's ``results/``, the viewer's own output
 folder and the run directories given on the command line; a path with ``..`` is refused, as is
@@ -24,14 +38,21 @@ from __future__ import annotations
 import json
 import os
 import threading
+from collections import OrderedDict
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
-from billiards.files import CHAINS, CHAINS_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, ROOT, LedgerError, read_ledger
+from billiards.files import CHAINS, CHAINS_FILE, EVAL_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT, LedgerError, read_ledger
+
+from . import replays
+from .replays import ReplayRefused, match_shot
 
 CONFIG_FILE = "config.yaml"
+EVALUATION_FILE, UNITS_FILE = "evaluation.json", "units.jsonl"  # a benchmark scorecard's run (billiards.bench.run)
 WEB_APP = "billiards.web"  # league.json's "app" of a match played in the viewer
+MAX_REPLAYS = 24  # runs and units played again, kept (the most recently used)
 
 
 class PathRefused(PermissionError):
@@ -51,8 +72,11 @@ class RunStore:
         self.out_dir = Path(out_dir).resolve() if out_dir is not None else None
         self.run_dirs = [Path(d).resolve() for d in run_dirs]
         self.allowed = [self.results, *([self.out_dir] if self.out_dir else []), *self.run_dirs]
-        self._replays: dict = {}
+        self._replays: OrderedDict = OrderedDict()  # what was played again, by (kind, path, unit)
+        self._locks: dict = {}  # one lock per replay key: one plays it, the others wait for it
         self._settings: dict = {}  # (config.yaml, its mtime) -> (physics, noise)
+        self._protocols: dict = {}  # (results.json, its mtime) -> its protocol and size
+        self._sources: tuple | None = None  # (the shipped policies' mtimes, run dir -> policy)
         self._lock = threading.Lock()
 
     # ------------------------------------------------------------------------- paths
@@ -102,12 +126,21 @@ class RunStore:
             for dirpath, dirnames, filenames in os.walk(base, followlinks=False):
                 dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
                 d = Path(dirpath)
-                if CHAINS_FILE in filenames and not (d / CHAINS_FILE).is_symlink():
+                files = {f for f in filenames if not (d / f).is_symlink()}
+                if CHAINS_FILE in files:
                     runs.setdefault(self.display(d), self._p3_entry(d))
-                if MATCHES_FILE in filenames and not (d / MATCHES_FILE).is_symlink():
+                elif RESULTS_FILE in files and CONFIG_FILE in files and (entry := self._p1_entry(d)) is not None:
+                    runs.setdefault(self.display(d), entry)
+                if MATCHES_FILE in files:
                     runs.setdefault(self.display(d), self._league_entry(d))
-                if "scorecard.json" in filenames or d.is_relative_to(self.results / "bench" / "recorded"):
-                    for name in sorted(filenames):
+                if EVAL_FILE in files and CONFIG_FILE in files:
+                    runs.setdefault(self.display(d), self._training_entry(d))
+                if EVALUATION_FILE in files and UNITS_FILE in files:
+                    entry = self._scorecard_dir_entry(d)
+                    if entry is not None:
+                        runs.setdefault(self.display(d), entry)
+                elif "scorecard.json" in files or d.is_relative_to(self.results / "bench" / "recorded"):
+                    for name in sorted(files):
                         if name == "scorecard.json" or (name.endswith(".json") and d.is_relative_to(self.results / "bench" / "recorded")):
                             entry = self._scorecard_entry(d / name)
                             if entry is not None:
@@ -120,6 +153,44 @@ class RunStore:
             chains = sum(1 for line in f if line.strip())
         return {"path": self.display(d), "kind": "p3", "label": f"P3 chains ({chains}): {self.display(d)}",
                 "units": chains, "physics": physics, "noise": noise, "replayable": True}
+
+    def _p1_size(self, d: Path) -> dict | None:
+        """A search run's protocol and size from its results.json (None: not a P1 run)."""
+        path = d / RESULTS_FILE
+        try:
+            key = (str(path), path.stat().st_mtime_ns)
+        except OSError:
+            return None
+        if key not in self._protocols:
+            res = _read_json(path)
+            out = None
+            if isinstance(res, dict) and res.get("protocol") == "p1" and isinstance(res.get("values"), list):
+                extra = res.get("extra") if isinstance(res.get("extra"), dict) else {}
+                out = {"innings": len(res["values"]), "shots": extra.get("shots_per_inning"), "values": res["values"],
+                       "partial": bool(extra.get("partial"))}
+            self._protocols[key] = out
+        return self._protocols[key]
+
+    def _p1_refusal(self, d: Path, size: dict, physics: str) -> str | None:
+        if size["partial"]:
+            return "an interrupted P1 (results.json says partial): its innings stopped part-way and are not played again"
+        if "+custom" in physics:
+            return "custom physics: the viewer replays presets only"
+        shots = size["innings"] * (size["shots"] or 0)
+        if shots > replays.MAX_P1_SHOTS:
+            return (f"its {size['innings']} innings of {size['shots']} shots ({shots:,} shots, stepped together with one search "
+                    f"generator) would have to be played again whole; the viewer plays at most {replays.MAX_P1_SHOTS:,}")
+        return None
+
+    def _p1_entry(self, d: Path) -> dict | None:
+        size = self._p1_size(d)
+        if size is None:
+            return None
+        physics, noise = self._p3_settings(d)
+        refusal = self._p1_refusal(d, size, physics)
+        return {"path": self.display(d), "kind": "p1", "label": f"P1 innings ({size['innings']} x {size['shots']} shots): "
+                f"{self.display(d)}", "units": size["innings"], "physics": physics, "noise": noise, "replayable": refusal is None,
+                "why_not": refusal}
 
     def _league_entry(self, d: Path) -> dict:
         league = _read_json(d / LEAGUE_FILE) or {}
@@ -137,7 +208,39 @@ class RunStore:
             return None
         agent = card["agent"].get("name") if isinstance(card["agent"], dict) else card["agent"]
         return {"path": self.display(path), "kind": "scorecard", "label": f"scorecard {card['track']}: {agent}",
-                "units": None, "physics": None, "noise": None, "replayable": False}
+                "units": None, "physics": None, "noise": None, "replayable": False,
+                "why_not": "a scorecard without its ledger (units.jsonl) and evaluation.json: nothing to play again"}
+
+    def _scorecard_dir_entry(self, d: Path) -> dict | None:
+        ev = _read_json(d / EVALUATION_FILE)
+        if not (isinstance(ev, dict) and isinstance(ev.get("track"), dict) and isinstance(ev.get("agent"), dict)):
+            return None
+        track, agent = ev["track"], ev["agent"]
+        spec = agent.get("spec")
+        refusal = replays.scorecard_refusal(spec, self.root)
+        with open(d / UNITS_FILE, "rb") as f:
+            units = sum(1 for line in f if line.strip())
+        return {"path": self.display(d), "kind": "scorecard", "label": f"scorecard {track.get('name')}: {agent.get('name')} ({spec})",
+                "units": units, "physics": track.get("physics"), "noise": track.get("noise"), "replayable": refusal is None,
+                "why_not": refusal, "track": track.get("name"), "agent": spec}
+
+    def policy_sources(self) -> dict[str, str]:
+        """The shipped policies by the training run they came from (read again when a file changes)."""
+        files = sorted((self.root / "results" / "policies").glob("*/*.pt"))
+        stamp = tuple((str(p), p.stat().st_mtime_ns) for p in files)
+        with self._lock:
+            if self._sources is None or self._sources[0] != stamp:
+                self._sources = (stamp, replays.policy_sources(self.root) if files else {})
+            return self._sources[1]
+
+    def _training_entry(self, d: Path) -> dict:
+        ev = _read_json(d / EVAL_FILE) or {}
+        physics, noise = self._p3_settings(d)
+        policy = self.policy_sources().get(self.display(d))
+        n = ev.get("n_innings")
+        return {"path": self.display(d), "kind": "training", "label": f"training eval ({n} innings): {self.display(d)}",
+                "units": n, "physics": physics, "noise": noise, "replayable": policy is not None, "policy": policy,
+                "why_not": None if policy else _NO_WEIGHTS}
 
     def _p3_settings(self, d: Path) -> tuple[str, str]:
         """The physics preset and noise preset of a search run (its config.yaml)."""
@@ -175,19 +278,59 @@ class RunStore:
     # ------------------------------------------------------------------------- one run
 
     def load(self, path: str, unit: int | None = None) -> dict:
-        """A run's replayable shots (see the module docstring); ``unit``: a league match's index,
-        which is played again."""
+        """A run's replayable shots (see the module docstring); ``unit``: the match, inning or
+        chain to play again (leagues, scorecards, P1 runs, training evaluations)."""
         real = self.resolve(path)
+        if real.is_file() and real.name == "scorecard.json" and (real.parent / EVALUATION_FILE).is_file():
+            real = real.parent  # a scorecard's run is its directory
         if real.is_dir() and (real / CHAINS_FILE).is_file():
             return self._load_p3(real)
         if real.is_dir() and (real / MATCHES_FILE).is_file():
             return self._load_matches(real, unit)
+        if real.is_dir() and (real / EVALUATION_FILE).is_file() and (real / UNITS_FILE).is_file():
+            return self._load_scorecard_dir(real, unit)
+        if real.is_dir() and (real / CONFIG_FILE).is_file() and self._p1_size(real) is not None:
+            return self._load_p1(real, unit)
+        if real.is_dir() and (real / CONFIG_FILE).is_file() and (real / EVAL_FILE).is_file():
+            return self._load_training(real, unit)
         if real.is_file() and real.suffix == ".json":
             card = _read_json(real)
             if isinstance(card, dict) and isinstance(card.get("track"), str) and "agent" in card:
                 return self._load_scorecard(real, card)
-        raise RunNotFound(f"{path!r} is not a run the viewer replays (a directory with {CHAINS_FILE} or {MATCHES_FILE}, "
-                          f"or a benchmark scorecard)")
+        raise RunNotFound(f"{path!r} is not a run the viewer replays (a directory with {CHAINS_FILE}, {MATCHES_FILE}, a P1's "
+                          f"{RESULTS_FILE}, a training run's {EVAL_FILE} or a benchmark scorecard's {UNITS_FILE}, or a scorecard)")
+
+    def kind_of(self, path: str) -> tuple[str, Path]:
+        """(the kind of run at ``path``, its real directory) for the runs whose agent can be asked
+        again (/api/considered): ``p3`` and ``p1`` search runs, ``scorecard`` runs."""
+        real = self.resolve(path)
+        if real.is_file() and real.name == "scorecard.json":
+            real = real.parent
+        if real.is_dir() and (real / EVALUATION_FILE).is_file() and (real / UNITS_FILE).is_file():
+            return "scorecard", real
+        if real.is_dir() and (real / CONFIG_FILE).is_file() and ((real / CHAINS_FILE).is_file() or self._p1_size(real) is not None):
+            return "search", real
+        raise RunNotFound(f"{path!r} is not a run whose agent the viewer asks again (a search run's P3 or P1, "
+                          f"or a benchmark scorecard's run)")
+
+    def _played(self, key: tuple, play):
+        """What ``play()`` gives, played once per ``key`` (the others asking meanwhile wait for it) and kept."""
+        with self._lock:
+            if key in self._replays:
+                self._replays.move_to_end(key)
+                return self._replays[key]
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            with self._lock:
+                if key in self._replays:
+                    return self._replays[key]
+            out = play()
+            with self._lock:
+                self._replays[key] = out
+                self._locks.pop(key, None)
+                while len(self._replays) > MAX_REPLAYS:
+                    self._replays.popitem(last=False)
+            return out
 
     def _load_p3(self, d: Path) -> dict:
         physics, noise = self._p3_settings(d)
@@ -203,11 +346,11 @@ class RunStore:
                               "noisy": played is not None, "scored": bool(s[2]), "shooter": 0, "level": level,
                               "caption": f"shot {total - n + k + 1} of {total}"})
             units.append({"id": rec["seed"], "title": f"seed {rec['seed']}: {rec['length']} points (last {n} shots)",
-                          "shots": shots})
+                          "shots": shots, "seed": rec["seed"]})
         replayable = "+custom" not in physics
         return {"path": self.display(d), "kind": "p3", "physics": physics.split("+")[0], "noise": noise,
                 "replayable": replayable, "note": None if replayable else "custom physics: the viewer replays presets only",
-                "units": units}
+                "considers": replayable and (d / CONFIG_FILE).is_file(), "units": units}
 
     def _load_matches(self, d: Path, unit: int | None) -> dict:
         league = _read_json(d / LEAGUE_FILE) or {}
@@ -230,19 +373,136 @@ class RunStore:
             if not 0 <= unit < len(records):
                 raise RunNotFound(f"{self.display(d)} has matches 0..{len(records) - 1}, not {unit}")
             if not web:
-                key = (str(d), unit)
-                with self._lock:
-                    if key not in self._replays:
-                        self._replays[key] = replay_league_match(league, records[unit])
-                units[unit] = {**units[unit], **self._replays[key]}
+                played = self._played(("league", str(d), unit), lambda: replay_league_match(league, records[unit]))
+                units[unit] = {**units[unit], **played}
             out["units"] = [units[unit]]
         return out
 
     def _load_scorecard(self, path: Path, card: dict) -> dict:
         summary = {k: v for k, v in card.items() if k not in ("values", "runs", "track_record", "agent")}
         return {"path": self.display(path), "kind": "scorecard", "physics": None, "noise": None, "replayable": False,
-                "note": "a scorecard records its numbers per inning, chain or match, not the shots: nothing to replay",
+                "note": "a scorecard without its ledger (units.jsonl) and evaluation.json records figures, not shots: "
+                        "nothing to play again",
                 "summary": summary, "agent": card.get("agent"), "units": []}
+
+    def _load_scorecard_dir(self, d: Path, unit: int | None) -> dict:
+        ev, track, why = replays.read_scorecard(d)
+        spec = (ev.get("agent") or {}).get("spec")
+        refusal = why or replays.scorecard_refusal(spec, self.root)
+        records = replays.scorecard_records(d, ev)
+        like = track or SimpleNamespace(protocol=ev["track"].get("protocol"), seed=ev["track"].get("seed", 0))
+        units = replays.scorecard_units(like, records)
+        card = _read_json(d / "scorecard.json")
+        summary = None
+        if isinstance(card, dict):
+            summary = {k: v for k, v in card.items() if k not in ("values", "runs", "track_record", "agent")}
+        word = {"innings": "inning", "p1": "inning", "p3": "chain", "match": "match"}.get(like.protocol, "unit")
+        note = (f"this scorecard cannot be played again: {refusal}" if refusal else
+                f"a scorecard records scores, not shots: choose {'an' if word == 'inning' else 'a'} {word} and its agent plays "
+                f"it again on its seed" + (" (with the 49 innings of its block: they play together)" if word == "inning" else "")
+                + "; the replay says whether the unit's record equals the ledger's")
+        out = {"path": self.display(d), "kind": "scorecard", "physics": ev["track"].get("physics"), "noise": ev["track"].get("noise"),
+               "replayable": refusal is None, "note": note, "summary": summary, "agent": ev.get("agent"),
+               "track": ev["track"].get("name"), "protocol": like.protocol,
+               "considers": refusal is None and replays.scorecard_agent_searches(spec), "units": units}
+        if unit is None:
+            return out
+        chosen = next((u for u in units if u["id"] == unit), None)
+        if chosen is None:
+            raise RunNotFound(f"{self.display(d)} holds no {word} {unit} in its ledger")
+        if refusal:
+            raise ReplayRefused(out["note"])
+        from . import agents as web_agents
+
+        def build(spec_full, track_):
+            entry = web_agents.bench_entry(spec_full, track_)
+            return entry.agent, entry.lock
+
+        block = self._played(("scorecard", str(d), chosen["block"]),
+                             lambda: replays.replay_scorecard_block(d, self.root, chosen["block"], build=build))
+        shots = block["shots"][block["units"].index(unit)]
+        if like.protocol in ("innings", "p1"):
+            replayed = {"points": int(sum(s["scored"] for s in shots))}
+        elif like.protocol == "p3":
+            replayed = {"length": block["replayed"]["length"], "ended_by_foul": block["replayed"]["ended_by_foul"]}
+        else:
+            replayed = {"points": block["replayed"]["points"], "winner": block["replayed"]["winner"]}
+        what = f"unit {chosen['block']} of the ledger" + (f" (innings {block['units'][0]}-{block['units'][-1]})"
+                                                            if like.protocol in ("innings", "p1") else "")
+        check = (f"played again: {what} gives the ledger's record (scores, fouls, decisions, simulations)" if block["matches_ledger"]
+                 else f"played again: {what} differs from the ledger in {', '.join(block['differences'])}")
+        out["units"] = [{**chosen, "shots": shots, "replayed": replayed, "matches_ledger": block["matches_ledger"],
+                         "reproduced": block["matches_ledger"], "differences": block["differences"], "check": check}]
+        return out
+
+    def _load_p1(self, d: Path, unit: int | None) -> dict:
+        size = self._p1_size(d)
+        physics, noise = self._p3_settings(d)
+        refusal = self._p1_refusal(d, size, physics)
+        values = size["values"]
+        units = [{"id": i, "title": f"inning {i}: {v:g} points of {size['shots']} shots", "shots": None,
+                  "record": {"points": v}} for i, v in enumerate(values)]
+        note = (f"this P1 cannot be played again: {refusal}" if refusal else
+                f"a P1 records points, not shots, and its {len(values)} innings step together with one search generator: "
+                f"choosing an inning plays the whole run again once ({len(values) * (size['shots'] or 0):,} shots) and "
+                f"says whether its points per inning equal results.json's")
+        out = {"path": self.display(d), "kind": "p1", "physics": physics.split("+")[0], "noise": noise, "replayable": refusal is None,
+               "note": note, "considers": refusal is None, "units": units}
+        if unit is None:
+            return out
+        if not 0 <= unit < len(values):
+            raise RunNotFound(f"{self.display(d)} has innings 0..{len(values) - 1}, not {unit}")
+        if refusal:
+            raise ReplayRefused(note)
+        run = self._played(("p1", str(d)), lambda: replays.replay_p1(d))
+        shots = run["innings"][unit]
+        check = ("played again whole: every inning's points equal results.json's values" if run["matches_record"] else
+                 f"played again whole: the points differ from results.json's in "
+                 f"{sum(a != b for a, b in zip(run['points'], run['recorded']))} of {len(run['recorded'])} innings")
+        out["units"] = [{**units[unit], "shots": shots, "seed": run["seed"], "replayed": {"points": run["points"][unit]},
+                         "matches_record": run["matches_record"], "reproduced": run["matches_record"], "check": check}]
+        return out
+
+    def _load_training(self, d: Path, unit: int | None) -> dict:
+        ev = _read_json(d / EVAL_FILE) or {}
+        physics, noise = self._p3_settings(d)
+        policy = self.policy_sources().get(self.display(d))
+        points = ev.get("points") or []
+        units = [{"id": i, "title": f"inning {i}: {p} points of {ev.get('max_shots')} shots", "shots": None, "record": {"points": p}}
+                 for i, p in enumerate(points)]
+        refusal = None if policy else _NO_WEIGHTS
+        if refusal is None and "+custom" in physics:
+            refusal = "custom physics: the viewer replays presets only"
+        note = (f"this run's evaluation cannot be played again: {refusal}" if refusal else
+                f"eval.json records points, not shots: choosing an inning plays the evaluation again with the run's shipped "
+                f"policy {policy} ({len(points)} innings side by side, as billiards.evaluation.evaluate plays them) and says "
+                f"whether its points equal eval.json's")
+        out = {"path": self.display(d), "kind": "training", "physics": physics.split("+")[0], "noise": noise,
+               "replayable": refusal is None, "note": note, "policy": policy, "considers": False, "units": units}
+        if unit is None:
+            return out
+        if not 0 <= unit < len(points):
+            raise RunNotFound(f"{self.display(d)} has innings 0..{len(points) - 1}, not {unit}")
+        if refusal:
+            raise ReplayRefused(note)
+        run = self._played(("training", str(d), policy), lambda: replays.replay_training(d, self.root / policy))
+        shots = run["innings"][unit]
+        if run["matches_record"]:
+            check = "played again: every inning's points equal eval.json's"
+        else:
+            differ = sum(a != b for a, b in zip(run["points"], run["recorded"]))
+            check = (f"played again: the points differ from eval.json's in {differ} of {len(run['recorded'])} innings (mean "
+                     f"{np.mean(run['points']):.2f} against {np.mean(run['recorded']):.2f}): today's code, whose own "
+                     f"billiards.evaluation.evaluate gives these points, does not play this evaluation bit for bit as the code "
+                     f"that wrote eval.json did (docs/reproducibility.md); these are today's innings of the same policy on the "
+                     f"same racks and noise seed")
+        out["units"] = [{**units[unit], "shots": shots, "seed": run["seed"], "replayed": {"points": run["points"][unit]},
+                         "matches_record": run["matches_record"], "reproduced": run["matches_record"], "check": check}]
+        return out
+
+
+_NO_WEIGHTS = ("no weights of this run were shipped (no policy under results/policies names it as its source), so its "
+               "evaluation innings cannot be played again")
 
 
 def _read_json(path: Path):
@@ -299,13 +559,4 @@ def replay_league_match(league: dict, rec: dict) -> dict:
     return {"shots": shots, "replayed_scores": scores, "reproduced": scores == rec["scores"]}
 
 
-def match_shot(before: np.ndarray, shot: dict, level, game, who: str) -> dict:
-    """A shot of a two-player game as the replay view reads it (the table in its own ball order)."""
-    played, commanded = shot["raw_action"], shot["commanded_action"]
-    return {"positions": before.tolist(), "commanded": commanded.tolist(), "played": played.tolist(),
-            "noisy": not np.array_equal(played, commanded), "scored": bool(shot["score"]), "foul": bool(shot["foul"]),
-            "shooter": int(shot["player"]), "level": level, "who": who, "scores": [float(s) for s in game.scores],
-            "final": game.positions.tolist(), "caption": f"{who} ({'white' if shot['player'] == 0 else 'yellow'}) shoots"}
-
-
-__all__ = ["PathRefused", "RunNotFound", "RunStore", "WEB_APP", "match_shot", "replay_league_match"]
+__all__ = ["PathRefused", "ReplayRefused", "RunNotFound", "RunStore", "WEB_APP", "match_shot", "replay_league_match"]

@@ -1,6 +1,7 @@
 // sagu viewer: the page of `python -m billiards.web` (docs/viewer.md). Plain JavaScript, no build step,
 // nothing loaded from elsewhere. Three views share one table canvas and one shot panel:
-//   replay  -- a recorded run's shots (GET /api/runs, /api/run), each played again exactly by POST /api/shot;
+//   replay  -- a recorded run's shots (GET /api/runs, /api/run), each played again exactly by POST /api/shot, and for a
+//              search what it considered (POST /api/considered, asked per shot when the shot is shown);
 //   lab     -- drag balls, aim, shoot (POST /api/shot), ask an agent (POST /api/agent);
 //   play    -- a match against a league player (POST /api/match, /api/match/{id}/shot).
 // What the page shows is also exposed on window.billiards (and the canvas's data-final attribute) for tests.
@@ -16,7 +17,7 @@
     ready: false, view: "replay", errors: [], busy: 0,
     anim: { state: "idle", t: 0, duration: 0, fps: null, frames: 0, wall: 0 },
     last: null,
-    replay: { path: null, unit: null, index: -1, count: 0, finals: {}, frames: {}, done: false },
+    replay: { path: null, unit: null, index: -1, count: 0, finals: {}, frames: {}, done: false, considered: {}, check: null },
     lab: { shots: 0, final: null, agent: null },
     match: { state: null, shots: 0, finals: [], over: false, pending: false },
   };
@@ -28,7 +29,7 @@
     anim: null, playing: false, speed: 1,
     preview: null, previewToken: 0, previewTimer: null, cloud: null,
     shown: null, drag: null,
-    run: null, unit: null, index: -1, replayToken: 0, shotCache: new Map(),
+    run: null, unit: null, index: -1, replayToken: 0, shotCache: new Map(), considered: null, consideredCache: new Map(),
     match: null,
   };
 
@@ -196,6 +197,7 @@
         ctx.fill();
       }
     }
+    if (B.view === "replay") drawConsidered(ctx, g);
     let balls = S.balls;
     if (a) {
       const p = a.shot.paths, upto = frameIndex(p.t, a.t);
@@ -214,6 +216,33 @@
       ctx.strokeStyle = "#ff3b30";
       ctx.lineWidth = 2;
       ctx.stroke();
+    }
+  }
+
+  // the search's candidates (thin aim lines: green scores exactly, red fouls, grey misses) and the
+  // cloud of the recorded shot's noisy replays (cue-ball ends, green: scored) for the shot shown
+  function drawConsidered(ctx, g) {
+    const c = S.considered;
+    if (!c || !S.unit || c.index !== S.index || !$("rp-considered").checked) return;
+    const r = c.data, from = S.unit.shots[S.index].positions[S.unit.shots[S.index].shooter];
+    const top = r.considered && r.considered.candidates ? r.considered.candidates.top : [];
+    for (const cand of top.slice().reverse()) {
+      const [theta, p] = cand.action, len = 0.12 + 0.55 * p;
+      ctx.beginPath();
+      ctx.moveTo(g.X(from[0]), g.Y(from[1]));
+      ctx.lineTo(g.X(from[0] + len * Math.cos(theta)), g.Y(from[1] + len * Math.sin(theta)));
+      ctx.strokeStyle = cand.score ? "rgba(120,255,140,0.8)" : cand.foul ? "rgba(255,110,110,0.7)" : "rgba(220,220,220,0.45)";
+      ctx.lineWidth = 1.2;
+      ctx.stroke();
+    }
+    if (r.noisy) {
+      for (let i = 0; i < r.noisy.white_ends.length; i++) {
+        const e = r.noisy.white_ends[i];
+        ctx.beginPath();
+        ctx.arc(g.X(e[0]), g.Y(e[1]), 2.5, 0, 2 * Math.PI);
+        ctx.fillStyle = r.noisy.scored[i] ? "#9cff9c" : "#ff9c9c";
+        ctx.fill();
+      }
     }
   }
 
@@ -393,7 +422,9 @@
   async function loadRuns() {
     const data = await api("GET", "/api/runs");
     const sel = $("run-select");
-    const groups = { p3: "search runs: P3 chains", league: "leagues (played again on demand)", web: "matches played here", scorecard: "benchmark scorecards (no shots)" };
+    const groups = { p3: "search runs: P3 chains", p1: "search runs: P1 innings (played again on demand)",
+      scorecard: "benchmark scorecards (played again on demand)", training: "training runs: evaluation innings (played again on demand)",
+      league: "leagues (played again on demand)", web: "matches played here" };
     for (const kind of Object.keys(groups)) {
       const runs = data.runs.filter((r) => r.kind === kind);
       if (!runs.length) continue;
@@ -402,7 +433,8 @@
       for (const r of runs) {
         const o = document.createElement("option");
         o.value = r.path;
-        o.textContent = r.path + (r.noise && r.noise !== "none" ? " [" + r.noise + "]" : "");
+        o.textContent = r.path + (r.noise && r.noise !== "none" ? " [" + r.noise + "]" : "") + (r.replayable ? "" : " (cannot be played again)");
+        if (r.why_not) o.title = r.why_not;
         og.appendChild(o);
       }
       sel.appendChild(og);
@@ -412,8 +444,9 @@
 
   async function openRun(path) {
     cancelAnim();
-    S.run = null; S.unit = null; S.index = -1; S.shotCache.clear();
-    Object.assign(B.replay, { path, unit: null, index: -1, count: 0, finals: {}, frames: {}, done: false });
+    S.run = null; S.unit = null; S.index = -1; S.shotCache.clear(); S.considered = null; S.consideredCache.clear();
+    showConsidered(null);
+    Object.assign(B.replay, { path, unit: null, index: -1, count: 0, finals: {}, frames: {}, done: false, considered: {}, check: null });
     const us = $("unit-select");
     us.innerHTML = "";
     us.disabled = true;
@@ -435,9 +468,10 @@
       o.textContent = u.title;
       us.appendChild(o);
     }
-    us.disabled = !run.units.length;
-    status(run.units.length ? path + ": " + run.units.length + " to replay" : path + ": nothing to replay");
-    if (run.units.length) await openUnit(run.units[0].id);
+    const playable = run.units.length && run.replayable !== false;
+    us.disabled = !playable;
+    status(playable ? path + ": " + run.units.length + " to replay" : path + ": nothing to replay", false);
+    if (playable) await openUnit(run.units[0].id);
   }
 
   async function openUnit(id) {
@@ -445,16 +479,93 @@
     const run = S.run;
     let unit = run.units.find((u) => String(u.id) === String(id));
     if (!unit) return;
-    if (!unit.shots) {  // a league's match: played again by the server
-      status("playing match " + id + " again (the league's players, its seed) ...");
+    if (!unit.shots) {  // played again by the server: a league's match, a scorecard's unit, a P1 run, a training evaluation
+      const what = { league: "match " + id + " (the league's players, its seed)", scorecard: "unit " + id + " (the scorecard's agent, its seed)",
+        p1: "the whole P1 run (its innings step together)", training: "the evaluation (the run's shipped policy)" }[run.kind] || String(id);
+      status("playing " + what + " again ...");
       const one = await api("GET", "/api/run?path=" + encodeURIComponent(run.path) + "&unit=" + encodeURIComponent(id));
       unit = Object.assign(unit, one.units[0]);
-      status("match " + id + " played again: " + unit.shots.length + " shots"
-        + (unit.reproduced === false ? " (the replay does not give the recorded scores)" : ", the recorded scores reproduced"), unit.reproduced === false);
+      const check = unit.check || (unit.reproduced === false ? "the replay does not give the recorded scores" : "the recorded scores reproduced");
+      status(unit.title + ": " + unit.shots.length + " shots; " + check, false);
+      $("run-note").textContent = (run.note ? run.note + ". " : "") + check[0].toUpperCase() + check.slice(1) + ".";
+      B.replay.check = { reproduced: unit.reproduced, check };
     }
-    S.unit = unit; S.index = -1; S.shotCache.clear();
-    Object.assign(B.replay, { unit: id, index: -1, count: unit.shots.length, finals: {}, frames: {}, done: false });
+    S.unit = unit; S.index = -1; S.shotCache.clear(); S.considered = null; S.consideredCache.clear();
+    showConsidered(null);
+    Object.assign(B.replay, { unit: id, index: -1, count: unit.shots.length, finals: {}, frames: {}, done: false, considered: {} });
     await showShot(0, false);
+  }
+
+  // what the run's search considers for shot k (asked once per shot, when the shot is shown)
+  function consideredRequest(k) {
+    const shot = S.unit.shots[k];
+    if (!S.consideredCache.has(k)) {
+      const body = { run: S.run.path, positions: shot.positions, commanded: shot.commanded, shooter: shot.shooter,
+        seed: S.unit.seed !== undefined && S.unit.seed !== null ? S.unit.seed : 0, replays: 50 };
+      if (shot.level !== null && shot.level !== undefined) body.level = shot.level;
+      S.consideredCache.set(k, api("POST", "/api/considered", body));
+    }
+    return S.consideredCache.get(k);
+  }
+
+  async function loadConsidered(k, token) {
+    const shot = S.unit && S.unit.shots[k];
+    if (!S.run || !S.run.considers || !shot || shot.agent_shot === false || !$("rp-considered").checked) {
+      if (token === S.replayToken) showConsidered(null, shot && shot.agent_shot === false ? "an opponent's shot: not the scored agent's" : "");
+      return;
+    }
+    $("considered-info").textContent = "asking the search what it considers here ...";
+    let r;
+    try { r = await consideredRequest(k); } catch (err) {
+      S.consideredCache.delete(k);
+      if (S.index === k) showConsidered(null, "the search cannot be asked: " + (err.message || err));
+      return;
+    }
+    B.replay.considered[k] = r;
+    if (S.index !== k) return;
+    S.considered = { index: k, data: r };
+    showConsidered(r);
+    draw();
+  }
+
+  function showConsidered(r, text) {
+    const info = $("considered-info"), table = $("candidates"), body = table.querySelector("tbody");
+    body.innerHTML = "";
+    if (!r) { info.textContent = text || ""; table.classList.add("hidden"); return; }
+    const c = r.considered;
+    let t = r.agent + ", asked again on this table (seed " + r.seed + ", " + r.sims + " simulations, " + fmt(1000 * r.seconds, 1) + " ms)";
+    if (c) {
+      if (c.candidates) t += ": its first " + c.candidates.count + " candidates, " + c.candidates.scoring + " score and " + c.candidates.fouling + " foul exactly (lines: green scores, red fouls)";
+      if (c.r1 !== undefined) t += "; its estimate of its pick: r1 = " + fmt(c.r1, 3) + (c.value !== undefined ? ", value " + fmt(c.value, 3) : "");
+    }
+    if (r.same_choice === true) t += "; it picks the recorded shot again.";
+    else if (r.same_choice === false) t += "; it picks another shot now (in the run its generator had another state).";
+    const n = r.noisy;
+    if (n) {
+      t += " The recorded shot under " + r.noise + " noise: " + Math.round(100 * n.score_share) + " % of " + n.n + " noisy replays score, "
+        + Math.round(100 * n.foul_share) + " % foul (dots: where the cue ball ends; green: scored)";
+      if (n.leave) {
+        t += "; the value of the leave where it scores: " + (n.leave.mean_if_scored === null ? "none scores" : fmt(n.leave.mean_if_scored, 3))
+          + " (position weight " + n.leave.position + ", the search's estimate of the shot " + fmt(n.leave.estimate, 3) + ")";
+      }
+      t += ".";
+    }
+    info.textContent = t;
+    const top = c && c.candidates ? c.candidates.top : [];
+    const rec = r.recorded;
+    top.forEach((cand, i) => {
+      const tr = document.createElement("tr");
+      if (rec && cand.action.every((v, j) => v === rec[j])) tr.className = "chosen";
+      const a = cand.action, label = cand.score ? "score" : cand.foul ? "foul" : "miss";
+      for (const [v, cls] of [[String(i + 1), ""], [fmt(deg(a[0]), 1), ""], [fmt(a[1], 2), ""], [fmt(a[2], 2), ""], [fmt(a[3], 2), ""], [label, label]]) {
+        const td = document.createElement("td");
+        td.textContent = v;
+        if (cls) td.className = cls;
+        tr.appendChild(td);
+      }
+      body.appendChild(tr);
+    });
+    table.classList.toggle("hidden", !top.length);
   }
 
   function shotRequest(k) {
@@ -476,6 +587,8 @@
     B.replay.index = k;
     S.balls = S.unit.shots[k].positions;
     $("shot-label").textContent = "shot " + (k + 1) + " / " + S.unit.shots.length;
+    if (!S.considered || S.considered.index !== k) { S.considered = null; showConsidered(null); }
+    loadConsidered(k, token);
     const shot = await shotRequest(k);
     if (token !== S.replayToken) return;
     if (k + 1 < S.unit.shots.length) shotRequest(k + 1).catch(() => {});
@@ -558,6 +671,9 @@
       if (c.candidates) text += "; its first " + c.candidates.count + " candidates: " + c.candidates.scoring + " score, " + c.candidates.fouling + " foul exactly";
     }
     if (r.noisy) text += "; under " + noise + " noise " + Math.round(100 * r.noisy.score_share) + " % of " + r.noisy.n + " noisy replays score (dots: where the cue ball ends)";
+    if (r.noisy && r.noisy.leave && r.noisy.leave.mean_if_scored !== null) {
+      text += "; the value of the leave where it scores: " + fmt(r.noisy.leave.mean_if_scored, 3) + " (position weight " + r.noisy.leave.position + ")";
+    }
     (forMatch ? $("match-info") : $("agent-info")).textContent = text;
     S.cloud = r.noisy;
     status(spec + " answered");
@@ -808,6 +924,12 @@
       requestPreview();
     });
     $("lab-preview").addEventListener("change", () => { requestPreview(); draw(); });
+    $("rp-considered").addEventListener("change", () => {
+      if (S.unit && S.index >= 0 && !(S.considered && S.considered.index === S.index)) loadConsidered(S.index, S.replayToken);
+      if (!$("rp-considered").checked) showConsidered(null);
+      else if (S.considered && S.considered.index === S.index) showConsidered(S.considered.data);
+      draw();
+    });
   }
 
   async function init() {
