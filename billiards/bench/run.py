@@ -71,9 +71,12 @@ def _levels(env) -> np.ndarray | None:
     return None if env._levels is None else env._levels.copy()
 
 
-def play_innings(agent: Agent, track: Track, first: int, n: int) -> dict:
+def play_innings(agent: Agent, track: Track, first: int, n: int, on_shot=None) -> dict:
     """Innings ``first .. first + n - 1`` of an innings or P1 track, side by side: inning i's
-    rack and noise from seed ``track.seed + i`` (each inning depends only on its seed and the agent)."""
+    rack and noise from seed ``track.seed + i`` (each inning depends only on its seed and the
+    agent). ``on_shot(row, shot, before, info, level)`` after every shot of every inning (a replay
+    records them): the inning's row in the block, the shot's index, its table, the env's info
+    rows and the level it played at."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
     env = Billiards4BallVectorEnv(n, start="random", on_miss="continue", max_shots=track.shots, physics=track.physics,
@@ -85,16 +88,20 @@ def play_innings(agent: Agent, track: Track, first: int, n: int) -> dict:
     foul = np.zeros((n, track.shots), dtype=bool)
     tables = info["positions"]
     for t in range(track.shots):
-        raw = clock.act(obs, tables.copy(), _levels(env) if track.tells_level else None)
+        levels = _levels(env)
+        raw = clock.act(obs, tables.copy(), levels if track.tells_level else None)
         obs, _, _, _, info = env.step(raw)
         score[:, t], foul[:, t] = info["score"], info["foul"]
+        if on_shot is not None:
+            for i in range(n):
+                on_shot(i, t, tables[i], {k: v[i] for k, v in info.items()}, None if levels is None else levels[i])
         tables = info["positions"]
     return {"first": first, "n": n, "score": score.astype(int).tolist(), "foul": foul.astype(int).tolist(), **clock.record()}
 
 
-def play_chain(agent: Agent, track: Track, index: int) -> dict:
+def play_chain(agent: Agent, track: Track, index: int, on_shot=None) -> dict:
     """Chain ``index`` of a P3 track: the opening rack, seed ``track.seed + index``, until the first
-    miss or foul or the cap."""
+    miss or foul or the cap (``on_shot`` as for :func:`play_innings`, the row always 0)."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
     seed = track.seed + index
@@ -105,8 +112,11 @@ def play_chain(agent: Agent, track: Track, index: int) -> dict:
     clock = _Clock(agent)
     length, fouled = 0, False
     while True:
-        raw = clock.act(obs, info["positions"].copy(), _levels(env) if track.tells_level else None)
+        before, levels = info["positions"].copy(), _levels(env)
+        raw = clock.act(obs, before.copy(), levels if track.tells_level else None)
         obs, _, terminated, truncated, info = env.step(raw)
+        if on_shot is not None:
+            on_shot(0, length, before[0], {k: v[0] for k, v in info.items()}, None if levels is None else levels[0])
         if not info["score"][0]:
             fouled = bool(info["foul"][0])
             break
@@ -144,8 +154,10 @@ def domain_observation(tables: np.ndarray) -> np.ndarray:
 _POOL: dict = {}  # (track name, opponent) -> league player (built once a process)
 
 
-def play_match(agent: Agent, track: Track, index: int) -> dict:
-    """Match ``index`` of a match track: opponent ``index // units``, the break alternating."""
+def play_match(agent: Agent, track: Track, index: int, on_shot=None, opponent=None) -> dict:
+    """Match ``index`` of a match track: opponent ``index // units``, the break alternating; the
+    agent plays white. ``on_shot`` as for :func:`billiards.league.play.play_match`; ``opponent``:
+    the pool player to use (default: the process's own, built once)."""
     from billiards.league.play import play_match as play
 
     from .agents import league_player
@@ -153,27 +165,30 @@ def play_match(agent: Agent, track: Track, index: int) -> dict:
     params, noise = _params_noise(track)
     j, i = divmod(index, track.units)
     name = track.opponents[j]
-    if (track.name, name) not in _POOL:
-        _POOL[(track.name, name)] = league_player(name, noise, params)[0]
+    if opponent is None:
+        if (track.name, name) not in _POOL:
+            _POOL[(track.name, name)] = league_player(name, noise, params)[0]
+        opponent = _POOL[(track.name, name)]
     clock = _Clock(agent)
     seed = track.seed + 1000 * j + i
-    result = play(_MatchPlayer(clock, track.tells_level), _POOL[(track.name, name)], seed=seed,
+    result = play(_MatchPlayer(clock, track.tells_level), opponent, seed=seed,
                   first="white" if i % 2 == 0 else "yellow", target=track.target, max_innings=track.max_innings,
-                  start="canonical", noise=noise, physics=params)
+                  start="canonical", noise=noise, physics=params, on_shot=on_shot)
     winner = {"white": "agent", "yellow": "opponent", None: None}[result["winner"]]
     return {"index": index, "opponent": name, "seed": seed, "first": "agent" if i % 2 == 0 else "opponent",
             "winner": winner, "points": [result["scores"]["white"], result["scores"]["yellow"]],
             "innings": result["innings"], **clock.record()}
 
 
-def play_unit(agent: Agent, track: Track, unit: int) -> dict:
-    """One resumable unit of ``track`` (a block of innings, a chain, a match)."""
+def play_unit(agent: Agent, track: Track, unit: int, on_shot=None) -> dict:
+    """One resumable unit of ``track`` (a block of innings, a chain, a match); ``on_shot`` as the
+    protocol's own function takes it."""
     if track.protocol in ("innings", "p1"):
         first = unit * track.block
-        return play_innings(agent, track, first, min(track.block, track.units - first))
+        return play_innings(agent, track, first, min(track.block, track.units - first), on_shot)
     if track.protocol == "p3":
-        return play_chain(agent, track, unit)
-    return play_match(agent, track, unit)
+        return play_chain(agent, track, unit, on_shot)
+    return play_match(agent, track, unit, on_shot)
 
 
 # ----------------------------------------------------------------------------- the fingerprint

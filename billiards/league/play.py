@@ -28,12 +28,24 @@ from billiards.envs.sagu import AGENTS, shooter_view
 from billiards.files import LEAGUE_FILE, MATCHES, MATCHES_FILE, append_record, atomic_write_text, read_ledger, run_identity, scan_ledger
 
 
-def play_match(white, yellow, *, seed: int, first: str = "white", frames: list | None = None, **game) -> dict:
+def play_match(white, yellow, *, seed: int, first: str = "white", frames: list | None = None, on_shot=None, **game) -> dict:
     """One match (``game``: :func:`billiards.envs.sagu_v0.raw_env`'s keywords); with ``frames`` a
     list, ``(rgb_array frame, (white's score, yellow's score, who plays next))`` of the table
-    before the first shot and after every shot is appended to it."""
+    before the first shot and after every shot is appended to it; ``on_shot(before, level, mover,
+    shot, game)`` is called after every shot (the table before it, the level it played at, the
+    shooter, :meth:`billiards.envs.sagu.SaguEnv.shoot`'s answer, the game after it)."""
     env = sagu_v0.raw_env(first=first, render_mode="rgb_array" if frames is not None else None, **game)
     env.reset(seed=seed)
+    if on_shot is not None:
+        shoot, state = env.game.shoot, env.game
+
+        def recorded(action, rng):  # the env's own shot, reported on the way
+            before, level, mover = state.positions.copy(), state.shot_level, state.mover
+            out = shoot(action, rng)
+            on_shot(before, level, mover, out, state)
+            return out
+
+        state.shoot = recorded
     players = {"white": white, "yellow": yellow}
     for i, p in enumerate(AGENTS):
         players[p].reseed(seed * 2 + i)

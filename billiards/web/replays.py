@@ -147,103 +147,45 @@ def scorecard_units(track, records: list[dict]) -> list[dict]:
 
 def _innings_recorded(agent, track, first: int, n: int) -> tuple[dict, list[list[dict]]]:
     """:func:`billiards.bench.run.play_innings`, every shot recorded: (its record, shots per inning)."""
-    from billiards.bench.run import _Clock, _levels
-    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+    from billiards.bench.run import play_innings
 
-    env = Billiards4BallVectorEnv(n, start="random", on_miss="continue", max_shots=track.shots, physics=track.physics,
-                                  noise=track.noise, normalize_actions=False)
-    obs, info = env.reset(seed=track.seed + first)
-    agent.reset(track.seed + first)
-    clock = _Clock(agent)
-    score = np.zeros((n, track.shots), dtype=bool)
-    foul = np.zeros((n, track.shots), dtype=bool)
-    tables = info["positions"]
     shots: list[list[dict]] = [[] for _ in range(n)]
-    for t in range(track.shots):
-        levels = _levels(env)  # the levels these shots play at (a copy: nothing drawn)
-        raw = clock.act(obs, tables.copy(), levels if track.tells_level else None)
-        obs, _, _, _, info = env.step(raw)
-        score[:, t], foul[:, t] = info["score"], info["foul"]
-        for i in range(n):
-            shots[i].append(shot_entry(tables[i], info["commanded_action"][i], info["raw_action"][i], score[i, t], foul[i, t],
-                                       None if levels is None else levels[i],
-                                       f"inning {first + i}, shot {t + 1} of {track.shots}"))
-        tables = info["positions"]
-    rec = {"first": first, "n": n, "score": score.astype(int).tolist(), "foul": foul.astype(int).tolist(), **clock.record()}
-    return rec, shots
+
+    def on_shot(i, t, before, info, level):
+        shots[i].append(shot_entry(before, info["commanded_action"], info["raw_action"], info["score"], info["foul"], level,
+                                   f"inning {first + i}, shot {t + 1} of {track.shots}"))
+
+    return play_innings(agent, track, first, n, on_shot), shots
 
 
 def _chain_recorded(agent, track, index: int) -> tuple[dict, list[dict]]:
     """:func:`billiards.bench.run.play_chain`, every shot recorded."""
-    from billiards.bench.run import _Clock, _levels
-    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+    from billiards.bench.run import play_chain
 
-    seed = track.seed + index
-    env = Billiards4BallVectorEnv(1, start="canonical", on_miss="reset", max_shots=track.shots, physics=track.physics,
-                                  noise=track.noise, normalize_actions=False)
-    obs, info = env.reset(seed=seed)
-    agent.reset(seed)
-    clock = _Clock(agent)
-    length, fouled, shots = 0, False, []
-    while True:
-        before, levels = info["positions"].copy(), _levels(env)
-        raw = clock.act(obs, before.copy(), levels if track.tells_level else None)
-        obs, _, terminated, truncated, info = env.step(raw)
-        shots.append(shot_entry(before[0], info["commanded_action"][0], info["raw_action"][0], info["score"][0], info["foul"][0],
-                                None if levels is None else levels[0], f"chain {index}, shot {len(shots) + 1}"))
-        if not info["score"][0]:
-            fouled = bool(info["foul"][0])
-            break
-        length += 1
-        if terminated[0] or truncated[0]:
-            break
-    return {"index": index, "seed": seed, "length": length, "ended_by_foul": fouled, **clock.record()}, shots
+    shots: list[dict] = []
+
+    def on_shot(i, t, before, info, level):
+        shots.append(shot_entry(before, info["commanded_action"], info["raw_action"], info["score"], info["foul"], level,
+                                f"chain {index}, shot {t + 1}"))
+
+    return play_chain(agent, track, index, on_shot), shots
 
 
 def _match_recorded(agent, track, index: int) -> tuple[dict, list[dict]]:
-    """:func:`billiards.bench.run.play_match` (through :func:`billiards.league.play.play_match`'s
-    loop), every shot recorded: the agent is white, the pool player yellow."""
+    """:func:`billiards.bench.run.play_match`, every shot recorded: the agent is white, the pool
+    player yellow (a player of its own, reseeded per match as the pool's is)."""
     from billiards.bench.agents import league_player
-    from billiards.bench.run import _Clock, _MatchPlayer, _params_noise
-    from billiards.envs import sagu_v0
-    from billiards.envs.sagu import AGENTS, shooter_view
+    from billiards.bench.run import _params_noise, play_match
 
     params, noise = _params_noise(track)
-    j, i = divmod(index, track.units)
-    name = track.opponents[j]
-    opponent = league_player(name, noise, params)[0]  # a player of its own (reseeded per match, as the pool's is)
-    clock = _Clock(agent)
-    seed = track.seed + 1000 * j + i
-    first = "white" if i % 2 == 0 else "yellow"
-    env = sagu_v0.raw_env(first=first, target=track.target, max_innings=track.max_innings, start="canonical", noise=noise,
-                          physics=params)
-    env.reset(seed=seed)
-    players = {"white": _MatchPlayer(clock, track.tells_level), "yellow": opponent}
-    for k, p in enumerate(AGENTS):
-        players[p].reseed(seed * 2 + k)
-    game, shots = env.game, []
-    shoot = game.shoot
+    name = track.opponents[index // track.units]
+    shots: list[dict] = []
 
-    def recorded(action, rng):  # the env's shot, recorded on the way
-        before, level, mover = game.positions.copy(), game.shot_level, game.mover
-        out = shoot(action, rng)
+    def on_shot(before, level, mover, out, game):
         shots.append({**match_shot(before, out, level, game, agent.name if mover == 0 else name), "agent_shot": mover == 0})
-        return out
 
-    game.shoot = recorded
-    for who in env.agent_iter():
-        _, _, terminated, truncated, _ = env.last()
-        if terminated or truncated:
-            env.step(None)
-            continue
-        view = shooter_view(game.positions, AGENTS.index(who))
-        level = game.shot_level
-        env.step(players[who].act(view) if level is None else players[who].act(view, level))
-    scores = dict(zip(AGENTS, game.scores))
-    win = None if scores["white"] == scores["yellow"] else max(scores, key=scores.get)
-    winner = {"white": "agent", "yellow": "opponent", None: None}[win]
-    return ({"index": index, "opponent": name, "seed": seed, "first": "agent" if i % 2 == 0 else "opponent", "winner": winner,
-             "points": [scores["white"], scores["yellow"]], "innings": game.innings, **clock.record()}, shots)
+    rec = play_match(agent, track, index, on_shot, opponent=league_player(name, noise, params)[0])
+    return rec, shots
 
 
 def play_scorecard_unit(agent, track, unit: int) -> tuple[dict, list[list[dict]]]:
