@@ -564,12 +564,18 @@ def test_checkpoint_never_runs_code_and_refuses_any_changed_byte(tmp_path):
         assert str(tmp_path / name / "checkpoint.pt") in str(err.value)
         assert not marker.exists(), f"loading the {name} file ran its code"
 
-    # a small real checkpoint round-trips exactly ...
+    # a small real checkpoint (a SAC agent of 2-unit layers: content the checks accept) round-trips exactly ...
+    from billiards.rl.checkpoint import agent_from_config
+    from billiards.rl.train import _plain
+
     run = tmp_path / "run"
     run.mkdir()
-    state = {"config": {"seed": 3, "algo": {"name": "sac"}}, "agent": {"w": torch.randn(4, 3)},
-             "agent_extra": {"optimizer": {"state": {0: {"step": torch.tensor(2.0)}}, "param_groups": [{"lr": 1e-3, "params": [0]}]}},
-             "counters": {"frames": 5, "owed": 0.25, "next_eval": math.inf}, "rng": rng_state(np.random.default_rng(9))}
+    config = _plain(compose_cfg("budget=smoke", "algo.hidden_sizes=[2]"))
+    agent, _ = agent_from_config(config)
+    state = {"config": config, "agent": agent.state_dict(), "agent_extra": agent.state_dict_extra(),
+             "counters": {"frames": 5, "owed": 0.25, "train_seconds": 0.0, "cpu_seconds": 0.0, "next_log": 256,
+                          "next_eval": math.inf, "next_ckpt": math.inf},
+             "rng": rng_state(np.random.default_rng(9))}
     path = save_checkpoint(run, state)
     assert same(load_checkpoint(run), {"format_version": 2, **state})
     # ... and a changed byte anywhere -- every byte of the header and digest, then every 37th

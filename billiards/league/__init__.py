@@ -10,40 +10,110 @@ from pathlib import Path
 RUNTIME_KEYS = ("threads", "progress", "picture", "resume")  # how a league runs, not what it finds
 
 
-def run(cfg, out_dir) -> dict:
-    """Play the league ``cfg`` describes into ``out_dir`` (or continue it there)."""
+def league_settings(cfg):
+    """``(config, settings as started, the starting command's overrides)`` of the league ``cfg``
+    asks for: with ``resume=<dir>`` the league's own settings -- what Hydra saved in
+    ``<dir>/.hydra/`` when it started -- with this command line's runtime keys (ValueError naming
+    the file if they cannot be read); else ``cfg`` itself (overrides None: this invocation's)."""
+    from omegaconf import DictConfig, ListConfig, OmegaConf
+
+    from billiards.files import display_path
+
+    from .config import MatchAppConfig
+
+    if not cfg.resume:
+        return cfg, cfg, None
+    path = Path(cfg.resume) / ".hydra" / "config.yaml"
+    try:
+        saved = OmegaConf.load(path)
+        if not isinstance(saved, DictConfig):
+            raise ValueError("not a mapping")
+        for key in RUNTIME_KEYS:  # the league's own settings, this command line's runtime keys
+            saved[key] = cfg[key]
+        merged = OmegaConf.merge(OmegaConf.structured(MatchAppConfig), saved)
+        path = path.with_name("overrides.yaml")
+        overrides = OmegaConf.load(path)
+        if not isinstance(overrides, ListConfig):
+            raise ValueError("not a list")
+    except Exception as err:  # missing, not YAML, not a league's settings
+        first = (str(err).strip().splitlines() or [type(err).__name__])[0]
+        raise ValueError(f"{display_path(path)} cannot be read as a league's record ({first}); a league continues "
+                         f"with the settings Hydra saved there when it started") from None
+    return merged, saved, [str(o) for o in overrides]
+
+
+def league_run_identity(started) -> str:
+    """The identity every match record of a league carries: a hash of its settings as it
+    started (its players' own agents, not every agent the config knows), less the runtime keys."""
     from omegaconf import OmegaConf
 
+    from billiards.files import run_identity
+
+    settings = OmegaConf.to_container(started, resolve=True)
+    settings["agents"] = {name: settings["agents"][name] for name in settings["players"]}
+    return run_identity(settings, runtime=RUNTIME_KEYS)
+
+
+def resume_state(run_dir: Path, config, finished: bool) -> str | None:
+    """The directory check's look at the league in ``run_dir`` before a resume
+    (:class:`billiards.app_config.RunKind`): its saved settings must load (ValueError naming the
+    file otherwise); with ``finished``, the line a resume says when every match of the league is
+    in its ledger, none torn, and ``league.json`` written, else None."""
+    from omegaconf import OmegaConf
+
+    from billiards.app_config import RESUME_AUTO
+    from billiards.files import LEAGUE_FILE, MATCHES, MATCHES_FILE, display_path, read_ledger
+
+    run_dir = Path(run_dir)
+    if config.get("resume") == RESUME_AUTO and not (run_dir / MATCHES_FILE).is_file():
+        return None  # resume=auto starts it afresh
+    probe = OmegaConf.masked_copy(config, [k for k in config if k != "hydra"])
+    probe.resume = str(run_dir)
+    cfg, started, _ = league_settings(probe)
+    if not finished or not (run_dir / LEAGUE_FILE).is_file():
+        return None
+    try:
+        scan = read_ledger(run_dir / MATCHES_FILE, MATCHES, league_run_identity(started))
+        names, matches = list(cfg.players), int(cfg.matches)
+    except Exception:  # a ledger or settings the resume refuses, naming the problem
+        return None
+    have = {(r["a"], r["b"], r["i"]) for r in scan.records}
+    todo = [(a, b, i) for a in names for b in names if a != b for i in range(matches) if (a, b, i) not in have]
+    if scan.torn is not None or todo:
+        return None
+    return f"{display_path(run_dir)} is finished ({len(have)} matches, {LEAGUE_FILE}): nothing to do"
+
+
+def run(cfg, out_dir) -> dict:
+    """Play the league ``cfg`` describes into ``out_dir`` (or continue it there: ``resume=<dir>``,
+    or ``resume=auto`` for a league an earlier attempt of this job started in ``out_dir``)."""
+    from billiards.app_config import RESUME_AUTO
     from billiards.device import set_threads
-    from billiards.files import LedgerError, display_path, recorded_command, run_identity
+    from billiards.files import MATCHES_FILE, LedgerError, display_path, recorded_command
     from billiards.physics.config import params_from_config
     from billiards.physics.noise import noise_from_config, noise_record
     from billiards.provenance import git_commit
 
     from .agents import make_agent
-    from .config import MatchAppConfig, agent_config, validate
+    from .config import agent_config, validate
     from .play import animate_match, play_match, run_league
 
-    started = cfg
-    if cfg.resume:  # the league's own settings, this command line's runtime keys
-        started = saved = OmegaConf.load(Path(cfg.resume) / ".hydra" / "config.yaml")
-        for key in RUNTIME_KEYS:
-            saved[key] = cfg[key]
-        cfg = OmegaConf.merge(OmegaConf.structured(MatchAppConfig), saved)
+    if cfg.resume == RESUME_AUTO:  # this job's own directory: the league an earlier attempt started there, or a new one
+        cfg.resume = str(out_dir) if (Path(out_dir) / MATCHES_FILE).is_file() else None
+    try:
+        cfg, started, started_overrides = league_settings(cfg)
+    except ValueError as err:
+        raise SystemExit(f"Error: resume={cfg.resume}: {err}") from None
     validate(cfg)
-    # the run identity every match record carries: the league's settings as it started (its
-    # players' own, not every agent the config knows), less the runtime keys
-    settings = OmegaConf.to_container(started, resolve=True)
-    settings["agents"] = {name: settings["agents"][name] for name in settings["players"]}
-    run_id = run_identity(settings, runtime=RUNTIME_KEYS)
+    run_id = league_run_identity(started)
     set_threads(cfg.threads)
     out_dir = Path(cfg.resume or out_dir)
     params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
     agents = {name: agent_config(cfg.agents[name], name) for name in cfg.players}
     players = {name: make_agent(agents[name], noise, params) for name in cfg.players}
     # the league's command: this one, or, continuing a league, the one that started it
-    if cfg.resume:
-        overrides = list(OmegaConf.load(out_dir / ".hydra" / "overrides.yaml"))
+    if started_overrides is not None:
+        overrides = started_overrides
     else:
         from hydra.core.hydra_config import HydraConfig
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import ClassVar, Optional
 
 import numpy as np
 
@@ -62,7 +62,14 @@ class AgentConfig:
     overrides: dict = field(default_factory=dict)  # further knobs of the search option, by name
     policy: Optional[str] = None  # kind=policy: the trained policy's file or run dir
 
+    # the upper bounds of a player's numbers (docs/reliability.md); search_budget: the search's own
+    UPPER: ClassVar[dict] = {"search_budget": (10**5, "simulations per decision"),
+                             **{key: (10_000, "candidates or replays per decision") for key in ("k", "replays", "opp_k",
+                                                                                                 "opp_replays")},
+                             **{key: (100.0, "points; a score is worth 1") for key in ("foul_penalty", "leave_weight")}}
+
     def errors(self, name: str) -> list[str]:
+        """What is wrong with the player's knobs (its files: :meth:`file_errors`)."""
         errs = [] if self.kind in KINDS else [f"agents.{name}.kind must be one of {', '.join(KINDS)}, got {self.kind!r}"]
         if self.kind == "policy":
             from billiards.files import repo_path
@@ -75,9 +82,40 @@ class AgentConfig:
         for key in ("foul_penalty", "leave_weight"):
             if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0):
                 errs.append(f"agents.{name}.{key} must be >= 0, got {getattr(self, key)}")
+        if self.threshold is not None and not 0.0 <= self.threshold <= 1.0:
+            errs.append(f"agents.{name}.threshold must be null or lie in [0, 1] (the search's own rating of its shot), "
+                        f"got {self.threshold!r}")
+        from billiards.app_config import upper_bound_errors
+
+        errs += upper_bound_errors(self, f"agents.{name}.", self.UPPER)
         if self.kind in ("search", "safety") and not errs:
             errs += [f"agents.{name}: {e}" for e in self.search_option_errors()]
         return errs
+
+    def file_errors(self, name: str, noise: NoiseModel | None) -> list[str]:
+        """The player's files loaded and checked (before a league writes anything): a policy's
+        file or run dir; its proposer's ranker or policies (``for_noise``: the proposer of the
+        match's ``noise`` preset; None: not known yet). Its table value: :meth:`errors`."""
+        if self.kind == "policy":
+            from billiards.files import repo_path
+            from billiards.rl.policy import policy_file_error
+
+            err = policy_file_error(repo_path(self.policy))
+            return [f"agents.{name}.policy: {err}"] if err else []
+        if self.kind not in ("search", "safety"):
+            return []
+        from billiards.search.config import NOISE_DEFAULT_PROPOSERS, proposer_options
+
+        if self.proposer != "for_noise":
+            proposer = proposer_options()[self.proposer]
+        elif noise is None:
+            return []
+        elif (preset := noise.describe()) not in NOISE_DEFAULT_PROPOSERS:
+            return [f"agents.{name}: proposer: for_noise needs a noise preset ({', '.join(NOISE_DEFAULT_PROPOSERS)}); "
+                    f"this match plays {preset}"]
+        else:
+            proposer = NOISE_DEFAULT_PROPOSERS[preset]
+        return [f"agents.{name}: {e}" for e in proposer.errors()]
 
     def search_option(self):
         """The search option (``search.py``'s schema) this player plays."""

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional
+from typing import Any, ClassVar, Dict, List, Optional
 
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from billiards.app_config import ValidatingCallback, numeric_bound_errors, register_app
+from billiards.app_config import ValidatingCallback, numeric_bound_errors, register_app, resolved_config, upper_bound_errors
 from billiards.device import threads_error
 from billiards.physics.config import PhysicsConfig, physics_errors
 from billiards.physics.noise import NoiseConfig, noise_errors
@@ -39,6 +39,11 @@ class MatchAppConfig:
     picture: bool = True  # match.gif: the league's first match replayed shot by shot
     resume: Optional[str] = None  # a league's run dir: play only its missing matches there, with its own settings
 
+    # the upper bounds of the league's numbers (docs/reliability.md; the players': AgentConfig.UPPER)
+    UPPER: ClassVar[dict] = {"target": (10_000, "points"), "max_innings": (10**5, "innings of a match"),
+                             "matches": (10**5, "matches per ordered pair"),
+                             "foul_penalty": (100.0, "points; a score is worth 1")}
+
 
 register_app("match_schema", MatchAppConfig, {})
 
@@ -48,18 +53,32 @@ class MatchConfigError(ValueError):
 
 
 def errors(cfg: DictConfig) -> list[str]:
+    """Every problem of a match config, each naming its key; checked on its resolved values
+    (:func:`resolved_config`), the players' files (policies, rankers, table values) loaded and
+    checked now, before anything is written."""
+    cfg, errs = resolved_config(cfg)
+    if errs:
+        return errs
     errs = numeric_bound_errors(cfg) + physics_errors(cfg.physics) + noise_errors(cfg.noise)
+    errs += upper_bound_errors(cfg, "", MatchAppConfig.UPPER)
+    noise = None
     if not errs:
         from billiards.envs.sagu import noise_cap_error
         from billiards.physics.noise import noise_from_config
 
-        if err := noise_cap_error(noise_from_config(cfg.noise)):
+        noise = noise_from_config(cfg.noise)
+        if err := noise_cap_error(noise):
             errs.append(err)
     for name, agent in cfg.agents.items():
         try:
-            errs += agent_config(agent, name).errors(name)
+            agent = agent_config(agent, name)
+            own = agent.errors(name)
         except ValueError as err:
             errs.append(str(err))
+            continue
+        errs += own
+        if name in cfg.players and not own:  # a player's files, once its knobs are right
+            errs += agent.file_errors(name, noise)
     unknown = [p for p in cfg.players if p not in cfg.agents]
     if unknown or len(set(cfg.players)) != len(cfg.players) or len(cfg.players) < 2:
         errs.append(f"players must name at least two different agents of {sorted(cfg.agents)}; got {list(cfg.players)}")

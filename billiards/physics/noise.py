@@ -53,6 +53,14 @@ SIGMA_CAPS = {
     "sigma_tip_mm": (1e3 * UPPER_BOUNDS["ball_radius"], "mm: the largest ball radius any table allows"),
 }
 MAX_LEVEL = 100.0  # the highest level (multiplier of the sigmas) a variable model may draw
+# What an app's ``noise`` config node may ask for (:func:`noise_errors`), tighter than what a
+# NoiseModel accepts: ``noise.scale`` at most MAX_SCALE, and each sigma (times the top level of
+# variable noise) at most PRACTICAL_LEVEL times fastfiz's -- 1.25 degrees of aim, 0.75 m/s, 5 mm
+# of tip. That is the bound match.py's observation tells a level up to (billiards.envs.sagu:
+# MAX_NOISE_LEVEL, and its noise_cap_error, the same rule for the aim); the largest noise any
+# result of the project plays is 5 times fastfiz's (noise=fastfiz_x5, noise.scale=5).
+MAX_SCALE = 20.0
+PRACTICAL_LEVEL = 10.0
 
 
 def _is_level(value) -> bool:
@@ -286,6 +294,8 @@ def noise_errors(node: Any) -> list[str]:
     if scale is not None and not _is_level(scale):
         return [f"noise.scale must be a finite number >= 0 (a multiplier of the preset's sigmas; 1 keeps them), "
                 f"got {scale!r}"]
+    if scale is not None and scale > MAX_SCALE:
+        return [f"noise.scale must be at most {MAX_SCALE:g} (a multiplier of the preset's sigmas), got {scale!r}"]
     levels = node.get("level_range")
     if levels is not None:
         levels = list(levels)
@@ -293,10 +303,25 @@ def noise_errors(node: Any) -> list[str]:
             return [f"noise.level_range must be [low, high], finite numbers with 0 <= low <= high (each shot's "
                     f"multiplier of the sigmas is drawn uniformly from it), got {levels!r}"]
     try:  # the sigmas the preset, the overrides, the scale and the levels make together, within their caps
-        noise_from_config(node)
+        model = noise_from_config(node)
     except ValueError as err:
         return [f"noise: {err}"]
-    return []
+    err = practical_noise_error(model)
+    return [err] if err else []
+
+
+def practical_noise_error(model: NoiseModel) -> str | None:
+    """What is wrong with the noise an app's config asks for if a sigma, times the top level of
+    variable noise, passes :data:`PRACTICAL_LEVEL` times fastfiz's (aim, then speed, then tip),
+    else None."""
+    base = NOISE_PRESETS["fastfiz"]
+    top = model.level_range[1] if model.is_variable else 1.0
+    for (key, field), what in zip(CONFIG_FIELDS.items(), ("aim", "speed", "tip")):
+        times = getattr(model, field) / getattr(base, field) * top
+        if times > PRACTICAL_LEVEL * (1 + 1e-9):
+            return (f"noise: at most {PRACTICAL_LEVEL:g} times fastfiz's {what} sigma, got {times:g} (noise.{key} times "
+                    f"noise.scale and the top level of variable noise; past it no shot is played as commanded)")
+    return None
 
 
 def noise_record(model: NoiseModel) -> dict:
@@ -311,5 +336,6 @@ def noise_record(model: NoiseModel) -> dict:
     return record
 
 
-__all__ = ["CONFIG_FIELDS", "MAX_LEVEL", "NOISE_PRESETS", "SIGMA_CAPS", "SIGMA_FIELDS", "NoiseConfig", "NoiseModel",
-           "get_noise", "noise_errors", "noise_from_config", "noise_level", "noise_record", "sigma_cap_error"]
+__all__ = ["CONFIG_FIELDS", "MAX_LEVEL", "MAX_SCALE", "NOISE_PRESETS", "PRACTICAL_LEVEL", "SIGMA_CAPS", "SIGMA_FIELDS",
+           "NoiseConfig", "NoiseModel", "get_noise", "noise_errors", "noise_from_config", "noise_level", "noise_record",
+           "practical_noise_error", "sigma_cap_error"]

@@ -44,6 +44,7 @@ refused, since loading it would need the unsafe unpickler.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import io
 import logging
@@ -60,9 +61,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from billiards.files import atomic_open
+from billiards.files import atomic_open, key_problem, plain_data_problem, shape_problem, tensor_problem
 
-from .config import CHECKPOINT_FILE
+from .config import CHECKPOINT_FILE, MAX_LAYERS, MAX_WIDTH
 
 FORMAT_VERSION = 2
 MAGIC = b"billiards-checkpoint"
@@ -272,6 +273,7 @@ class RunState:
         against ``carrier_spec``, the env's observation and done specs) pending for
         :meth:`resume_collector`. Reads checkpoints of every earlier version of format 2 (e.g.
         those written before ``stage_log`` or the collector state existed)."""
+        _LAST.clear()  # the run holds what it needs now
         try:
             agent.load_state_dict(ckpt["agent"])
             agent.load_state_dict_extra(ckpt["agent_extra"])
@@ -317,14 +319,25 @@ class RunState:
         set_rng_state(pending["rng"], env_rngs, device)
 
 
-def check_counters(ckpt: dict[str, Any]) -> dict[str, Any]:
+def _most_owed(config: Any) -> float:
+    """The most gradient updates a checkpoint may owe: one batch's (utd x the batch's frames; a
+    run stopped amid a batch's updates owes the rest), plus the fraction carried over."""
+    try:
+        algo, env = config["algo"], config["env"]
+        batch = max(int(algo.get("frames_per_batch") or 0), int(env.get("num_envs") or 1))
+        return float(algo.get("utd", 0.0)) * batch + 1.0
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError):
+        return 1.0
+
+
+def check_counters(ckpt: dict[str, Any], what: str = "the checkpoint") -> dict[str, Any]:
     """The checkpoint's counters, or a CheckpointError if one is impossible: frames an integer in
     [0, budget.total_steps + 10^6] (the run's own budget, and a batch's overshoot), times and owed
     updates finite and >= 0, the next log / evaluation / checkpoint steps numbers >= 0 (inf: never),
     the histories lists. A checksum proves a file is what was written, not that it made sense."""
     c = ckpt.get("counters")
     if not isinstance(c, dict):
-        raise CheckpointError("cannot resume: the checkpoint's counters are not a mapping; it is corrupt, start a new run")
+        raise CheckpointError(f"cannot resume: {what}'s counters are not a mapping; it is corrupt, start a new run")
     try:
         total = int(ckpt["config"]["budget"]["total_steps"])
     except (KeyError, TypeError, ValueError):
@@ -337,6 +350,9 @@ def check_counters(ckpt: dict[str, Any]) -> dict[str, Any]:
         v = c.get(key)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
             bad.append(f"{key}={v!r} (a finite number >= 0)")
+    owed = c.get("owed")
+    if isinstance(owed, (int, float)) and not isinstance(owed, bool) and owed > (most := _most_owed(ckpt.get("config"))):
+        bad.append(f"owed={owed!r} (the gradient updates of at most one batch: {most:,.0f})")
     for key in ("next_log", "next_eval", "next_ckpt"):
         v = c.get(key)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or v < 0:
@@ -345,9 +361,213 @@ def check_counters(ckpt: dict[str, Any]) -> dict[str, Any]:
         if not isinstance(ckpt.get(key) or [], list):
             bad.append(f"{key} (a list)")
     if bad:
-        raise CheckpointError(f"cannot resume: the checkpoint holds impossible counters: {', '.join(bad)}; "
+        raise CheckpointError(f"cannot resume: {what} holds impossible counters: {', '.join(bad)}; "
                               f"it is corrupt, start a new run")
     return c
+
+
+# ----------------------------------------------------------------------------- the content
+
+
+def config_problem(config: Any, where: str = "config") -> str | None:
+    """What keeps a stored training config (a checkpoint's, an exported policy's) from describing
+    networks, or None: not plain data (an interpolation, an object), no algorithm of this
+    version, hidden sizes other than 1 to :data:`MAX_LAYERS` widths in [1, :data:`MAX_WIDTH`],
+    env flags that are not booleans, a noise node its schema refuses."""
+    from billiards.physics.noise import noise_errors
+
+    from .agents import AGENTS
+
+    if (bad := plain_data_problem(config, where)) or (bad := key_problem(config, {"algo": dict, "env": dict}, where)):
+        return bad
+    algo, env = config["algo"], config["env"]
+    if algo.get("name") not in AGENTS:
+        return f"{where}.algo.name={algo.get('name')!r}: not an algorithm of this version ({', '.join(AGENTS)})"
+    hidden = algo.get("hidden_sizes")
+    if not (isinstance(hidden, list) and 0 < len(hidden) <= MAX_LAYERS
+            and all(isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= MAX_WIDTH for h in hidden)):
+        return f"{where}.algo.hidden_sizes={hidden!r}: not 1 to {MAX_LAYERS} layer widths in [1, {MAX_WIDTH}]"
+    for key in ("constrain_aim", "extra_features"):
+        if not isinstance(env.get(key, False), bool):
+            return f"{where}.env.{key}={env.get(key)!r}: not a boolean"
+    noise = config.get("noise")
+    if noise is not None:
+        if bad := key_problem(noise, {"preset": str}, f"{where}.noise"):
+            return bad
+        if errs := noise_errors(noise):
+            return f"{where}.noise: {errs[0]}"
+    return None
+
+
+def agent_from_config(config: dict):
+    """``(agent, cfg)``: the agent (networks and optimisers, on the CPU, freshly initialised) a
+    stored training config describes, and the config as a DictConfig: what a checkpoint's or an
+    exported policy's tensors must fit. Only the observation and action layout matter (no
+    shaping: no reward model is loaded); variable noise adds the level to the observation. The
+    algorithm's node is read through its schema (keys a config of an older version lacks take
+    their defaults). Check the config with :func:`config_problem` first; a config that still does
+    not build a network raises :class:`CheckpointError`."""
+    from omegaconf import OmegaConf
+
+    from billiards.envs import make_env
+    from billiards.physics.noise import noise_from_config
+
+    from .agents import make_agent
+    from .config import ALGO_SCHEMAS
+
+    cfg = OmegaConf.create(config)
+    try:
+        schema = ALGO_SCHEMAS[cfg.algo.name]
+        own = {f.name for f in dataclasses.fields(schema)}
+        algo = OmegaConf.merge(OmegaConf.structured(schema), {k: v for k, v in config["algo"].items() if k in own})
+        env = make_env(1, constrain_aim=bool(cfg.env.get("constrain_aim", False)),
+                       extra_features=bool(cfg.env.get("extra_features", False)), noise=noise_from_config(cfg.get("noise")))
+        obs_dim = env.observation_spec_unbatched["observation"].shape[-1]
+        return make_agent(algo, obs_dim, env.action_spec_unbatched), cfg
+    except Exception as err:  # a config that passed config_problem and still builds nothing: say so, no traceback
+        raise CheckpointError(f"its config does not describe networks ({type(err).__name__}: "
+                              f"{str(err).splitlines()[0] if str(err) else ''})") from None
+
+
+def _optimizer_problem(agent, extra: Any) -> str | None:
+    """What is wrong with ``extra`` (a checkpoint's ``agent_extra``) against ``agent`` (built from
+    its config): an optimiser missing or of another network (its groups, its state's indices),
+    a state tensor whose shape is not its parameter's, a non-finite or complex value, an update
+    counter that is not an integer >= 0."""
+    built = agent.state_dict_extra()
+    spec = {key: (int if key == "n_updates" else dict) for key in built}
+    if bad := key_problem(extra, spec, "agent_extra"):
+        return bad
+    if extra["n_updates"] < 0:
+        return f"agent_extra.n_updates={extra['n_updates']}: not a count"
+    for key, own in built.items():
+        if key == "n_updates":
+            continue
+        where, saved = f"agent_extra.{key}", extra[key]
+        if bad := key_problem(saved, {"state": dict, "param_groups": list}, where):
+            return bad
+        groups = saved["param_groups"]
+        if len(groups) != len(own["param_groups"]) or any(
+                not isinstance(g, dict) or list(g.get("params", ())) != list(o["params"])
+                for g, o in zip(groups, own["param_groups"])):
+            return f"{where}.param_groups: not the optimiser of the networks its config describes"
+        for g in groups:
+            for name, v in g.items():
+                numbers = v if isinstance(v, (list, tuple)) else [v]
+                if name != "params" and any(isinstance(x, float) and not math.isfinite(x) for x in numbers):
+                    return f"{where}.param_groups: {name}={v!r} is not finite"
+        params = [p for g in getattr(agent, key).param_groups for p in g["params"]]
+        for idx, st in saved["state"].items():
+            if isinstance(idx, bool) or not isinstance(idx, int) or not 0 <= idx < len(params) or not isinstance(st, dict):
+                return f"{where}.state: entry {idx!r} is not the state of one of its {len(params)} parameters"
+            for name, v in st.items():
+                if name == "step":
+                    continue
+                if not torch.is_tensor(v) or tuple(v.shape) != tuple(params[idx].shape):
+                    shape = tuple(v.shape) if torch.is_tensor(v) else type(v).__name__
+                    return (f"{where}.state.{idx}.{name}: shape {shape}, but the parameter it belongs to has "
+                            f"{tuple(params[idx].shape)}")
+        if bad := tensor_problem(saved["state"], f"{where}.state", floats_only=False):
+            return bad
+    return None
+
+
+def _leading_sizes(tree: Any, name: str):
+    """(name, first dimension) of every tensor in a nested dict."""
+    if torch.is_tensor(tree):
+        yield name, (tree.shape[0] if tree.dim() else None)
+    elif isinstance(tree, dict):
+        for k, v in tree.items():
+            yield from _leading_sizes(v, f"{name}.{k}")
+
+
+def _buffer_problem(buffer: Any, agent, cfg, frames: int) -> str | None:
+    """What is wrong with a checkpoint's replay buffer: kept by an algorithm that has none, its
+    row count outside [1, its capacity and the frames collected], a tensor of another row count,
+    a replay key missing, a non-finite or complex value, a write cursor outside the buffer."""
+    if cfg.algo.name not in ("sac", "td3"):
+        return f"buffer: a replay buffer, but algo={cfg.algo.name} keeps none"
+    if bad := key_problem(buffer, {"data": dict, "rows": int, "writer": dict}, "buffer"):
+        return bad
+    rows, size, total = buffer["rows"], cfg.algo.get("buffer_size"), cfg.budget.get("total_steps")
+    if not all(isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in (size, total)):
+        return f"buffer: its capacity is unknown (config.algo.buffer_size={size!r}, config.budget.total_steps={total!r})"
+    capacity = min(size, total)
+    if not 1 <= rows <= min(capacity, frames):
+        return (f"buffer.rows={rows}: not within [1, {min(capacity, frames):,}] (the buffer's capacity, "
+                f"min(algo.buffer_size, budget.total_steps) = {capacity:,}, and the {frames:,} frames collected)")
+    if bad := next((f"{n}: {size} rows, the buffer holds {rows}" for n, size in _leading_sizes(buffer["data"], "buffer.data")
+                    if size != rows), None):
+        return bad
+    for key in agent.replay_keys:
+        node = buffer["data"]
+        for part in (key if isinstance(key, tuple) else (key,)):
+            node = node.get(part) if isinstance(node, dict) else None
+        if not torch.is_tensor(node):
+            return f"buffer.data: lacks {'.'.join(key) if isinstance(key, tuple) else key}, which every replayed frame holds"
+    if bad := tensor_problem(buffer["data"], "buffer.data", floats_only=False):
+        return bad
+    writer = buffer["writer"]
+    if any(isinstance(v, bool) or not isinstance(v, int) or v < 0 for v in writer.values()) \
+            or not 0 <= writer.get("_cursor", 0) < capacity:
+        return f"buffer.writer={writer!r}: not a write cursor within the buffer's {capacity:,} rows"
+    return None
+
+
+def _history_problem(ckpt: dict[str, Any], frames: int) -> str | None:
+    """What is wrong with the evaluation history and the curriculum's stage log: not lists of
+    records, an evaluation without its step (an integer within the frames collected), its
+    ``final`` flag (a boolean) or its mean (a finite number), a stage without its index."""
+    for key, spec in (("eval_history", {"step": int, "final": bool, "eval_mean": (int, float)}),
+                      ("stage_log", {"stage": int, "step": int})):
+        entries = ckpt.get(key) or []
+        if bad := plain_data_problem(entries, key):
+            return bad
+        for i, entry in enumerate(entries):
+            if bad := key_problem(entry, spec, f"{key}[{i}]"):
+                return bad
+            if not 0 <= entry["step"] <= frames:
+                return f"{key}[{i}].step={entry['step']}: not within the {frames:,} frames collected"
+            if key == "eval_history" and not math.isfinite(entry["eval_mean"]):
+                return f"{key}[{i}].eval_mean={entry['eval_mean']!r}: not a finite number"
+    return None
+
+
+def check_checkpoint(state: dict[str, Any], path) -> None:
+    """The one place a training checkpoint's content is checked, after its checksum
+    (:func:`load_checkpoint` calls it): its config plain data describing networks
+    (:func:`config_problem`); its counters possible (:func:`check_counters`); the agent's
+    tensors those of the networks its config builds (names and shapes: another algorithm, other
+    layer sizes or observations are refused before anything is loaded), finite and real; the
+    optimisers' state of those networks; the replay buffer within its capacity, finite, every
+    replay key there; the evaluation history and stage log well-formed. CheckpointError naming
+    the file and what is wrong. (The random-generator and collector states are checked where
+    they are restored, against the env.)"""
+
+    def bad(why: str) -> CheckpointError:
+        return CheckpointError(f"cannot resume: {path} holds an impossible checkpoint: {why}; it is corrupt, start a new run")
+
+    if why := (key_problem(state, {"config": dict, "agent": dict, "agent_extra": dict, "counters": dict, "rng": dict})
+               or config_problem(state["config"])):
+        raise bad(why)
+    if not isinstance(state["config"].get("budget"), dict):
+        raise bad("config.budget is missing")
+    frames = check_counters(state, str(path))["frames"]
+    try:
+        agent, cfg = agent_from_config(state["config"])
+    except CheckpointError as err:
+        raise bad(str(err)) from None
+    expected = {k: v.shape for k, v in agent.state_dict().items()}
+    why = (tensor_problem(state["agent"], "agent", floats_only=False) or shape_problem(expected, state["agent"], "agent")
+           or _optimizer_problem(agent, state["agent_extra"]))
+    if why:
+        raise bad(f"{why} (its config: algo={cfg.algo.name}, hidden_sizes={list(cfg.algo.hidden_sizes)})")
+    if state.get("buffer") is not None and (why := _buffer_problem(state["buffer"], agent, cfg, frames)):
+        raise bad(why)
+    if why := _history_problem(state, frames):
+        raise bad(why)
+    if not isinstance(state.get("wandb_id"), (str, type(None))):
+        raise bad(f"wandb_id is a {type(state['wandb_id']).__name__}, not a run id")
 
 
 # ----------------------------------------------------------------------------- the file
@@ -423,11 +643,14 @@ def _payload(path: Path) -> bytes:
     return payload
 
 
-def load_checkpoint(run_dir: str | Path) -> dict[str, Any]:
+def load_checkpoint(run_dir: str | Path, keep: bool = False) -> dict[str, Any]:
     """The state saved by :func:`save_checkpoint` in ``run_dir``. Loads tensors and plain
     types only (``weights_only=True``): nothing in the file is executed. Raises
     :class:`CheckpointError` naming the file if it is missing, of another format, corrupt
-    (checksum) or holds anything else."""
+    (checksum) or holds anything else, or if its content is impossible
+    (:func:`check_checkpoint`). ``keep``: hold the state for the next load of the same,
+    unchanged file (a run's validation, before the run loads it: the file is read and checked
+    once); restoring it into a run lets it go."""
     run_dir = Path(run_dir)
     path = run_dir / CHECKPOINT_FILE
     if not run_dir.is_dir():
@@ -437,6 +660,9 @@ def load_checkpoint(run_dir: str | Path) -> dict[str, Any]:
             f"cannot resume: {path} does not exist (the run was killed before its first checkpoint, "
             f"every budget.checkpoint_every steps); start a new run instead"
         )
+    key = _identity(path)
+    if key in _LAST:
+        return _LAST[key]
     payload = _payload(path)
     try:
         state = torch.load(io.BytesIO(payload), map_location="cpu", weights_only=True)
@@ -456,4 +682,20 @@ def load_checkpoint(run_dir: str | Path) -> dict[str, Any]:
     missing = [k for k in REQUIRED if k not in state]
     if missing:
         raise CheckpointError(f"cannot resume: {path} lacks {missing}; it is corrupt, start a new run")
+    check_checkpoint(state, path)
+    if keep:
+        _LAST.clear()
+        _LAST[key] = state
     return state
+
+
+# The checkpoint a load kept (load_checkpoint(..., keep=True)), by its file's identity (path, device,
+# inode, size, modification time): a run's validation loads its resume= checkpoint before any
+# directory is written, and the run then takes it from here instead of reading and checking the
+# whole file (replay buffer included) again. Restoring it into a run drops it (RunState.restore).
+_LAST: dict[tuple, dict[str, Any]] = {}
+
+
+def _identity(path: Path) -> tuple:
+    st = path.stat()
+    return (str(path.resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)

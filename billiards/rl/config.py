@@ -27,14 +27,15 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, List, Optional
+from typing import Any, ClassVar, List, Optional
 
 from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.device import device_error, threads_error
 from billiards.app_config import fixed_job_config as _fixed_job_config
-from billiards.app_config import BASIC_SWEEPER, RESUME_AUTO, numeric_bound_errors, register_app, validate_jobs
+from billiards.app_config import (BASIC_SWEEPER, RESUME_AUTO, numeric_bound_errors, register_app, resolved_config,
+                                  upper_bound_errors)
 from billiards.files import CHECKPOINT_FILE, repo_path
 from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
 from billiards.physics.config import PhysicsConfig, physics_errors
@@ -75,6 +76,22 @@ class WandbMode(str, enum.Enum):
     disabled = "disabled"
 
 
+# ----------------------------------------------------------------------------- bounds
+#
+# Every number a run is sized by has a finite upper bound, written once in its schema's ``UPPER``
+# (key -> (bound, why); :func:`billiards.app_config.upper_bound_errors`) and listed in
+# docs/reliability.md ("Numbers with bounds after resolution"): a value past it is refused while
+# validating, before a directory exists, instead of overflowing, allocating without end or
+# making a run that cannot finish or be stopped.
+MAX_WIDTH = 4096  # units of a hidden layer
+MAX_LAYERS = 8  # hidden layers of a network
+MAX_STEPS = 10**9  # frames of a budget (and every cadence in frames)
+MAX_INNINGS = 10_000  # innings of an evaluation, shots of an inning
+MAX_PPO_UPDATES = 10_000  # PPO gradient updates per rollout (epochs x minibatches), made before a stop is seen
+RATE = (1.0, "a learning rate")
+NETWORK = (MAX_WIDTH, "units per hidden layer")
+
+
 # ----------------------------------------------------------------------------- algorithms
 
 
@@ -110,9 +127,17 @@ class OffPolicyConfig:
     # evaluate the live actor.
     actor_ema: float = 0.0
 
-    @staticmethod
-    def errors(a) -> list[str]:
-        return [*_network_errors(a), *_positive("algo.batch_size", a.batch_size), *_positive("algo.utd", a.utd),
+    UPPER: ClassVar[dict] = {
+        "lr": RATE, "hidden_sizes": NETWORK,
+        "batch_size": (65_536, "replay rows per gradient update"),
+        "utd": (64.0, "gradient updates per collected frame"),
+        "buffer_size": (10**7, "replay rows, allocated at the first batch"),
+        "frames_per_batch": (2**20, "frames per collector batch"),
+    }
+
+    @classmethod
+    def errors(cls, a) -> list[str]:
+        return [*_network_errors(a, cls.UPPER), *_positive("algo.batch_size", a.batch_size), *_positive("algo.utd", a.utd),
                 *_positive("algo.buffer_size", a.buffer_size), *_need(0.0 < a.tau <= 1.0, f"algo.tau must lie in (0, 1], got {a.tau!r}"),
                 *_need(0.0 <= a.actor_ema < 1.0, f"algo.actor_ema must lie in [0, 1) (0 = off), got {a.actor_ema!r}"),
                 *_positive("algo.frames_per_batch", a.frames_per_batch, strict=False)]
@@ -126,9 +151,15 @@ class SACConfig(OffPolicyConfig):
     alpha_init: float = 1.0
     target_entropy: Optional[float] = None  # None = "auto" = -dim(action)
 
-    @staticmethod
-    def errors(a) -> list[str]:
-        return OffPolicyConfig.errors(a) + _positive("algo.alpha_init", a.alpha_init)
+    UPPER: ClassVar[dict] = {**OffPolicyConfig.UPPER, "alpha_init": (1e3, "the entropy temperature's start")}
+
+    @classmethod
+    def errors(cls, a) -> list[str]:
+        te = a.target_entropy
+        return [*super().errors(a), *_positive("algo.alpha_init", a.alpha_init),
+                *_need(te is None or -100.0 <= te <= 100.0,
+                       f"algo.target_entropy must be null (auto: minus the action's dimension) or lie in [-100, 100] "
+                       f"(nats), got {te!r}")]
 
 
 @dataclass
@@ -139,9 +170,15 @@ class TD3Config(OffPolicyConfig):
     noise_clip: float = 0.5
     policy_delay: int = 2  # one actor and target update per policy_delay critic updates
 
-    @staticmethod
-    def errors(a) -> list[str]:
-        return [*OffPolicyConfig.errors(a), *_positive("algo.exploration_noise", a.exploration_noise, strict=False),
+    UPPER: ClassVar[dict] = {**OffPolicyConfig.UPPER,
+                             "exploration_noise": (2.0, "twice the action's half-range"),
+                             "policy_noise": (2.0, "twice the action's half-range"),
+                             "noise_clip": (2.0, "twice the action's half-range"),
+                             "policy_delay": (1000, "critic updates per actor update")}
+
+    @classmethod
+    def errors(cls, a) -> list[str]:
+        return [*super().errors(a), *_positive("algo.exploration_noise", a.exploration_noise, strict=False),
                 *_positive("algo.policy_noise", a.policy_noise, strict=False),
                 *_positive("algo.noise_clip", a.noise_clip, strict=False), *_positive("algo.policy_delay", a.policy_delay)]
 
@@ -162,9 +199,25 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     normalize_advantage: bool = True
 
-    @staticmethod
-    def errors(a) -> list[str]:
-        return [*_network_errors(a), *_positive("algo.frames_per_batch", a.frames_per_batch), *_positive("algo.epochs", a.epochs),
+    UPPER: ClassVar[dict] = {
+        "lr": RATE, "hidden_sizes": NETWORK,
+        "frames_per_batch": (2**20, "frames per rollout"),
+        "epochs": (1000, "passes over a rollout"),
+        "entropy_coeff": (100.0, "a loss coefficient"),
+        "critic_coeff": (100.0, "a loss coefficient"),
+        "max_grad_norm": (1e3, "a gradient norm"),
+    }
+
+    @classmethod
+    def errors(cls, a) -> list[str]:
+        updates = a.epochs * (a.frames_per_batch // a.minibatch_size) if a.minibatch_size > 0 else 0
+        return [*_network_errors(a, cls.UPPER), *_positive("algo.frames_per_batch", a.frames_per_batch),
+                *_positive("algo.epochs", a.epochs),
+                *_positive("algo.entropy_coeff", a.entropy_coeff, strict=False),
+                *_positive("algo.critic_coeff", a.critic_coeff, strict=False),
+                *_need(updates <= MAX_PPO_UPDATES,
+                       f"algo.epochs x (algo.frames_per_batch // algo.minibatch_size) = {updates:,} gradient updates per "
+                       f"rollout, at most {MAX_PPO_UPDATES:,} (a stop request is seen after them)"),
                 *_positive("algo.minibatch_size", a.minibatch_size),
                 *_need(a.minibatch_size <= a.frames_per_batch,
                        f"algo.minibatch_size ({a.minibatch_size}) must not exceed algo.frames_per_batch ({a.frames_per_batch})"),
@@ -173,11 +226,14 @@ class PPOConfig:
                 *_positive("algo.max_grad_norm", a.max_grad_norm)]
 
 
-def _network_errors(a) -> list[str]:
-    """What every algorithm's node says about its networks and optimiser."""
-    return [*_need(len(a.hidden_sizes) > 0 and all(h > 0 for h in a.hidden_sizes),
-                   f"algo.hidden_sizes must be a non-empty list of positive widths, got {list(a.hidden_sizes)}"),
-            *_positive("algo.lr", a.lr), *_need(0.0 < a.gamma <= 1.0, f"algo.gamma must lie in (0, 1], got {a.gamma!r}")]
+def _network_errors(a, upper: dict) -> list[str]:
+    """What every algorithm's node says about its networks and optimiser, and every key's upper
+    bound (the schema's ``upper``)."""
+    return [*_need(0 < len(a.hidden_sizes) <= MAX_LAYERS and all(h > 0 for h in a.hidden_sizes),
+                   f"algo.hidden_sizes must be a non-empty list of at most {MAX_LAYERS} positive widths, "
+                   f"got {list(a.hidden_sizes)}"),
+            *_positive("algo.lr", a.lr), *_need(0.0 < a.gamma <= 1.0, f"algo.gamma must lie in (0, 1], got {a.gamma!r}"),
+            *upper_bound_errors(a, "algo.", upper)]
 
 
 # ----------------------------------------------------------------------------- the rest
@@ -193,9 +249,13 @@ class EnvConfig:
     max_shots: int = 10  # shots per training inning
     num_envs: int = 32  # B innings stepped together by one batched env
 
-    @staticmethod
-    def errors(e) -> list[str]:
-        return _positive("env.num_envs", e.num_envs) + _positive("env.max_shots", e.max_shots)
+    UPPER: ClassVar[dict] = {"num_envs": (65_536, "innings stepped together"),
+                             "max_shots": (MAX_INNINGS, "shots of a training inning")}
+
+    @classmethod
+    def errors(cls, e) -> list[str]:
+        return [*_positive("env.num_envs", e.num_envs), *_positive("env.max_shots", e.max_shots),
+                *upper_bound_errors(e, "env.", cls.UPPER)]
 
 
 @dataclass
@@ -213,10 +273,14 @@ class ShapingConfig:
     rm: float = 0.0  # reward += rm * V_rm(s, a), the learned reward model's P(score | s, a)
     rm_model: str = "results/rm/model.pt"  # the reward model (python -m billiards.rm train); relative paths: cwd, then the repo
 
-    @staticmethod
-    def errors(sh) -> list[str]:
+    UPPER: ClassVar[dict] = {**{key: (100.0, "a reward coefficient; a point is 1")
+                                for key in ("foul_penalty", "gentle", "near_miss", "rm")},
+                             "near_miss_sigma": (10.0, "metres")}
+
+    @classmethod
+    def errors(cls, sh) -> list[str]:
         errs = [m for key in ("foul_penalty", "gentle", "near_miss", "rm") for m in _positive(f"shaping.{key}", sh[key], strict=False)]
-        errs += _positive("shaping.near_miss_sigma", sh.near_miss_sigma)
+        errs += _positive("shaping.near_miss_sigma", sh.near_miss_sigma) + upper_bound_errors(sh, "shaping.", cls.UPPER)
         errs += _need(sh.gentle_kind in ("leave", "power"),
                       f"shaping.gentle_kind must be leave (the paper's leave-position bonus) or power, got {sh.gentle_kind!r}")
         if not sh.rm:
@@ -305,13 +369,20 @@ class BudgetConfig:
     # the final evaluation follows
     cpu_minutes: float = 0.0
 
-    @staticmethod
-    def errors(b) -> list[str]:
+    UPPER: ClassVar[dict] = {
+        **{key: (MAX_STEPS, "frames") for key in ("total_steps", "init_random_steps", "eval_every", "checkpoint_every",
+                                                  "log_every")},
+        "eval_innings": (MAX_INNINGS, "innings of an evaluation"), "final_eval_innings": (MAX_INNINGS, "innings of an evaluation"),
+        "cpu_minutes": (1e6, "about two years"),
+    }
+
+    @classmethod
+    def errors(cls, b) -> list[str]:
         errs = _positive("budget.total_steps", b.total_steps)
         for key in ("init_random_steps", "eval_every", "checkpoint_every"):
             errs += _positive(f"budget.{key}", b[key], strict=False)
         errs += [m for key in ("eval_innings", "final_eval_innings", "log_every") for m in _positive(f"budget.{key}", b[key])]
-        return errs + _positive("budget.cpu_minutes", b.cpu_minutes, strict=False)
+        return errs + _positive("budget.cpu_minutes", b.cpu_minutes, strict=False) + upper_bound_errors(b, "budget.", cls.UPPER)
 
 
 @dataclass
@@ -324,10 +395,12 @@ class EvalConfig:
     max_shots: int = 10
     seed: int = 0  # eval racks are the same for every run and every evaluation
 
-    @staticmethod
-    def errors(ev) -> list[str]:
+    UPPER: ClassVar[dict] = {"max_shots": (MAX_INNINGS, "shots of an evaluation inning")}
+
+    @classmethod
+    def errors(cls, ev) -> list[str]:
         # eval.seed: the racks' np.random.default_rng (any integer >= 0), checked here, not at the final evaluation
-        return [*_positive("eval.max_shots", ev.max_shots),
+        return [*_positive("eval.max_shots", ev.max_shots), *upper_bound_errors(ev, "eval.", cls.UPPER),
                 *_need(len(ev.starts) > 0, "eval.starts must list at least one start (random, canonical)"),
                 *_need(ev.seed >= 0, f"eval.seed must be an integer >= 0 (a numpy seed), got {ev.seed!r}")]
 
@@ -363,6 +436,8 @@ class TrainConfig:
     # a run dir to continue from its last checkpoint; auto: this job's own dir if it holds one
     resume: Optional[str] = None
 
+    UPPER: ClassVar[dict] = {"paper_steps": (MAX_STEPS, "frames")}
+
 
 Config = TrainConfig  # the former name (billiards/rl/train.py imports it)
 
@@ -397,7 +472,13 @@ def appended_keys(cfg: DictConfig) -> list[str]:
 
 
 def _errors(cfg: DictConfig) -> list[str]:
-    errs: list[str] = numeric_bound_errors(cfg) + appended_keys(cfg)
+    """Every problem of the config, checked on its resolved values (:func:`resolved_config`:
+    an interpolation is checked as what it yields, one through a resolver the project does not
+    allow is refused)."""
+    cfg, errs = resolved_config(cfg)
+    if errs:
+        return errs
+    errs = numeric_bound_errors(cfg) + appended_keys(cfg) + upper_bound_errors(cfg, "", TrainConfig.UPPER)
     a, e = cfg.algo, cfg.env
     for key, schema in (("budget", BudgetConfig), ("env", EnvConfig), ("eval", EvalConfig), ("shaping", ShapingConfig),
                         ("curriculum", CurriculumConfig), ("logger", LoggerConfig)):
@@ -427,6 +508,13 @@ def _errors(cfg: DictConfig) -> list[str]:
             )
         elif (run_dir / CHECKPOINT_FILE).stat().st_size == 0:
             errs.append(f"resume={cfg.resume!r}: {run_dir / CHECKPOINT_FILE} is empty (corrupt); start a new run instead")
+        else:  # loaded and checked now, before anything is written (the run reuses what was loaded)
+            from billiards.rl.checkpoint import CheckpointError, load_checkpoint
+
+            try:
+                load_checkpoint(run_dir, keep=True)
+            except CheckpointError as err:
+                errs.append(f"resume={cfg.resume!r}: {err}")
     return errs
 
 
@@ -453,26 +541,33 @@ def _refuse_other_apps_preset(config: DictConfig) -> None:
 class ValidateConfig(Callback):
     """Hydra callback (``hydra.callbacks`` in conf/config.yaml): validates the training config
     before Hydra creates any directory. For a multirun it composes and validates every job
-    first, so one bad job aborts the whole sweep before anything is written.
+    first, so one bad job aborts the whole sweep before anything is written. Then it claims the
+    run's directories (billiards.app_config, "Whose directory" in docs/reliability.md).
 
     Hydra turns exceptions raised by callbacks into warnings, so a failure exits the process
     (``SystemExit``, status 1) with the message on stderr.
     """
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        from billiards.app_config import claim_run_directory
+
         _refuse_other_apps_preset(config)
         try:
             validate(config)
         except Exception as err:  # Hydra would only warn and go on
             raise SystemExit(f"Error: {err}") from None
+        claim_run_directory(config)
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        from billiards.app_config import claim_sweep_directories
+
         _refuse_other_apps_preset(config)
         print(f"sweep: {config.hydra.sweep.dir}", flush=True)
         if config.hydra.sweeper._target_ != BASIC_SWEEPER:
             self._check_fixed_part(config)
+            claim_sweep_directories(config)
             return
-        validate_jobs(config, validate)
+        claim_sweep_directories(config, validate)  # every job validated, then its directory claimed
 
     @staticmethod
     def _check_fixed_part(config: DictConfig) -> None:

@@ -23,31 +23,70 @@ from billiards.physics import PhysicsParams
 from billiards import compat
 from billiards.physics.config import params_from_config
 
-from .checkpoint import CheckpointError, load_checkpoint
+from .checkpoint import CheckpointError, agent_from_config, config_problem, load_checkpoint
 
 POLICY_FORMAT = "billiards-policy-1"
 
+_build_agent = agent_from_config  # the agent a stored config describes (billiards.rl.checkpoint)
 
-def _build_agent(config: dict):
-    from billiards.envs import make_env
 
-    from .agents import make_agent
+def check_policy(payload: dict, path):
+    """The one place an exported policy's content is checked, after its seal: its keys (a config,
+    the actor's tensors; its evaluation and summary records, if any), the config plain data that
+    describes networks (:func:`~billiards.rl.checkpoint.config_problem`: no interpolation, an
+    algorithm of this version, positive layer widths ...), the actor's tensors real, finite and
+    of the names and shapes of the actor that config builds -- compared before anything is
+    loaded (a config that says 32 inputs for a 28-input actor is refused). CheckpointError
+    naming the file and what is wrong; returns ``(agent, cfg)``, the agent built from the config
+    with the actor's weights loaded."""
+    from billiards.files import key_problem, plain_data_problem, shape_problem, tensor_problem
 
-    from billiards.physics.noise import noise_from_config
+    def bad(why: str) -> CheckpointError:
+        return CheckpointError(f"exported policy file {path} is not a usable policy: {why}")
 
-    cfg = OmegaConf.create(config)
-    # only the observation and action layout matter here (no shaping, e.g. no reward model); the
-    # noise adds the level to the observation when it is variable
-    env = make_env(1, constrain_aim=bool(cfg.env.constrain_aim), extra_features=bool(cfg.env.extra_features),
-                   noise=noise_from_config(cfg.get("noise")))
-    obs_dim = env.observation_spec_unbatched["observation"].shape[-1]
-    return make_agent(cfg.algo, obs_dim, env.action_spec_unbatched), cfg
+    why = (key_problem(payload, {"config": dict, "actor": dict}) or config_problem(payload["config"])
+           or next((p for key in ("eval", "summary") if (p := plain_data_problem(payload.get(key), key))), None)
+           or tensor_problem(payload["actor"], "actor"))
+    if why:
+        raise bad(why)
+    try:
+        agent, cfg = agent_from_config(payload["config"])
+    except CheckpointError as err:
+        raise bad(str(err)) from None
+    expected = {k: v.shape for k, v in agent.actor.state_dict().items()}
+    if why := shape_problem(expected, payload["actor"], "actor"):
+        raise bad(f"{why} (its config: algo={cfg.algo.name}, hidden_sizes={list(cfg.algo.hidden_sizes)}, "
+                  f"extra_features={bool(cfg.env.get('extra_features', False))}, noise={cfg.get('noise', {}).get('preset')})")
+    agent.actor.load_state_dict(payload["actor"])
+    return agent, cfg
+
+
+def _load_policy(path: Path):
+    """``(payload, agent, cfg)`` of an exported policy file, sealed and checked (:func:`check_policy`)."""
+    from billiards.files import load_tagged
+
+    payload = load_tagged(path, POLICY_FORMAT, CheckpointError, "exported policy")
+    return (payload, *check_policy(payload, path))
 
 
 def _load_policy_file(path: Path) -> dict:
-    from billiards.files import load_tagged
+    """An exported policy file's payload, sealed and checked (:func:`check_policy`)."""
+    return _load_policy(path)[0]
 
-    return load_tagged(path, POLICY_FORMAT, CheckpointError, "exported policy")
+
+def policy_file_error(path) -> str | None:
+    """Why the policy at ``path`` (an exported policy file, a run dir or its checkpoint) cannot
+    be played, or None: the file loaded and checked now (its seal, then its content), e.g. by an
+    app's validation before any directory is written."""
+    path = Path(path)
+    try:
+        if path.is_file() and path.name != CHECKPOINT_FILE:
+            _load_policy(path)
+        else:
+            load_checkpoint(path.parent if path.name == CHECKPOINT_FILE else path)
+    except CheckpointError as err:
+        return str(err)
+    return None
 
 
 def load_policy(path: str | Path):
@@ -60,9 +99,7 @@ def load_policy(path: str | Path):
     """
     path = Path(path)
     if path.is_file() and path.name != CHECKPOINT_FILE:
-        state = _load_policy_file(path)
-        agent, cfg = _build_agent(state["config"])
-        agent.actor.load_state_dict(state["actor"])  # the exported (evaluated) actor
+        _, agent, cfg = _load_policy(path)  # the exported (evaluated) actor's weights loaded
         policy = agent.policy
     else:
         run_dir = path.parent if path.name == CHECKPOINT_FILE else path

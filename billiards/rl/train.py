@@ -77,8 +77,8 @@ RUNTIME_KEYS = ("threads", "progress", "compile", "device")
 # a killed run can be given a CPU-time limit, e.g. to end it within one CPU hour.
 RESUME_KEYS = ("budget.cpu_minutes",)
 
-__all__ = ["RESUME_KEYS", "RUNTIME_KEYS", "OnDevice", "Run", "finish", "load_run_config", "make_collector",
-           "make_replay_buffer", "make_run", "periodic", "train", "train_off_policy", "train_ppo"]
+__all__ = ["RESUME_KEYS", "RUNTIME_KEYS", "OnDevice", "Run", "finish", "finished_line", "load_run_config", "make_collector",
+           "make_replay_buffer", "make_run", "periodic", "resume_state", "train", "train_off_policy", "train_ppo"]
 
 
 # ----------------------------------------------------------------------------- setup helpers
@@ -188,6 +188,33 @@ def finished_result(ckpt: dict[str, Any], cfg: DictConfig, run_dir: Path) -> tup
     if spent and finals and (Path(run_dir) / EVAL_FILE).is_file():
         return float(finals[0]["eval_mean"]), frames  # the first start is the primary one
     return None
+
+
+def finished_line(run_dir, frames: int, mean: float) -> str:
+    """What a resume of a finished run says."""
+    return (f"resume: {run_dir} is already finished ({frames} frames, final evaluation in {EVAL_FILE}: {mean:.3f} points "
+            f"per inning); nothing to do, nothing changed. Start a new run to train further.")
+
+
+def resume_state(run_dir: Path, config: DictConfig, finished: bool) -> str | None:
+    """The directory check's look at the training run in ``run_dir`` before a resume
+    (:class:`billiards.app_config.RunKind`): with ``finished``, the line :func:`train` would say
+    if the run is finished (its checkpoint, budget and evaluation, as :func:`finished_result`
+    reads them with this command line's ``budget.cpu_minutes``), else None; ValueError for a
+    checkpoint that cannot be loaded."""
+    if not finished or not (Path(run_dir) / EVAL_FILE).is_file():
+        return None  # the checkpoint's presence is validate's; its contents are read by the run
+    try:
+        ckpt = load_checkpoint(run_dir)
+    except CheckpointError as err:
+        raise ValueError(str(err)) from None
+    given = [str(o) for o in (OmegaConf.select(config, "hydra.overrides.task", default=None) or [])]
+    try:
+        cfg = resume_config(ckpt["config"], config, overrides=[o for o in given if o.split("=", 1)[0].lstrip("+~") in RESUME_KEYS])
+        done = finished_result(ckpt, cfg, Path(run_dir))
+    except Exception:  # a config the run itself reports on
+        return None
+    return None if done is None else finished_line(run_dir, done[1], done[0])
 
 
 # ----------------------------------------------------------------------------- the run's parts
@@ -367,7 +394,8 @@ def make_run(cfg: DictConfig, run_dir: Path, ckpt: dict | None = None) -> Run:
 
 class StopRequests:
     """SIGINT (Ctrl-C), SIGTERM and SIGUSR1 (a scheduler's preemption notice: SLURM, submitit)
-    while a run trains: the handler only records the signal; the loop checks after each batch,
+    while a run trains: the handler only records the signal; the loop checks between any two
+    gradient updates of a batch (:func:`gradient_updates`: the rest stay owed) and after each batch,
     writes a checkpoint at that step and exits with 128 + the signal's number, so nothing finished
     is lost and ``resume=<run dir>`` continues to the uninterrupted run's result (a batch boundary:
     the checkpoint holds the collector's state there). A second Ctrl-C stops at once
@@ -525,6 +553,33 @@ def collecting(run: Run, policy, frames_per_batch: int) -> Iterator[Iterable[Ten
         collector.shutdown()
 
 
+def gradient_updates(run: Run, stop: StopRequests, count: int) -> bool:
+    """``count`` gradient updates (off-policy: utd x a batch's frames), each on a fresh sample of
+    the replay buffer, a stop request (a signal) seen between any two of them: the updates not
+    made stay owed (the run state's ``owed``, checkpointed), and the resumed run makes them
+    before its next batch, as the uninterrupted run did. Whether all ``count`` were made."""
+    for i in range(count):
+        if stop.signum is not None:
+            run.state.owed += count - i
+            return False
+        run.window.metrics = run.agent.update(run.rb.sample())
+    return True
+
+
+def after_updates(run: Run, bar, stop: StopRequests, complete: bool, frames: int) -> bool:
+    """After a batch of ``frames`` frames and its gradient updates (``complete``: all made):
+    the warm-up flag, the curriculum's stage, the progress bar and what is due
+    (:func:`periodic`), then a stop request (a checkpoint and exit; updates left owed are made
+    by the resumed run first, before these). Whether the CPU budget is spent."""
+    if complete:
+        run.agent.set_warmup(run.state.frames < run.cfg.budget.init_random_steps)
+        run.update_stage()
+        bar.update(frames)
+        periodic(run, bar)
+    stop.stop_if_requested(run)
+    return run.cpu_spent()
+
+
 def train_off_policy(run: Run) -> float:
     """SAC and TD3 to the budget; returns the final mean points per inning."""
     cfg, agent, rb, state = run.cfg, run.agent, run.rb, run.state
@@ -532,20 +587,16 @@ def train_off_policy(run: Run) -> float:
     with session(run) as bar, StopRequests() as stop:
         agent.set_warmup(state.frames < b.init_random_steps)
         with collecting(run, agent.explore, a.frames_per_batch or cfg.env.num_envs) as batches:
-            for data in batches:
+            spent = False
+            if state.owed >= 1:  # stopped amid a batch's updates: the rest first, as the uninterrupted run made them
+                spent = after_updates(run, bar, stop, gradient_updates(run, stop, state.take_updates(0.0)), 0)
+            for data in () if spent else batches:
                 n = data.numel()
                 state.frames += n
                 rb.extend(data.reshape(-1).select(*agent.replay_keys))
                 run.window.add(data)
-                if state.frames >= b.init_random_steps:
-                    for _ in range(state.take_updates(a.utd * n)):
-                        run.window.metrics = agent.update(rb.sample())
-                agent.set_warmup(state.frames < b.init_random_steps)
-                run.update_stage()
-                bar.update(n)
-                periodic(run, bar)
-                stop.stop_if_requested(run)
-                if run.cpu_spent():
+                count = state.take_updates(a.utd * n) if state.frames >= b.init_random_steps else 0
+                if after_updates(run, bar, stop, gradient_updates(run, stop, count), n):
                     break
         return finish(run, bar)
 
@@ -588,9 +639,7 @@ def train(cfg: DictConfig, run_dir: str | Path | None = None) -> float:
         finished = finished_result(ckpt, cfg, run_dir) if ckpt is not None else None
         if finished is not None:
             mean, frames = finished
-            log.warning("resume: %s is already finished (%d frames, final evaluation in %s: %.3f points per inning); "
-                        "nothing to do, nothing changed. Start a new run to train further.",
-                        run_dir, frames, EVAL_FILE, mean)
+            log.warning(finished_line(run_dir, frames, mean))
             return mean
         run = make_run(cfg, run_dir, ckpt)
         record_start(run_dir, "fresh" if ckpt is None else "resume", run.state.frames,

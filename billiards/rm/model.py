@@ -11,7 +11,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -133,25 +132,53 @@ def save_model(path, model: RewardModel, meta: dict | None = None) -> Path:
     return save_tagged(path, payload)
 
 
+MAX_WIDTH = 4096  # units of a hidden layer a reward-model file may declare
+MAX_LAYERS = 8
+
+
+def check_reward_model(payload: dict, path) -> RewardModel:
+    """The one place a reward-model file's content is checked, after its seal: its keys and
+    their types, the input features this code computes, the hidden sizes 1 to
+    :data:`MAX_LAYERS` widths in [1, :data:`MAX_WIDTH`], the weights real and finite with the
+    names and shapes of the network those sizes build (compared before anything is loaded), the
+    metadata plain data (and its table, if it names one, valid). :class:`RewardModelError`
+    naming the file and what is wrong; returns the model with the weights loaded."""
+    from billiards.files import key_problem, plain_data_problem, shape_problem, tensor_problem
+
+    def bad(why: str) -> RewardModelError:
+        return RewardModelError(f"reward model file {path} is not a usable reward model: {why}")
+
+    if why := key_problem(payload, {"n_features": int, "hidden": list, "state_dict": dict}):
+        raise bad(why)
+    if payload["n_features"] != N_FEATURES:
+        raise bad(f"it expects {payload['n_features']} input features, this code computes {N_FEATURES}")
+    hidden = payload["hidden"]
+    if not (0 < len(hidden) <= MAX_LAYERS
+            and all(isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= MAX_WIDTH for h in hidden)):
+        raise bad(f"hidden={hidden!r}: not 1 to {MAX_LAYERS} layer widths in [1, {MAX_WIDTH}]")
+    meta = payload.get("meta") or {}
+    if why := (plain_data_problem(meta, "meta") or key_problem({"meta": meta}, {"meta": dict})
+               or tensor_problem(payload["state_dict"], "state_dict")):
+        raise bad(why)
+    model = RewardModel(hidden)
+    if why := shape_problem({k: v.shape for k, v in model.state_dict().items()}, payload["state_dict"], "state_dict"):
+        raise bad(why)
+    model.load_state_dict(payload["state_dict"], strict=True)
+    try:
+        model.params = recorded_physics(meta.get("physics_params"))
+    except (ValueError, TypeError, AttributeError) as err:
+        raise bad(f"its metadata's table is not valid ({err})") from None
+    model.meta = dict(meta)
+    return model
+
+
 def load_model(path) -> RewardModel:
     """Load a model written by :func:`save_model`, in eval mode, with its metadata in
     ``model.meta``. Raises :class:`RewardModelError` naming the path if the file is missing,
-    empty, not a reward-model file, or its weights do not fit the stored architecture."""
+    empty, not a reward-model file, or its content is not a usable model
+    (:func:`check_reward_model`)."""
     from billiards.files import load_tagged
 
     path = Path(path)
     payload = load_tagged(path, FILE_FORMAT, RewardModelError, "reward model")
-    if payload.get("n_features") != N_FEATURES:
-        raise RewardModelError(
-            f"reward model {path} expects {payload.get('n_features')} input features, this code computes {N_FEATURES}"
-        )
-    try:
-        model = RewardModel(payload["hidden"])
-        model.load_state_dict(payload["state_dict"], strict=True)
-    except (KeyError, TypeError, ValueError, RuntimeError) as err:
-        raise RewardModelError(f"reward model file {path} is incompatible: {err}") from None
-    if not all(math.isfinite(float(v.abs().max())) for v in model.state_dict().values() if v.numel()):
-        raise RewardModelError(f"reward model file {path} has non-finite weights")
-    model.meta = dict(payload.get("meta") or {})
-    model.params = recorded_physics(model.meta.get("physics_params"))
-    return model.eval()
+    return check_reward_model(payload, path).eval()

@@ -37,34 +37,50 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, List, Optional
+from typing import Any, ClassVar, List, Optional
 
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from billiards import compat
 from billiards.tables import paper_tables
-from billiards.app_config import RESUME_AUTO, ValidatingCallback, numeric_bound_errors, register_app
+from billiards.app_config import (RESUME_AUTO, ValidatingCallback, numeric_bound_errors, register_app, resolved_config,
+                                  upper_bound_errors)
 from billiards.device import device_error, threads_error
 from billiards.files import CONFIG_FILE, repo_path
 from billiards.physics.config import PhysicsConfig, physics_errors
 from billiards.physics.noise import NoiseConfig, noise_errors, noise_from_config
 
+# ----------------------------------------------------------------------------- bounds
+#
+# Every count and weight of a search has a finite upper bound, written once in its schema's
+# ``UPPER`` (key -> (bound, why); :func:`billiards.app_config.upper_bound_errors`) and listed in
+# docs/reliability.md ("Numbers with bounds after resolution").
+MAX_SEARCH = 10**5  # simulations per decision, and every count a decision spends them on
+MAX_WEIGHT = 100.0  # a weight in points (a score is worth 1)
+SIMS = (MAX_SEARCH, "simulations per decision")
+COUNT = (MAX_SEARCH, "at most the simulations of a decision")
+WEIGHT = (MAX_WEIGHT, "points; a score is worth 1")
+
+
 # ----------------------------------------------------------------------------- search
 
 
 class _SearchOption:
-    """What the search options share: their checks (the budget, and the knobs' own ranges as the
-    search's settings object checks them)."""
+    """What the search options share: their checks (the budget, every key's upper bound and the
+    knobs' own ranges as the search's settings object checks them)."""
+
+    UPPER: ClassVar[dict] = {}
 
     def errors(self) -> list[str]:
         if self.budget < 1:
             return [f"search.budget must be >= 1, got {self.budget}"]
+        errs = upper_bound_errors(self, "search.", self.UPPER)
         try:
             self.settings()
         except ValueError as err:
-            return [f"search ({self.kind}): {err}"]
-        return []
+            errs.append(f"search ({self.kind}): {err}")
+        return errs
 
 
 @dataclass
@@ -78,6 +94,8 @@ class H2SearchConfig(_SearchOption):
     m1: int = 10
     gamma: float = 0.99
     foul_penalty: float = 1.0
+
+    UPPER: ClassVar[dict] = {"budget": SIMS, "k1": COUNT, "m1": COUNT, "foul_penalty": WEIGHT}
 
     def settings(self):
         """The :class:`~billiards.search.lookahead.H2Config` (ValueError if the split is invalid)."""
@@ -108,6 +126,10 @@ class PUCTSearchConfig(_SearchOption):
     max_depth: int = 8
     gamma: float = 0.99
     foul_penalty: float = 1.0
+
+    UPPER: ClassVar[dict] = {"budget": SIMS, "pool": COUNT, "max_depth": (1000, "plies of a tree"),
+                             "c_puct": (100.0, "an exploration weight"), "pw_c": (100.0, "a widening coefficient"),
+                             "foul_penalty": WEIGHT}
 
     def settings(self):
         """The :class:`~billiards.search.puct.PUCTConfig` (ValueError if a knob is out of range)."""
@@ -152,6 +174,10 @@ class RobustSearchConfig(_SearchOption):
     safeties: int = 0  # safety play: also weigh this many screened misses that leave the opponent the hardest table
     safety_draws: int = 0  # safety play: screen this many soft shots into a red's cone too, as safety candidates
     value: Optional[str] = None  # the table value file (billiards.search.value) that prices the leaves
+
+    UPPER: ClassVar[dict] = {"budget": SIMS, **{key: COUNT for key in ("k1", "samples", "m1", "k2", "target", "wave", "safeties",
+                                                                       "safety_draws")},
+                             **{key: WEIGHT for key in ("foul_penalty", "position", "leave")}}
 
     def settings(self):
         """The :class:`~billiards.search.robust.RobustConfig` (ValueError if a knob is out of range)."""
@@ -205,10 +231,13 @@ class RobustSearchConfig(_SearchOption):
 
 
 class _ProtocolOption:
+    UPPER: ClassVar[dict] = {}
+
     def errors(self) -> list[str]:
-        """Every count of the protocol must be >= 1."""
+        """Every count of the protocol must be >= 1, and at most its bound."""
         return [f"protocol.{f.name} must be >= 1, got {getattr(self, f.name)}"
-                for f in dataclasses.fields(self) if f.name != "name" and getattr(self, f.name) < 1]
+                for f in dataclasses.fields(self) if f.name != "name" and getattr(self, f.name) < 1] \
+            + upper_bound_errors(self, "protocol.", self.UPPER)
 
 
 @dataclass
@@ -219,6 +248,8 @@ class P1Config(_ProtocolOption):
     n_innings: int = 100
     shots: int = 100
 
+    UPPER: ClassVar[dict] = {"n_innings": (10**5, "innings"), "shots": (10**6, "shots of an inning")}
+
 
 @dataclass
 class P3Config(_ProtocolOption):
@@ -228,6 +259,8 @@ class P3Config(_ProtocolOption):
     name: str = "p3"
     seeds: int = 10
     cap: int = 10000
+
+    UPPER: ClassVar[dict] = {"seeds": (10**5, "chains"), "cap": (10**6, "shots of a chain")}
 
 
 # ----------------------------------------------------------------------------- proposers
@@ -301,9 +334,12 @@ class RankedProposerConfig:
     def path(self) -> str:
         return str(repo_path(self.ranker))
 
+    UPPER: ClassVar[dict] = {"pool": (MAX_SEARCH, "candidates ranked per decision")}
+
     def errors(self) -> list[str]:
         """The pool, and the ranker file loaded and checked now, before any directory is written."""
         errs = [f"proposer.pool must be >= 1, got {self.pool}"] if self.pool < 1 else []
+        errs += upper_bound_errors(self, "proposer.", self.UPPER)
         if not Path(self.path()).is_file():
             how = f" (trained with: {self.command})" if self.command else ""
             return errs + [f"proposer {self.name!r}: no ranker file at {self.ranker}{how}"]
@@ -377,24 +413,13 @@ TRAIN_COMMAND = ("python train.py -m experiment=table5 variant=table5/{shaping} 
 
 
 def _policy_file_errors(proposer) -> list[str]:
-    """Each of a policy proposer's files loaded and checked (format, checksum, finite weights) now,
-    before any directory is written: exported policy files by their seal, run dirs and checkpoint
-    files by the checkpoint's own checksum."""
-    from billiards.files import CHECKPOINT_FILE
-    from billiards.rl.checkpoint import CheckpointError, load_checkpoint
-    from billiards.rl.policy import _load_policy_file
+    """Each of a policy proposer's files loaded and checked now, before any directory is written
+    (:func:`billiards.rl.policy.policy_file_error`: exported policy files by their seal and
+    content, run dirs and checkpoint files by the checkpoint's checksum and content)."""
+    from billiards.rl.policy import policy_file_error
 
-    errs = []
-    for given, p in zip(proposer.checkpoints, proposer.paths()):
-        p = Path(p)
-        try:
-            if p.is_file() and p.name != CHECKPOINT_FILE:
-                _load_policy_file(p)
-            else:
-                load_checkpoint(p.parent if p.name == CHECKPOINT_FILE else p)
-        except CheckpointError as err:
-            errs.append(f"proposer {proposer.name!r}: {given}: {err}")
-    return errs
+    return [f"proposer {proposer.name!r}: {given}: {err}" for given, p in zip(proposer.checkpoints, proposer.paths())
+            if (err := policy_file_error(p))]
 
 
 def shipped_proposer(name: str) -> PolicyProposerConfig:
@@ -559,8 +584,15 @@ def saved_config(run_dir: str | Path) -> DictConfig:
 
 
 def errors(cfg) -> list[str]:
-    """Every problem of a composed search config that a type cannot express, each naming its key."""
-    errs: list[str] = numeric_bound_errors(cfg) if isinstance(cfg, DictConfig) else []
+    """Every problem of a composed search config that a type cannot express, each naming its key;
+    checked on its resolved values (:func:`resolved_config`: an interpolation is checked as what
+    it yields, one through a resolver the project does not allow is refused)."""
+    errs: list[str] = []
+    if isinstance(cfg, DictConfig):
+        cfg, errs = resolved_config(cfg)
+        if errs:
+            return errs
+        errs = numeric_bound_errors(cfg)
     extra = [k for k in _extra_keys(cfg, SearchAppConfig, "") if k != "hydra"]  # hydra: the callback's view
     if extra:
         errs.append(f"{', '.join(extra)}: not a key of SearchAppConfig")

@@ -146,15 +146,60 @@ class TaggedMLP:
                                   "meta": json.dumps(self.meta)})
 
     @classmethod
-    def load(cls, path):
-        """Read a file of this kind (tensors and plain values only: nothing in it is executed)."""
-        payload = load_tagged(path, cls.FORMAT, cls.ERROR, cls.WHAT)
+    def check(cls, payload: dict, path) -> dict:
+        """The one place a file of this kind is checked, after its seal: its keys and their types,
+        every tensor real and finite, the layers a chain of (in, out) matrices from
+        :attr:`N_FEATURES` features to one logit with a bias each, the feature scales ``std``
+        > 0 (a zero would score NaN), and its metadata a JSON object naming a valid table
+        (``physics_params``) and noise (``noise``). ``ERROR`` naming the file and what is wrong;
+        returns the metadata."""
+        import torch
+
+        from billiards.files import key_problem, tensor_problem
+        from billiards.physics.checks import ContractError
+
+        def bad(why: str):
+            return cls.ERROR(f"{cls.WHAT} file {path} is not a usable {cls.WHAT}: {why}")
+
+        why = (key_problem(payload, {"weights": list, "biases": list, "mean": torch.Tensor, "std": torch.Tensor,
+                                     "meta": str})
+               or tensor_problem({k: payload[k] for k in ("weights", "biases", "mean", "std")}, "tensors"))
+        if why:
+            raise bad(why)
+        n, weights, biases = cls.N_FEATURES, payload["weights"], payload["biases"]
+        shapes = [tuple(w.shape) for w in weights]
+        if (not shapes or len(biases) != len(shapes) or any(len(sh) != 2 for sh in shapes) or shapes[0][0] != n
+                or shapes[-1][1] != 1 or any(a[1] != b[0] for a, b in zip(shapes, shapes[1:]))
+                or any(tuple(b.shape) != (sh[1],) for sh, b in zip(shapes, biases))):
+            raise bad(f"its layers do not chain from {n} features to one logit: weights {shapes}, "
+                      f"biases {[tuple(b.shape) for b in biases]}")
+        for key in ("mean", "std"):
+            if tuple(payload[key].shape) != (n,):
+                raise bad(f"{key} has shape {tuple(payload[key].shape)}, not ({n},)")
+        if not bool((payload["std"] > 0).all()):
+            raise bad(f"std holds {float(payload['std'].min()):g}: a feature's scale must be > 0 (0 would score NaN)")
         try:
-            arr = lambda x: x.numpy().astype(np.float32)
-            return cls([arr(w) for w in payload["weights"]], [arr(b) for b in payload["biases"]],
-                       arr(payload["mean"]), arr(payload["std"]), json.loads(payload["meta"]))
-        except (KeyError, TypeError, AttributeError, ValueError) as err:
-            raise cls.ERROR(f"{path}: not a complete {cls.WHAT} ({type(err).__name__}: {err})") from None
+            meta = json.loads(payload["meta"])
+        except (ValueError, RecursionError) as err:
+            raise bad(f"its metadata is not JSON ({err})") from None
+        if why := key_problem(meta, {"physics_params": dict, "noise": dict}, "meta"):
+            raise bad(why)
+        try:
+            PhysicsParams.from_dict(meta["physics_params"])
+            NoiseModel(**meta["noise"])
+        except (ContractError, ValueError, TypeError) as err:
+            raise bad(f"its metadata's table or noise is not valid ({err})") from None
+        return meta
+
+    @classmethod
+    def load(cls, path):
+        """Read a file of this kind (tensors and plain values only: nothing in it is executed),
+        sealed and checked (:meth:`check`)."""
+        payload = load_tagged(path, cls.FORMAT, cls.ERROR, cls.WHAT)
+        meta = cls.check(payload, path)
+        arr = lambda x: x.numpy().astype(np.float32)  # noqa: E731
+        return cls([arr(w) for w in payload["weights"]], [arr(b) for b in payload["biases"]],
+                   arr(payload["mean"]), arr(payload["std"]), meta)
 
     @property
     def params(self) -> PhysicsParams:

@@ -25,7 +25,8 @@ from .config import option, saved_config, typed, validate
 from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, run_p1, run_p3
 from .ranker import noise_mismatch
 
-__all__ = ["CONFIG_FILE", "RESULTS_FILE", "describe", "make_actor", "make_proposer", "resume_config", "run", "search_identity"]
+__all__ = ["CONFIG_FILE", "RESULTS_FILE", "describe", "make_actor", "make_proposer", "resume_config", "resume_state", "run",
+           "search_identity"]
 
 
 def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS, device=None):
@@ -80,7 +81,38 @@ def finished_run(out_dir: Path) -> dict | None:
         res = json.loads((out_dir / RESULTS_FILE).read_text())
     except (OSError, ValueError):
         return None
-    return res if isinstance(res, dict) and not res.get("extra", {}).get("partial") else None
+    extra = res.get("extra") if isinstance(res, dict) else None
+    return res if isinstance(res, dict) and not (isinstance(extra, dict) and extra.get("partial")) else None
+
+
+def resume_state(out_dir: Path, config, finished: bool) -> str | None:
+    """The directory check's look at the search in ``out_dir`` before a resume
+    (:class:`billiards.app_config.RunKind`): its saved config must load (ValueError naming it
+    otherwise); with ``finished``, the line a resume says when nothing is left to play there --
+    ``results.json`` final and, for a P3, every chain in its ledger, none torn -- else None."""
+    out_dir = Path(out_dir)
+    if not (out_dir / CONFIG_FILE).is_file():
+        return None  # nothing to continue: validate refuses resume=<dir>, resume=auto starts afresh
+    try:
+        saved = saved_config(out_dir)
+    except ValueError:
+        raise
+    except Exception as err:  # a config.yaml that is not YAML, cannot be read, ...
+        first = (str(err).strip().splitlines() or [type(err).__name__])[0]
+        raise ValueError(f"{display_path(out_dir / CONFIG_FILE)} cannot be read as a search config ({first})") from None
+    done = finished_run(out_dir) if finished else None
+    if done is None:
+        return None
+    if saved.protocol.name == "p3":
+        try:
+            scan = read_ledger(out_dir / CHAINS_FILE, CHAINS, search_identity(out_dir))
+        except (LedgerError, SystemExit, ValueError, OSError):  # the resume refuses it, naming the line
+            return None
+        if scan.torn is not None or len(scan.records) < saved.protocol.seeds:
+            return None
+    mean = done.get("mean")
+    return (f"{display_path(out_dir)} is finished" + (f" (mean {mean:.2f})" if isinstance(mean, (int, float)) else "")
+            + ": nothing to do")
 
 
 def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
@@ -96,6 +128,8 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
     commit = git_commit()  # the code that runs (read before anything runs: files may change meanwhile)
     out_dir = Path(out_dir)
     cfg = typed(cfg)
+    if cfg.get("resume") and cfg.resume != RESUME_AUTO:
+        out_dir = Path(cfg.resume)  # the stopped run resume= names (hydra.run.dir is it unless given apart)
     if cfg.get("resume") == RESUME_AUTO:
         if (done := finished_run(out_dir)) is not None:
             print(f"{display_path(out_dir)} is finished (mean {done['mean']:.2f}): nothing to do", flush=True)
