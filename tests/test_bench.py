@@ -688,7 +688,7 @@ def test_evaluate_writes_a_scorecard(tmp_path):
     assert card["command"].startswith("python evaluate.py") and f"agent={spec}" in card["command"]
     assert (out / SCORECARD_MD).read_text().startswith(f"# {spec} on p1-exact-v1")
     here = json.loads(json.dumps(evaluate(spec, "p1-exact-v1", limit=1, progress=False)))
-    assert card == here | {k: card[k] for k in ("command", "ms_per_decision")}  # the app and the library agree
+    assert card == here | {k: card[k] for k in ("command", "commit", "ms_per_decision")}  # the app and the library agree
 
 
 # ----------------------------------------------------------------------------- 8. statistics
