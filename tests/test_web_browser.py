@@ -40,16 +40,17 @@ def page(server):
     with sync_api.sync_playwright() as p:
         browser = launch(p)
         pg = browser.new_page(viewport={"width": 1280, "height": 900})
+        pg.set_default_timeout(600_000)  # Playwright's limits (30 s by default) guard against a hang only
         pg.console_errors = []
         pg.on("console", lambda m: pg.console_errors.append(m.text) if m.type == "error" else None)
         pg.on("pageerror", lambda e: pg.console_errors.append(f"page error: {e}"))
         pg.goto(server)
-        pg.wait_for_function("window.billiards && window.billiards.ready", timeout=60_000)
+        pg.wait_for_function("window.billiards && window.billiards.ready", timeout=600_000)  # a limit against a hang only
         yield pg
         browser.close()
 
 
-def wait_until(pg, condition: str, timeout_s: float = 60.0, skip_animation: bool = True):
+def wait_until(pg, condition: str, timeout_s: float = 600.0, skip_animation: bool = True):
     """Poll ``condition`` (JavaScript) until true; meanwhile press the to-the-end button so that
     the shots after the first end at once (the animation itself runs in the first one)."""
     deadline = time.monotonic() + timeout_s
@@ -62,7 +63,7 @@ def wait_until(pg, condition: str, timeout_s: float = 60.0, skip_animation: bool
 
 def test_replay_of_a_committed_p3_chain_ends_where_the_simulator_does(page):
     page.select_option("#run-select", P3_RUN)
-    page.wait_for_function("window.billiards.replay.count > 0", timeout=30_000)
+    page.wait_for_function("window.billiards.replay.count > 0", timeout=600_000)
     run = page.evaluate(f"fetch('/api/run?path={P3_RUN}').then(r => r.json())")
     chain = run["units"][0]
     page.select_option("#speed", "4")
