@@ -90,11 +90,13 @@ def to_raw(action: np.ndarray, name: str, normalized: bool) -> np.ndarray:
     """A checked (B, 4) action in the gymnasium env's space as the raw shot."""
     if not normalized:
         return action
-    if np.any(np.abs(action[:, 1:]) > 1.0):
-        row = action[np.any(np.abs(action[:, 1:]) > 1.0, axis=1)][0]
-        raise AgentError(f"agent {name} answered outside the normalised box: power and tip coordinates x1, x2, x3 "
-                         f"must lie in [-1, 1], got {row.tolist()} (normalized=False if it answers raw shots)")
-    return domain.unnormalize_action(action)
+    from billiards.envs._common import unnormalize_checked  # the gymnasium env's own check and map
+
+    try:
+        return unnormalize_checked(action)
+    except ValueError as err:
+        raise AgentError(f"agent {name} answered outside the normalised box: {err} (normalized=False if it answers raw "
+                         f"shots)") from None
 
 
 class CallableAgent(Agent):

@@ -124,7 +124,7 @@ def collect(root: Path) -> list[dict]:
 def check_against_ledger(path: Path, card: dict) -> None:
     """A played scorecard must agree with the sealed ledger beside it: every unit there, of this
     run, and the scorecard's per-unit scores recomputed from it."""
-    from .run import LEDGER_FILE, EvaluationError, read_ledger, score_records
+    from .run import LEDGER_FILE, EvaluationError, read_ledger, unit_values
 
     ledger = path.parent / LEDGER_FILE
     if not ledger.is_file():
@@ -136,7 +136,7 @@ def check_against_ledger(path: Path, card: dict) -> None:
     track = TRACKS[card["track"]]
     if len(records) != track.n_blocks():
         raise ValueError(f"{display_path(ledger)}: {len(records)} units, the track has {track.n_blocks()}")
-    if score_records(track, [records[u] for u in sorted(records)]).get("values") != card.get("values"):
+    if unit_values(track, [records[u] for u in sorted(records)]) != card.get("values"):
         raise ValueError(f"{display_path(path)}: its scores differ from those its ledger gives")
 
 

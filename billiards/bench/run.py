@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from billiards import files
+from billiards import domain, files
 from billiards.files import LedgerKind, atomic_write_text, display_path
 
 from billiards import stats
@@ -140,15 +140,9 @@ class _MatchPlayer:
         from billiards.league.agents import to_env_action
 
         levels = None if level is None or not self.tells_level else np.array([float(level)])
-        obs = with_levels(domain_observation(view[None]), levels)
+        obs = with_levels(domain.observation(view[None]), levels)
         raw = self.clock.act(obs, view[None].astype(np.float64), levels)
         return to_env_action(raw[0])
-
-
-def domain_observation(tables: np.ndarray) -> np.ndarray:
-    from billiards import domain
-
-    return domain.observation(tables)
 
 
 _POOL: dict = {}  # (track name, opponent) -> league player (built once a process)
@@ -248,6 +242,23 @@ def _per_inning(records: list[dict], key: str) -> np.ndarray:
     return np.asarray([row for r in records for row in r[key]], dtype=float)
 
 
+def _match_score(rec: dict) -> float:
+    return 1.0 if rec["winner"] == "agent" else 0.0 if rec["winner"] == "opponent" else 0.5
+
+
+def unit_values(track: Track, records: list[dict]) -> list:
+    """The per-unit scores the intervals resample (a scorecard's ``values``): points per inning
+    (innings), each inning's success rate (P1), chain lengths (P3), match scores (1, 0.5, 0)."""
+    if track.protocol in ("innings", "p1"):
+        score = _per_inning(records, "score")
+        if track.protocol == "innings":
+            return score.sum(axis=1).astype(int).tolist()
+        return [round(float(v), 6) for v in score.mean(axis=1)]
+    if track.protocol == "p3":
+        return [int(r["length"]) for r in records]
+    return [_match_score(r) for r in records]
+
+
 def score_records(track: Track, records: list[dict]) -> dict:
     """The scorecard's figures from the finished units' records (see docs/benchmark.md)."""
     decisions = sum(r["decisions"] for r in records)
@@ -262,19 +273,16 @@ def score_records(track: Track, records: list[dict]) -> dict:
         out["success_per_shot"] = {"mean": round(float(score.mean()), 6), "ci95": stats.bootstrap_ci(rate),
                                    "n_shots": int(score.size), "n_innings": int(len(rate))}
         out["foul_per_shot"] = {"mean": round(float(foul.mean()), 6), "ci95": stats.bootstrap_ci(foul.mean(axis=1))}
-        points = score.sum(axis=1)
-        out["points_per_inning"] = stats.summary(points)
-        out["values"] = points.astype(int).tolist() if track.protocol == "innings" else [round(float(v), 6) for v in rate]
+        out["points_per_inning"] = stats.summary(score.sum(axis=1))
     elif track.protocol == "p3":
         lengths = np.asarray([r["length"] for r in records], dtype=float)
         out["chain"] = {**stats.summary(lengths), "max": int(lengths.max()), "reached_cap": int((lengths >= track.shots).sum()),
                         "cap": track.shots}
         shots = lengths.sum() + sum(1 for r in records if r["length"] < track.shots)
         out["success_per_shot"] = {"mean": round(float(lengths.sum() / max(shots, 1)), 6), "n_shots": int(shots)}
-        out["values"] = lengths.astype(int).tolist()
     else:
         ratings = dict(track.ratings)
-        scores = [1.0 if r["winner"] == "agent" else 0.0 if r["winner"] == "opponent" else 0.5 for r in records]
+        scores = [_match_score(r) for r in records]
         total = float(sum(scores))
         out["match"] = {"matches": len(records), "wins": sum(r["winner"] == "agent" for r in records),
                         "draws": sum(r["winner"] is None for r in records), "win_rate": round(total / len(records), 6),
@@ -286,7 +294,7 @@ def score_records(track: Track, records: list[dict]) -> dict:
         results = [(ratings[r["opponent"]], s) for r, s in zip(records, scores)]
         out["elo"] = stats.elo_against(results)
         out["elo_ci95"] = stats.elo_interval(results)
-        out["values"] = scores
+    out["values"] = unit_values(track, records)
     return out
 
 
@@ -507,4 +515,4 @@ def headline(card: dict) -> str:
 
 __all__ = ["EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "claim_directory", "evaluate",
            "figures", "fingerprint", "fingerprint_data", "headline", "play_unit", "read_ledger", "run_identity", "score_records",
-           "scorecard_markdown"]
+           "scorecard_markdown", "unit_values"]
