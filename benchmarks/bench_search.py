@@ -48,7 +48,7 @@ GOALS = {"h2 ensemble after": 3.0, "puct ensemble after": 6.0}  # multiples of t
 def chain_states(n: int, seed: int, params) -> np.ndarray:
     """n tables at rest met along greedy h2 chains (geometric proposer) from the opening rack; a
     chain that fails restarts from the opening rack."""
-    rng, cfg = np.random.default_rng(seed), H2Config(k1=60, m1=4, k2=10)
+    rng, cfg = np.random.default_rng(seed), H2Config(budget=100, k1=60, m1=4)
     prop = GeometricProposer(R=params.ball_radius)
     out, pos = [], canonical_rack(params)[None]
     while len(out) < n:

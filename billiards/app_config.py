@@ -29,7 +29,7 @@ from __future__ import annotations
 import functools
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional
 
@@ -42,6 +42,21 @@ from billiards.physics.config import PhysicsConfig
 from billiards.physics.noise import NoiseConfig
 
 SCHEMA_GROUP = "schema"  # where option schemas live (outside the option groups)
+
+
+@dataclass
+class AppConfig:
+    """What every app's root schema holds (``train.py``'s :class:`~billiards.rl.config.TrainConfig`,
+    ``search.py``'s :class:`~billiards.search.config.SearchAppConfig`, ``match.py``'s
+    :class:`~billiards.league.config.MatchAppConfig`): the table (``physics=``), the execution
+    noise (``noise=``), the seed, the progress bar and ``resume=`` (a run directory of the app to
+    continue; ``auto``: the job's own directory if it holds one). Each app adds its own keys."""
+
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
+    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise: noise=none|fastfiz|fastfiz_x5|variable
+    seed: int = 0
+    progress: bool = True  # progress with totals and ETA on stderr
+    resume: Optional[str] = None  # a run dir of this app to continue; auto: this job's own dir if it holds a run
 
 
 # ``resume=auto``: continue the job's own run directory if an earlier attempt left one there
@@ -1161,7 +1176,7 @@ def guard_command_line(argv=None) -> None:
     install_composition_guard()
 
 
-__all__ = ["BASIC_SWEEPER", "RESUME_AUTO", "SCHEMA_GROUP", "ValidatingCallback", "composition_errors", "fixed_job_config",
+__all__ = ["AppConfig", "BASIC_SWEEPER", "RESUME_AUTO", "SCHEMA_GROUP", "ValidatingCallback", "composition_errors", "fixed_job_config",
            "guard_command_line", "install_composition_guard", "job_configs", "numeric_bound_errors", "override_errors",
            "register_app", "register_resolvers", "validate_jobs",
            # whose directory

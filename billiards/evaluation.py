@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from billiards import domain
+from billiards import compat, domain
 from billiards.envs import make_env
 from billiards.files import atomic_write_text
 from billiards.physics.noise import get_noise
@@ -37,7 +37,8 @@ from billiards.physics.noise import get_noise
 
 @dataclasses.dataclass
 class EvalResult:
-    """Outcome of :func:`evaluate`. Percentages are in [0, 100]."""
+    """Outcome of :func:`evaluate`. Percentages are in [0, 100]. ``eval.json`` holds its fields
+    (:meth:`from_json` reads one of any version through :func:`billiards.compat.upgrade_eval_record`)."""
 
     mean: float  # points per inning
     std: float  # population std of points per inning
@@ -47,13 +48,12 @@ class EvalResult:
     success_per_shot_pct: float
     n_innings: int
     shots: int  # total shots played = n_innings * max_shots
-    max_shots: int = 10
-    start: str = "random"
-    seed: int = 0
-    points: list[int] = dataclasses.field(default_factory=list)  # per inning
-    noise: str = "none"  # the execution noise the shots were played under (NoiseModel.describe())
-    # per inning, the points scored before its first miss or foul (empty in results written before it existed)
-    first_miss_points: list[int] = dataclasses.field(default_factory=list)
+    max_shots: int
+    start: str
+    seed: int
+    points: list[int]  # per inning
+    noise: str  # the execution noise the shots were played under (NoiseModel.describe())
+    first_miss_points: list[int]  # per inning, the points scored before its first miss or foul (empty: not recorded)
 
     @property
     def first_miss_mean(self) -> float | None:
@@ -66,7 +66,8 @@ class EvalResult:
 
     @classmethod
     def from_json(cls, path: str | Path) -> EvalResult:
-        return cls(**json.loads(Path(path).read_text()))
+        """The result an ``eval.json`` records, in today's form whatever version wrote it."""
+        return cls(**compat.upgrade_eval_record(json.loads(Path(path).read_text())))
 
     def summary(self) -> str:
         return (

@@ -167,7 +167,7 @@ def payload_digest(payload) -> str:
     return h.hexdigest()
 
 
-def _non_finite(payload, prefix: str = "") -> str | None:
+def non_finite_entry(payload, prefix: str = "") -> str | None:
     """The first entry of ``payload`` holding a NaN or an infinity (floating tensors and arrays)."""
     import numpy as np
     import torch
@@ -179,7 +179,7 @@ def _non_finite(payload, prefix: str = "") -> str | None:
             return name
         if isinstance(v, np.ndarray) and v.dtype.kind == "f" and not np.isfinite(v).all():
             return name
-        if isinstance(v, (dict, list, tuple)) and (bad := _non_finite(v, f"{name}.")):
+        if isinstance(v, (dict, list, tuple)) and (bad := non_finite_entry(v, f"{name}.")):
             return bad
     return None
 
@@ -197,12 +197,6 @@ def record_digest(record: dict) -> str:
 def sealed_record(record: dict) -> dict:
     """The record with its checksum (:func:`record_digest`) under :data:`SEAL_KEY`."""
     return {**{k: v for k, v in record.items() if k != SEAL_KEY}, SEAL_KEY: record_digest(record)}
-
-
-def record_intact(record: dict) -> bool:
-    """True unless the record carries a checksum that its content does not match (records
-    written before ledgers were sealed carry none and pass on their shape alone)."""
-    return SEAL_KEY not in record or record[SEAL_KEY] == record_digest(record)
 
 
 # ----------------------------------------------------------------------------- sealed ledgers
@@ -299,24 +293,25 @@ LEDGERS = (CHAINS, MATCHES)
 @dataclass
 class LedgerScan:
     """What a ledger holds: its intact ``records`` in file order, one sentence per bad line
-    (``problems``), the line numbers of the ``legacy`` records accepted (sealed without a run
+    (``problems``), the line numbers of the records read ``unchecked`` (sealed without a run
     identity, or ``unsealed``), the line number of a ``torn`` last line and whether it was ``cut``."""
 
     records: list = field(default_factory=list)
     problems: list = field(default_factory=list)
-    legacy: list = field(default_factory=list)
+    unchecked: list = field(default_factory=list)
     unsealed: list = field(default_factory=list)
     torn: int | None = None
     cut: bool = False
 
 
-def scan_ledger(data: bytes, name: str, kind: LedgerKind, run: str | None = None, legacy: bool = False) -> LedgerScan:
+def scan_ledger(data: bytes, name: str, kind: LedgerKind, run: str | None = None, unchecked: bool = False) -> LedgerScan:
     """Check a ledger's bytes line by line (``name``: the file, for the messages). A record must
     be a JSON object of the kind's shape whose seal matches it, carry the identity ``run`` (with
     None: the same identity as the other records) and finish a unit no earlier line finished.
-    With ``legacy``, records written before ledgers were sealed (no seal, or no identity) are
-    accepted on their shape and listed in ``legacy``. A last line without its newline is a torn
-    append: not read, its line number in ``torn``."""
+    With ``unchecked`` (read-only views: :func:`billiards.compat.ledger_records`, and
+    :func:`verify`), a record without a seal or without a run identity, whose content or
+    writer cannot be checked, is read on its shape and listed in ``unchecked``. A last line
+    without its newline is a torn append: not read, its line number in ``torn``."""
     import json
 
     end = len(data) if not data or data.endswith(b"\n") else data.rfind(b"\n") + 1
@@ -345,19 +340,19 @@ def scan_ledger(data: bytes, name: str, kind: LedgerKind, run: str | None = None
         if sealed and rec[SEAL_KEY] != record_digest(rec):
             bad(n, "its content does not match its seal (the line was edited or damaged)")
             continue
-        if not sealed and not legacy:
-            bad(n, "it carries no seal (written before ledgers were sealed, or by hand), and an unsealed record "
-                   "cannot be told from an edited one")
+        if not sealed and not unchecked:
+            bad(n, "it carries no seal, and an unsealed record cannot be told from an edited one: no run continues "
+                   "from it (python -m billiards.files verify reads it)")
             continue
         if (why := kind.problem(rec)) is not None:
             bad(n, why)
             continue
         ident = rec.get(RUN_KEY) if sealed else None
         if ident is None:
-            if not legacy:
-                bad(n, "it carries no run identity (written before records carried one)")
+            if not unchecked:
+                bad(n, "it carries no run identity: which run wrote it cannot be told")
                 continue
-            scan.legacy.append(n)
+            scan.unchecked.append(n)
             if not sealed:
                 scan.unsealed.append(n)
         elif owner is None:
@@ -377,7 +372,7 @@ def scan_ledger(data: bytes, name: str, kind: LedgerKind, run: str | None = None
     return scan
 
 
-def read_ledger(path, kind: LedgerKind, run: str | None = None, *, legacy: bool = False,
+def read_ledger(path, kind: LedgerKind, run: str | None = None, *, unchecked: bool = False,
                 repair: bool = False) -> LedgerScan:
     """The records of the ledger at ``path`` (none if there is no file), checked by
     :func:`scan_ledger`; :class:`LedgerError` naming the file and the first bad line if any line
@@ -387,7 +382,7 @@ def read_ledger(path, kind: LedgerKind, run: str | None = None, *, legacy: bool 
     path = Path(path)
     if not path.is_file():
         return LedgerScan()
-    scan = scan_ledger(path.read_bytes(), display_path(path), kind, run, legacy)
+    scan = scan_ledger(path.read_bytes(), display_path(path), kind, run, unchecked)
     if scan.problems:
         more = f" (and {len(scan.problems) - 1} more bad lines)" if len(scan.problems) > 1 else ""
         raise LedgerError(scan.problems[0] + more)
@@ -471,8 +466,9 @@ def verify(run_dir, strict: bool = False) -> tuple[list[str], list[str]]:
     """Check a run directory's ledger (``chains.jsonl`` or ``matches.jsonl``) record by record
     and its summary (``results.json``: its values are the ledger's chain lengths in seed order;
     ``league.json``: its pair counts are the ledger's). Returns (problems, notes), one sentence
-    each. Records written before ledgers were sealed are a note (a problem with ``strict``, or
-    when the summary names the run's identity: such a run wrote every record sealed)."""
+    each. Records whose seal or run identity is missing are checked on their shape and are a
+    note (a problem with ``strict``, or when the summary names the run's identity: such a run
+    seals every record with it)."""
     import json
 
     run_dir = Path(run_dir)
@@ -495,20 +491,19 @@ def verify(run_dir, strict: bool = False) -> tuple[list[str], list[str]]:
             problems.append(f"{display_path(spath)} is damaged: {err}")
         run = summary.get(RUN_KEY) if summary is not None else None
         run = run if isinstance(run, str) else None
-        scan = scan_ledger(path.read_bytes(), display_path(path), kind, run, legacy=run is None)
+        scan = scan_ledger(path.read_bytes(), display_path(path), kind, run, unchecked=run is None)
         problems += scan.problems
         if scan.torn is not None:
             problems.append(f"{display_path(path)}: line {scan.torn} is torn (no newline: a kill mid-append); "
                             f"resume cuts it off and plays its unit again")
         if summary is not None:
             problems += _summary_problems(kind, scan.records, summary, display_path(spath))
-        if scan.legacy:
-            n, unsealed = len(scan.legacy), len(scan.unsealed)
+        if scan.unchecked:
+            n, unsealed = len(scan.unchecked), len(scan.unsealed)
             what = ("carry no seal: their shape is checked, their content cannot be" if unsealed == n else
                     f"carry a seal but no run identity{f' ({unsealed} no seal either)' if unsealed else ''}: "
                     f"their shape and seals are checked, which run wrote them cannot be")
-            say = (f"{display_path(path)}: {n} of {len(scan.records)} records {what} (written before ledgers were sealed "
-                   f"with their run's identity); such a run is not resumed")
+            say = f"{display_path(path)}: {n} of {len(scan.records)} records {what}; such a run is not resumed"
             (problems if strict else notes).append(say)
         else:
             notes.append(f"{display_path(path)}: {len(scan.records)} sealed records"
@@ -653,11 +648,11 @@ def load_tagged(path, tag: str, error: type[Exception], what: str) -> dict:
     infinity. The loaders check the shapes their layout declares."""
     payload = _load_tagged_unchecked(path, tag, error, what)
     if SEAL_KEY not in payload:
-        raise error(f"{what} file {path} carries no checksum (written before files were sealed): "
-                    f"python -m billiards.files seal {path} checks its contents and seals it")
+        raise error(f"{what} file {path} carries no checksum: python -m billiards.compat seal {path} checks its "
+                    f"contents and seals it")
     if payload[SEAL_KEY] != payload_digest(payload):
         raise error(f"{what} file {path} is damaged: its contents do not match its sha256 checksum")
-    if (bad := _non_finite(payload)) is not None:
+    if (bad := non_finite_entry(payload)) is not None:
         raise error(f"{what} file {path} holds non-finite values (NaN or inf) in {bad}")
     return payload
 
@@ -679,53 +674,27 @@ def _load_tagged_unchecked(path, tag: str, error: type[Exception], what: str) ->
     return payload
 
 
-def seal(path) -> str:
-    """Add the checksum to a tagged file written before files were sealed, after checking that
-    it loads as tensors and plain values and holds only finite numbers; returns the digest."""
-    import torch
-
-    payload = torch.load(Path(path), map_location="cpu", weights_only=True)
-    if not isinstance(payload, dict) or not isinstance(payload.get("format"), str):
-        raise ValueError(f"{path} is not a tagged file (no format entry)")
-    if (bad := _non_finite(payload)) is not None:
-        raise ValueError(f"{path} holds non-finite values (NaN or inf) in {bad}: not sealed")
-    payload.pop(SEAL_KEY, None)
-    save_tagged(path, payload)
-    return payload_digest(payload)
-
-
 def main(argv=None) -> int:
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m billiards.files", description="Seal tagged files (policies, rankers, "
-                                 "reward models) written before checksums; verify run directories' ledgers.")
+    ap = argparse.ArgumentParser(prog="python -m billiards.files", description="Verify run directories' ledgers.")
     sub = ap.add_subparsers(dest="command", required=True)
-    sp = sub.add_parser("seal", help="seal each file in place")
-    sp.add_argument("paths", nargs="+", type=Path)
     vp = sub.add_parser("verify", help="check each run directory's ledger (chains.jsonl, matches.jsonl) record by record "
                                        "and its summary (results.json, league.json) against it; one line per problem, "
                                        "exit status 1 if any")
     vp.add_argument("dirs", nargs="+", type=Path, metavar="RUN_DIR")
-    vp.add_argument("--strict", action="store_true", help="records written before ledgers were sealed are problems too")
+    vp.add_argument("--strict", action="store_true", help="records without a seal or a run identity are problems too")
     args = ap.parse_args(argv)
-    if args.command == "verify":
-        bad = 0
-        for d in args.dirs:
-            problems, notes = verify(d, strict=args.strict)
-            for line in problems:
-                print(f"problem: {line}")
-            for line in notes:
-                print(f"note: {line}")
-            print(f"{display_path(d)}: " + (f"{len(problems)} problems" if problems else "ledger and summary agree"))
-            bad += len(problems)
-        return 1 if bad else 0
-    for p in args.paths:
-        try:
-            print(f"{p}: sealed, sha256 {seal(p)[:16]}...")
-        except (OSError, ValueError, RuntimeError) as err:
-            print(f"Error: {p}: {err}")
-            return 2
-    return 0
+    bad = 0
+    for d in args.dirs:
+        problems, notes = verify(d, strict=args.strict)
+        for line in problems:
+            print(f"problem: {line}")
+        for line in notes:
+            print(f"note: {line}")
+        print(f"{display_path(d)}: " + (f"{len(problems)} problems" if problems else "ledger and summary agree"))
+        bad += len(problems)
+    return 1 if bad else 0
 
 
 if __name__ == "__main__":

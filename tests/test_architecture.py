@@ -127,7 +127,7 @@ def test_the_package_import_graph_is_acyclic():
 
 
 LAYERS = [  # lowest first; a new top-level module or subpackage takes its place here
-    ("billiards", "billiards.files", "billiards.device", "billiards.numerics", "billiards.stats"),
+    ("billiards", "billiards.files", "billiards.device", "billiards.numerics", "billiards.stats", "billiards.shaping"),
     ("billiards.physics", "billiards.provenance", "billiards.tables"),
     ("billiards.domain", "billiards.app_config", "billiards.compat"),
     ("billiards.render", "billiards.rm", "billiards.baselines"),

@@ -292,17 +292,20 @@ def test_the_match_app_refuses_a_bad_ledger_with_a_sentence(tmp_path):
 
 
 def test_committed_ledgers_written_before_the_seals_load_read_only_but_are_never_resumed(tmp_path, capsys):
-    """results/ holds ledgers written before ledgers were sealed: read-only views (verify, reports)
-    accept them on their shape; a resume refuses them."""
+    """results/ holds ledgers written before ledgers were sealed: read-only views (billiards.compat's
+    readers, verify, reports) accept them on their shape; a resume refuses them."""
+    from billiards import compat
     from billiards.league.play import parse_matches
 
     noise_run = ROOT / "results" / "noise" / "runs" / "geo_h2_fastfiz_400_p3"
-    assert len(read_chains(noise_run / "chains.jsonl", legacy=True)) == 100
+    assert len(compat.ledger_records(noise_run / "chains.jsonl", CHAINS)) == 100
     with pytest.raises(LedgerError, match=r"line 1 is not an intact P3 chain record: it carries no seal"):
         read_chains(noise_run / "chains.jsonl")
     sagu = ROOT / "results" / "sagu" / "fastfiz_x5_all"
     assert len(parse_matches((sagu / "matches.jsonl").read_text())) == 120
-    assert len(read_ledger(sagu / "matches.jsonl", MATCHES, legacy=True).records) == 120
+    assert len(compat.ledger_records(sagu / "matches.jsonl", MATCHES)) == 120
+    with pytest.raises(LedgerError, match=r"line 1 is not an intact league match record: it carries no seal"):
+        read_ledger(sagu / "matches.jsonl", MATCHES)
     assert files_main(["verify", str(noise_run), str(sagu)]) == 0
     out = capsys.readouterr().out
     assert "100 of 100 records carry no seal: their shape is checked" in out
@@ -311,10 +314,11 @@ def test_committed_ledgers_written_before_the_seals_load_read_only_but_are_never
     shutil.copytree(noise_run, tmp_path / "run")
     (tmp_path / "run" / "results.json").unlink()
     with pytest.raises(SystemExit, match=r"cannot resume: .*chains.jsonl: line 1 is not an intact P3 chain record: it "
-                                         r"carries no seal \(written before ledgers were sealed"):
+                                         r"carries no seal, and an unsealed record cannot be told from an edited one"):
         resume(tmp_path / "run")
 
 
+@pytest.mark.slow
 def test_every_committed_run_directory_verifies():
     """Every committed P3 and league directory: its ledger's records of one run, well formed,
     each unit once, and its summary equal to them (a few seconds)."""

@@ -6,7 +6,7 @@ innings / chains / matches, the evaluation seeds, what the agent may use at deci
 a version. Its name ends in ``-v<N>``, the rule the env IDs follow too (``Billiards4Ball-v0``):
 a change to the simulator, the envs or the track that changes any of its numbers gives it a new
 ``N``. Each track carries a fingerprint of its settings, its first racks and a reference agent's
-first decisions (the nearest-red heuristic); ``tests/test_bench.py`` recomputes it, so such a
+first decisions (the nearest-red heuristic); ``tests/bench/test_bench.py`` recomputes it, so such a
 change cannot go unnoticed.
 
 Protocols:
@@ -23,7 +23,7 @@ Protocols:
 
 Seeds: inning or chain ``i`` plays with seed ``seed + i``; match ``i`` against opponent ``j``
 with ``seed + 1000 j + i``. The seeds are held out: no training, tuning or reported run in the
-repository used them (``tests/test_bench.py`` checks every committed record).
+repository used them (``tests/bench/test_bench.py`` checks every committed record).
 
 Decision-time access: every agent sees the observation (the gymnasium env's); an agent that
 searches with the simulator may use up to ``budget`` simulations per decision, counted and

@@ -8,7 +8,8 @@ one, the TorchRL env and its transforms on B innings), and over the domain math 
   :func:`initial_racks`, :func:`terminated_truncated`;
 * the action a policy emits: :func:`validate_action`, :func:`unnormalize_checked`;
 * one step of B innings: :func:`play_shots` (execution noise, simulation, inning end);
-* the reward shaping's coefficients, checked once: :class:`Shaping`.
+* the reward shaping's coefficients, checked once: :class:`Shaping` (of the one schema,
+  :class:`billiards.shaping.ShapingOptions`, which :class:`EnvOptions` extends too).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from billiards.physics import (
 )
 from billiards.physics.checks import boolean, integer, one_of, real_array
 from billiards.physics.noise import NoiseModel
+from billiards.shaping import ShapingOptions
 
 STARTS = ("random", "canonical")
 ON_MISS = ("continue", "reset")
@@ -193,18 +195,30 @@ def play_shots(positions: np.ndarray, commanded: np.ndarray, shots_before: np.nd
     return Shots(played, result, shot, terminated, truncated, np.asarray(commanded, dtype=np.float64))
 
 
-@dataclasses.dataclass(frozen=True)
-class Shaping:
-    """The reward-shaping coefficients of an env, checked once where they enter (a
-    ValueError names the field as passed: NaN, inf or negative, ``near_miss_sigma`` <= 0, or
-    an unknown ``gentle_kind``); 0 switches a term off. The terms are
-    :func:`billiards.domain.shaped_reward`'s (the TorchRL transforms add them one by one)."""
+class _ReadOnly:
+    """What ``dataclass(frozen=True)`` gives, for a dataclass derived from the mutable shaping
+    schema (:class:`billiards.shaping.ShapingOptions`, mutable because the training config's
+    Hydra schema derives from it too; a frozen dataclass cannot derive from a mutable one):
+    ``__init__`` sets each field once; assigning or deleting one afterwards raises
+    ``dataclasses.FrozenInstanceError``. With ``unsafe_hash=True`` the instances hash by value,
+    as frozen ones do."""
 
-    foul_penalty: float = 0.0  # -c * foul
-    gentle: float = 0.0  # the gentle bonus's beta
-    gentle_kind: str = "leave"  # the paper's leave-position bonus, or "power"
-    near_miss: float = 0.0  # the near-miss bonus's beta
-    near_miss_sigma: float = domain.NEAR_MISS_SIGMA  # ... and its length scale (m)
+    def __setattr__(self, name: str, value) -> None:
+        if name in self.__dict__ or name not in self.__dataclass_fields__:
+            raise dataclasses.FrozenInstanceError(f"cannot assign to field {name!r}")
+        object.__setattr__(self, name, value)
+
+    def __delattr__(self, name: str) -> None:
+        raise dataclasses.FrozenInstanceError(f"cannot delete field {name!r}")
+
+
+@dataclasses.dataclass(unsafe_hash=True, kw_only=True)
+class Shaping(_ReadOnly, ShapingOptions):
+    """The reward-shaping coefficients of an env (:class:`~billiards.shaping.ShapingOptions`,
+    the one schema), checked once where they enter (a ValueError names the field as passed: NaN,
+    inf or negative, ``near_miss_sigma`` <= 0, or an unknown ``gentle_kind``); read-only. The
+    terms are :func:`billiards.domain.shaped_reward`'s (the TorchRL transforms add them one by
+    one; the reward model's, ``rm``, only they)."""
 
     def __post_init__(self) -> None:
         for name in ("foul_penalty", "gentle", "near_miss"):
@@ -212,11 +226,18 @@ class Shaping:
         object.__setattr__(self, "near_miss_sigma", domain.check_coefficient("near_miss_sigma", self.near_miss_sigma, strict=True))
         if self.gentle_kind not in domain.GENTLE_KINDS:
             raise ValueError(f"gentle_kind must be one of {domain.GENTLE_KINDS}, got {self.gentle_kind!r}")
+        object.__setattr__(self, "rm", domain.check_coefficient("rm", self.rm))
+
+    @classmethod
+    def of(cls, options: ShapingOptions) -> Shaping:
+        """The shaping fields of ``options`` (an :class:`EnvOptions`, any ShapingOptions), checked."""
+        return cls(**{f.name: getattr(options, f.name) for f in dataclasses.fields(ShapingOptions)})
 
     def reward(self, shots: Shots) -> np.ndarray:
-        """(B,) float64: the carom score plus every enabled term, for the shots played. The
-        power-based gentle bonus reads the *commanded* power (the agent's choice, as the TorchRL
-        transform does): under execution noise the played power differs from it."""
+        """(B,) float64: the carom score plus every enabled term but the reward model's, for
+        the shots played. The power-based gentle bonus reads the *commanded* power (the agent's
+        choice, as the TorchRL transform does): under execution noise the played power differs
+        from it."""
         res = shots.result
         return domain.shaped_reward(res.score, res.foul, shots.commanded[..., 1], res.hits, res.closest, res.positions,
                                     res.second_red, foul_c=self.foul_penalty, gentle_beta=self.gentle,
@@ -224,13 +245,14 @@ class Shaping:
                                     near_miss_sigma=self.near_miss_sigma)
 
 
-@dataclasses.dataclass(frozen=True)
-class EnvOptions:
+@dataclasses.dataclass(unsafe_hash=True, kw_only=True)
+class EnvOptions(_ReadOnly, ShapingOptions):
     """Everything :func:`billiards.envs.make_env` builds an env from but its batch size and seed,
     as one object: what a training config means for its env
     (:func:`billiards.rl.config.env_options`), passed whole (``make_env(B, options, seed=s)``).
-    The fields are ``make_env``'s keyword arguments, with the same defaults and meaning; they
-    are checked when the env is built."""
+    The fields are ``make_env``'s keyword arguments, with the same defaults and meaning: the
+    shaping's (:class:`~billiards.shaping.ShapingOptions`, the one schema) and the ones below;
+    they are checked when the env is built. Read-only, keywords only."""
 
     start: str | None = None
     on_miss: str | None = None
@@ -239,12 +261,5 @@ class EnvOptions:
     constrain_aim: bool = False
     normalize_actions: bool = False
     extra_features: bool = False
-    foul_penalty: float = 0.0
-    gentle: float = 0.0
-    gentle_kind: str = "leave"
-    near_miss: float = 0.0
-    near_miss_sigma: float = domain.NEAR_MISS_SIGMA
-    rm: float = 0.0
-    rm_model: object = None
     params: object = None
     noise: object = None

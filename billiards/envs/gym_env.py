@@ -84,7 +84,8 @@ class Billiards4BallInningEnv(gym.Env):
 
     Physics: ``physics`` is a preset name (``"korean_medium"``, the default, the paper's table;
     ``"international"``), a :class:`~billiards.physics.PhysicsParams` or a dict of fields
-    (:func:`billiards.physics.get_params`); ``params`` is an older spelling of the same.
+    (:func:`billiards.physics.get_params`); ``params`` is the same argument under the name
+    :func:`billiards.envs.make_env` and :class:`~billiards.envs.BilliardsEnv` give it.
 
     Inning: at most ``max_shots`` shots (then ``truncated``); under ``on_miss="reset"`` a miss
     or a foul ends it (``terminated``); under ``"continue"`` it always runs ``max_shots`` shots
@@ -138,7 +139,7 @@ class Billiards4BallInningEnv(gym.Env):
     ):
         self.noise = get_noise(noise)
         if physics is not None and params is not None:
-            raise ValueError("give the physics once: physics= (or its older spelling params=), not both")
+            raise ValueError("give the physics once: physics= or params= (the same argument), not both")
         params = get_params(physics if physics is not None else params)
         self.max_shots = check_inning_options(start, on_miss, max_shots)
         render_mode = one_of(render_mode, "render_mode", (None, "rgb_array", "human"))
@@ -147,7 +148,8 @@ class Billiards4BallInningEnv(gym.Env):
         self.start, self.on_miss, self.params, self.render_mode = start, on_miss, params, render_mode
         self.constrain_aim, self.extra_features = check_flag("constrain_aim", constrain_aim), check_flag("extra_features", extra_features)
         self.normalize_actions = check_flag("normalize_actions", normalize_actions)
-        self.shaping = Shaping(foul_penalty, gentle, gentle_kind, near_miss, near_miss_sigma)
+        self.shaping = Shaping(foul_penalty=foul_penalty, gentle=gentle, gentle_kind=gentle_kind, near_miss=near_miss,
+                               near_miss_sigma=near_miss_sigma)
 
         low, high = domain.action_bounds(self.constrain_aim, self.normalize_actions)
         self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)

@@ -346,8 +346,7 @@ def make_env(batch_size: int = 1, options: EnvOptions | None = None, *, seed: in
 
 def _build(batch_size: int, o: EnvOptions, seed: int | None) -> TransformedEnv:
     start, on_miss = resolve_paradigm(o.paradigm, o.start, o.on_miss)
-    shaping = Shaping(o.foul_penalty, o.gentle, o.gentle_kind, o.near_miss, o.near_miss_sigma)  # checked before anything is built
-    domain.check_coefficient("rm", o.rm)
+    shaping = Shaping.of(o)  # checked before anything is built
     constrain_aim, normalize_actions = check_flag("constrain_aim", o.constrain_aim), check_flag("normalize_actions", o.normalize_actions)
     extra_features = check_flag("extra_features", o.extra_features)
     params = get_params(o.params)
@@ -367,10 +366,10 @@ def _build(batch_size: int, o: EnvOptions, seed: int | None) -> TransformedEnv:
         transforms.append(GentleShotBonus(shaping.gentle, shaping.gentle_kind))
     if shaping.near_miss:
         transforms.append(NearMissBonus(shaping.near_miss, shaping.near_miss_sigma))
-    if o.rm:
-        if o.rm_model is None:
+    if shaping.rm:
+        if shaping.rm_model is None:
             raise ValueError("rm > 0 needs rm_model (a billiards.rm.RewardModel or a path to one)")
-        transforms.append(RewardModelBonus(o.rm_model, o.rm, params))
+        transforms.append(RewardModelBonus(shaping.rm_model, shaping.rm, params))
     return TransformedEnv(base, Compose(*transforms))
 
 

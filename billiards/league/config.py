@@ -6,38 +6,36 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Dict, List, Optional
+from typing import Any, ClassVar, Dict, List
 
 from omegaconf import MISSING, DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from billiards.app_config import ValidatingCallback, numeric_bound_errors, register_app, resolved_config, upper_bound_errors
+from billiards.app_config import AppConfig, ValidatingCallback, numeric_bound_errors, register_app, resolved_config, upper_bound_errors
 from billiards.device import threads_error
-from billiards.physics.config import PhysicsConfig, physics_errors
-from billiards.physics.noise import NoiseConfig, noise_errors
+from billiards.physics.config import physics_errors
+from billiards.physics.noise import noise_errors
 
 from .agents import AgentConfig
 
 
 @dataclass
-class MatchAppConfig:
+class MatchAppConfig(AppConfig):
+    """match.py's root schema: the shared keys (:class:`~billiards.app_config.AppConfig`; a
+    resumed league plays only its missing matches, with its own settings) and the league's own."""
+
     # every player the app knows, by name: each an AgentConfig, checked by errors() (the map is
     # untyped so that a player can be added on the command line: +agents.mine={kind: search, ...};
     # OmegaConf cannot merge a dict into a map of structured values)
     agents: Dict[str, Any] = field(default_factory=dict)
     players: List[str] = MISSING  # who plays the league (names of agents)
-    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
-    noise: NoiseConfig = field(default_factory=NoiseConfig)
     target: int = 10  # points to win a match
     max_innings: int = 200  # then the match is truncated (a draw unless the scores differ)
     foul_penalty: float = 1.0  # points a foul costs
     start: str = "canonical"  # canonical (the opening rack) | random
     matches: int = 20  # per ordered pair of players (the break alternating)
-    seed: int = 0
     threads: int = 1
-    progress: bool = True
     picture: bool = True  # match.gif: the league's first match replayed shot by shot
-    resume: Optional[str] = None  # a league's run dir: play only its missing matches there, with its own settings
 
     # the upper bounds of the league's numbers (docs/reliability.md; the players': AgentConfig.UPPER)
     UPPER: ClassVar[dict] = {"target": (10_000, "points"), "max_innings": (10**5, "innings of a match"),

@@ -25,7 +25,7 @@ import numpy as np
 
 from billiards.envs import sagu_v0
 from billiards.envs.sagu import AGENTS, shooter_view
-from billiards.files import LEAGUE_FILE, MATCHES, MATCHES_FILE, append_record, atomic_write_text, read_ledger, run_identity, scan_ledger
+from billiards.files import LEAGUE_FILE, MATCHES, MATCHES_FILE, append_record, atomic_write_text, read_ledger, run_identity
 
 
 def play_match(white, yellow, *, seed: int, first: str = "white", frames: list | None = None, on_shot=None, **game) -> dict:
@@ -152,15 +152,16 @@ def summarize(records: list[dict], names: list[str], noise: str) -> dict:
     return {"pairs": pairs, "elo": elo(names, results) if results else {}}
 
 
-def parse_matches(text: str, name: str = MATCHES_FILE, legacy: bool = True) -> list[dict]:
-    """The finished matches of a league's ``matches.jsonl`` text, for a read-only view: a torn
-    last line (a kill mid-append) is left out, records written before ledgers were sealed are
-    accepted with ``legacy``; any other bad line (not JSON, not a match record, not matching its
-    seal, of another league, a repeated match) is a :class:`billiards.files.LedgerError` naming
-    ``name`` and the line."""
+def parse_matches(text: str, name: str = MATCHES_FILE) -> list[dict]:
+    """The finished matches of a league's ``matches.jsonl`` text, for a read-only view
+    (:func:`billiards.compat.ledger_scan`: every form a ledger was written in): a torn last line
+    (a kill mid-append) is left out; any other bad line (not JSON, not a match record, not
+    matching its seal, of another league, a repeated match) is a
+    :class:`billiards.files.LedgerError` naming ``name`` and the line."""
+    from billiards import compat
     from billiards.files import LedgerError
 
-    scan = scan_ledger(text.encode(), name, MATCHES, legacy=legacy)
+    scan = compat.ledger_scan(text.encode(), name, MATCHES)
     if scan.problems:
         raise LedgerError(scan.problems[0])
     return scan.records

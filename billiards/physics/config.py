@@ -38,10 +38,8 @@ def overrides_of(node: Any) -> dict:
 
 
 def params_from_config(node: Any | None) -> PhysicsParams:
-    """The PhysicsParams a ``physics`` config node describes (None: the default preset).
-
-    Configs saved before the node existed have none: pass ``cfg.get("physics")`` and such a
-    run gets ``default``, which the caller decides (see :func:`legacy_params`)."""
+    """The PhysicsParams a ``physics`` config node describes (None: the default preset). A
+    saved config is read through :mod:`billiards.compat` first, which gives it its node."""
     if node is None:
         return PRESETS[DEFAULT_PRESET]
     return get_params({"preset": node["preset"], **overrides_of(node)})
@@ -60,21 +58,16 @@ def physics_errors(node: Any) -> list[str]:
     return []
 
 
-LEGACY_PHYSICS = "international"  # the table of files saved before the presets existed
-
-
 def physics_record(params: PhysicsParams) -> dict:
     """What a result file records of its table: ``{"physics": label, "physics_params": fields}``
     (read back by :func:`recorded_physics`)."""
     return {"physics": params.describe(), "physics_params": params.to_dict()}
 
 
-def recorded_physics(record: dict | None) -> PhysicsParams:
-    """The table a saved artefact (data set, model, policy) records as ``physics_params`` (a
-    :meth:`PhysicsParams.to_dict`); artefacts saved before the presets existed record none
-    and were made on ``international``."""
-    if not record:
-        return PRESETS[LEGACY_PHYSICS]
+def recorded_physics(record: dict) -> PhysicsParams:
+    """The table a saved artefact (data set, model) records as ``physics_params`` (a
+    :meth:`PhysicsParams.to_dict`; its metadata read through
+    :func:`billiards.compat.upgrade_artefact_meta` first)."""
     return PhysicsParams.from_dict(record)
 
 
@@ -94,5 +87,5 @@ def warn_physics_mismatch(what: str, made_on: PhysicsParams, used_on: PhysicsPar
     return True
 
 
-__all__ = ["LEGACY_PHYSICS", "PhysicsConfig", "PhysicsMismatchWarning", "overrides_of", "params_from_config",
+__all__ = ["PhysicsConfig", "PhysicsMismatchWarning", "overrides_of", "params_from_config",
            "physics_errors", "physics_record", "recorded_physics", "warn_physics_mismatch"]

@@ -263,17 +263,20 @@ class NoiseConfig:
 
 
 def noise_from_config(node: Any | None) -> NoiseModel:
-    """The NoiseModel a ``noise`` config node describes (None, e.g. a config saved before the
-    node existed: exact play)."""
+    """The NoiseModel a ``noise`` config node describes (a DictConfig of :class:`NoiseConfig`,
+    or a plain dict: a key it leaves out takes NoiseConfig's default, as a null does; None: the
+    default, exact play, as :func:`billiards.physics.config.params_from_config` gives the
+    default table). A saved config is read through :mod:`billiards.compat` first, which gives it
+    its node."""
     if node is None:
-        return NOISE_PRESETS["none"]
+        return NOISE_PRESETS[NoiseConfig.preset]
     preset = str(node["preset"])
     base = get_noise(preset)
     overrides = {field: node[key] for key, field in CONFIG_FIELDS.items() if node.get(key) is not None}
     if node.get("level_range") is not None:
         overrides["level_range"] = tuple(node["level_range"])
     model = dataclasses.replace(base, **overrides) if overrides else base
-    scale = node.get("scale", 1.0)  # absent from a node saved before it existed: 1
+    scale = node.get("scale")
     if scale is not None and scale != 1:
         model = dataclasses.replace(model.scaled(scale), origin=(preset, float(scale)))
     return model

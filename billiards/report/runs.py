@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from billiards import compat
 from billiards.files import CHECKPOINT_FILE, CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE, SUMMARY_FILE
 
 @dataclass
@@ -63,8 +64,7 @@ class Run:
 # row, and the steps column shows where each stopped.
 SAME_ROW_KEYS = ("seed", "resume", "threads", "progress", "compile", "logger", "checkpoint", "table", "paper_steps", "device")
 # Budget keys that only set a cadence (how often to log, evaluate on the way, checkpoint).
-CADENCE_KEYS = ("budget.name", "budget.eval_every", "budget.eval_innings", "budget.checkpoint_every", "budget.log_every",
-                "budget.kill_after_checkpoint")
+CADENCE_KEYS = ("budget.name", "budget.eval_every", "budget.eval_innings", "budget.checkpoint_every", "budget.log_every")
 
 
 def flatten_config(d: dict, prefix: str = "") -> dict:
@@ -81,8 +81,8 @@ def flatten_config(d: dict, prefix: str = "") -> dict:
 def split_by_settings(items: list, config_of) -> dict[str, list]:
     """Split the runs (or curves) of one row by the settings that differ between them, so runs
     with, say, another learning rate never merge into one mean: ``{"": items}`` when they agree,
-    else ``{" (algo.lr=0.001, algo.gamma=0.9)": [...], ...}``. Keys missing from some configs
-    (written before the schema had them) are not compared."""
+    else ``{" (algo.lr=0.001, algo.gamma=0.9)": [...], ...}``. Only the keys every config of
+    them has are compared (a key that some leave out says nothing about the others)."""
     flats = [{k: v for k, v in flatten_config(config_of(it)).items() if k.split(".")[0] not in SAME_ROW_KEYS and k not in CADENCE_KEYS}
              for it in items]
     common = set.intersection(*(set(f) for f in flats)) if flats else set()
@@ -151,8 +151,8 @@ def _json_object(path: Path) -> dict:
 
 
 def read_config(run_dir: Path) -> dict:
-    """The run's ``config.yaml`` as a dict; ValueError saying what is wrong if it is missing,
-    unparsable or lacks an integer seed."""
+    """The run's ``config.yaml`` as a dict in today's form (:func:`billiards.compat.upgrade_training_config`);
+    ValueError saying what is wrong if it is missing, unparsable or lacks an integer seed."""
     path = run_dir / CONFIG_FILE
     if not path.is_file():
         raise ValueError("no config.yaml (the run's settings)")
@@ -162,7 +162,7 @@ def read_config(run_dir: Path) -> dict:
         raise ValueError(f"config.yaml is not valid YAML ({err})") from None
     if not isinstance(config, dict) or not isinstance(config.get("seed"), int):
         raise ValueError("config.yaml is not a training config (no integer seed)")
-    return config
+    return compat.upgrade_training_config(config)
 
 
 def read_run(run_dir: Path) -> Run | None:
@@ -172,11 +172,11 @@ def read_run(run_dir: Path) -> Run | None:
     eval_path = run_dir / EVAL_FILE
     if not eval_path.is_file():
         return None
-    result = _json_object(eval_path)
+    result = compat.upgrade_eval_record(_json_object(eval_path))
     missing = [k for k in EVAL_KEYS if not isinstance(result.get(k), (int, float))]
     if missing:
         raise ValueError(f"eval.json lacks {missing}")
-    extra = {p.stem[len("eval_"):]: _json_object(p) for p in run_dir.glob("eval_*.json")}
+    extra = {p.stem[len("eval_"):]: compat.upgrade_eval_record(_json_object(p)) for p in run_dir.glob("eval_*.json")}
     summary_path = run_dir / SUMMARY_FILE
     summary = _json_object(summary_path) if summary_path.is_file() else {}
     run = Run(run_dir, config, result, extra, summary)
@@ -220,7 +220,7 @@ def aggregate(runs: list[Run]) -> dict:
     if not canonical:
         canonical = [r.eval["mean"] for r in runs if r.eval.get("start") == "canonical"]
     random_evals = [r.eval if r.eval.get("start", "random") == "random" else r.extra_evals.get("random") for r in runs]
-    first_miss = [np.mean(e["first_miss_points"]) for e in random_evals if e and e.get("first_miss_points")]
+    first_miss = [np.mean(e["first_miss_points"]) for e in random_evals if e and e["first_miss_points"]]
     seconds = [r.summary["train_seconds"] for r in runs if "train_seconds" in r.summary]
     cpu = [r.summary["cpu_seconds"] for r in runs if "cpu_seconds" in r.summary]
     frames = sorted({r.frames for r in runs})
@@ -233,7 +233,7 @@ def aggregate(runs: list[Run]) -> dict:
         "foul_sh": float(np.mean([r.eval["foul_per_shot_pct"] for r in runs])),
         "succ_sh": float(np.mean([r.eval["success_per_shot_pct"] for r in runs])),
         "canonical": float(np.mean(canonical)) if canonical else None,
-        # only when every run recorded it (runs finished before it existed did not)
+        # only when every run recorded it (an empty first_miss_points: not recorded)
         "rand_eval": float(np.mean(first_miss)) if first_miss and len(first_miss) == len(runs) else None,
         "seeds": sorted(r.config.get("seed") for r in runs),
         "frames": frames,

@@ -55,6 +55,7 @@ from torchrl.objectives import (
     ValueEstimators,
 )
 
+from .config import ALGO_SCHEMAS, OFF_POLICY, PPOConfig, SACConfig, TD3Config  # noqa: F401  (OFF_POLICY re-exported)
 from .curriculum import HoldActions
 
 ACTION_NORM = "action_norm"
@@ -262,7 +263,7 @@ class SACAgent(_OffPolicyBase):
         self.actor = gaussian_actor(obs_dim, norm, cfg.hidden_sizes, return_log_prob=False)
         self.critic = q_critic(obs_dim, act_dim, cfg.hidden_sizes)
         self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
-        self._init_policies(self.actor, cfg.get("actor_ema", 0.0), norm, num_envs)  # absent from configs saved before it existed
+        self._init_policies(self.actor, cfg.actor_ema, norm, num_envs)
         self.loss = SACLoss(
             self.actor,
             self.critic,
@@ -319,7 +320,7 @@ class TD3Agent(_OffPolicyBase):
             self.actor,
             AdditiveGaussianModule(spec=norm, sigma_init=1.0, sigma_end=1.0, std=cfg.exploration_noise, action_key=ACTION_NORM),
         )
-        self._init_policies(noisy, cfg.get("actor_ema", 0.0), norm, num_envs)  # absent from configs saved before it existed
+        self._init_policies(noisy, cfg.actor_ema, norm, num_envs)
         self.loss = TD3Loss(
             self.actor,
             self.critic,
@@ -445,13 +446,16 @@ class PPOAgent(nn.Module):
         self.n_updates = int(state["n_updates"])
 
 
-AGENTS = {"sac": SACAgent, "td3": TD3Agent, "ppo": PPOAgent}
-OFF_POLICY = ("sac", "td3")
+# algo.name -> its agent, for the algorithms of the one list (billiards.rl.config.ALGO_SCHEMAS,
+# each name's schema); OFF_POLICY (re-exported): those with a replay buffer
+_AGENT_OF = {SACConfig: SACAgent, TD3Config: TD3Agent, PPOConfig: PPOAgent}
+AGENTS = {name: _AGENT_OF[schema] for name, schema in ALGO_SCHEMAS.items()}
 
 
 def make_agent(algo_cfg, obs_dim: int, action_spec, *, num_envs: int = 1, device: torch.device | str = "cpu") -> Agent:
     """The agent of ``algo_cfg.name`` on ``device`` for an env with ``obs_dim`` observations,
     the unbatched action spec ``action_spec`` (``env.action_spec_unbatched``) and
-    ``num_envs`` innings per step (the batch of the warm-up's random actions)."""
+    ``num_envs`` innings per step (the batch of the warm-up's random actions). ``algo_cfg``:
+    the algorithm's node with every key of its schema (a saved one merged into it)."""
     return AGENTS[algo_cfg.name](algo_cfg, obs_dim, action_spec, num_envs=num_envs, device=device)
 

@@ -20,10 +20,12 @@ runs code from the file):
   on a GPU;
 * ``collector``: what the collector holds between two batches (:func:`collector_state`): the
   tensordict the next env step starts from (every inning's table, shot count and done flags)
-  and the next trajectory id; None when no collector was running (the final checkpoint) and
-  in checkpoints written before it existed;
+  and the next trajectory id; None when no collector was running (the final checkpoint);
 * ``wandb_id``: to continue the same wandb run;
-* ``stage_log``: the curriculum stages entered so far.
+* ``stage_log``: the curriculum stages entered so far;
+* ``format_version`` (2) and ``schema``, the version of this content
+  (:data:`billiards.compat.CHECKPOINT`: :func:`load_checkpoint` reads a checkpoint of an
+  earlier content through :func:`billiards.compat.upgrade_checkpoint`).
 
 Tensors are saved as they are and loaded onto the CPU (``map_location``); restoring copies
 them onto the run's device, so a run can resume on another device than it started on.
@@ -38,8 +40,8 @@ The digest is the SHA-256 of the first line and the payload, so a changed byte a
 file (header, digest or payload) is detected on load and the file refused instead of resumed
 on damaged weights. Written with :func:`billiards.files.atomic_open` (temporary file, fsync,
 ``os.replace``), so a kill at any moment leaves either the previous or the new checkpoint.
-Format 1 (before the checksum) was a plain ``torch.save`` pickle holding numpy objects; it is
-refused, since loading it would need the unsafe unpickler.
+A file of another format is refused (:func:`billiards.compat.checkpoint_format_refusal` names
+the one before this).
 """
 
 from __future__ import annotations
@@ -61,17 +63,18 @@ from typing import Any
 import numpy as np
 import torch
 
+from billiards import compat
 from billiards.files import atomic_open, key_problem, plain_data_problem, shape_problem, tensor_problem
 
-from .config import CHECKPOINT_FILE, MAX_LAYERS, MAX_WIDTH
+from .config import ALGO_SCHEMAS, CHECKPOINT_FILE, MAX_LAYERS, MAX_WIDTH, OFF_POLICY
 
 FORMAT_VERSION = 2
 MAGIC = b"billiards-checkpoint"
 _HEADER = re.compile(rb"(billiards-checkpoint (\d{1,6})\n)sha256 ([0-9a-f]{64})\n")
 _HEADER_MAX = 128  # bytes: the header is about 94
-_ZIP = b"PK\x03\x04"  # what format 1 (a bare torch.save) starts with
 _PLAIN = (str, int, float, bool, type(None), bytes, torch.Tensor)
-REQUIRED = ("config", "agent", "agent_extra", "counters", "rng")
+REQUIRED = ("config", "agent", "agent_extra", "buffer", "counters", "eval_history", "rng", "collector", "wandb_id",
+            "stage_log")
 
 log = logging.getLogger(__name__)
 
@@ -119,16 +122,16 @@ def rng_state(env_rngs: EnvRngs, device: torch.device | None = None) -> dict[str
 
 
 def set_rng_state(state: dict[str, Any], env_rngs: EnvRngs, device: torch.device | None = None) -> None:
-    """Restore what :func:`rng_state` saved (numpy accepts its states with lists for arrays).
-    The racks' generator (``"env"``) must be in ``state``; another env generator the state
-    lacks (``"env_noise"`` in checkpoints written before it was saved) keeps its seeded state.
-    A saved CUDA generator state goes to a CUDA ``device`` (a CPU run has none to restore)."""
+    """Restore what :func:`rng_state` saved (numpy accepts its states with lists for arrays):
+    every generator of ``env_rngs`` must be in ``state``; one whose entry is None is left as it
+    is (its state was not saved: :data:`billiards.compat.CHECKPOINT`). A saved CUDA generator
+    state goes to a CUDA ``device`` (a CPU run has none to restore)."""
     torch.set_rng_state(state["torch"])
     np.random.set_state(state["numpy"])
     py = state["python"]
     random.setstate((py["version"], tuple(py["internal"]), py["gauss_next"]))
     for name, rng in _env_rngs(env_rngs).items():
-        if name == "env" or name in state:
+        if state[name] is not None:
             rng.bit_generator.state = state[name]
     if "cuda" in state and device is not None and torch.device(device).type == "cuda":
         torch.cuda.set_rng_state(state["cuda"], device)
@@ -271,8 +274,8 @@ class RunState:
         """Puts a checkpoint's networks, optimizers, replay buffer and random generators back
         into the run's objects and returns its counters, with its collector state (checked
         against ``carrier_spec``, the env's observation and done specs) pending for
-        :meth:`resume_collector`. Reads checkpoints of every earlier version of format 2 (e.g.
-        those written before ``stage_log`` or the collector state existed)."""
+        :meth:`resume_collector`. ``ckpt``: a checkpoint of today's form (:func:`load_checkpoint`
+        reads every earlier one through :func:`billiards.compat.upgrade_checkpoint`)."""
         _LAST.clear()  # the run holds what it needs now
         try:
             agent.load_state_dict(ckpt["agent"])
@@ -282,9 +285,9 @@ class RunState:
         c = check_counters(ckpt)
         state = cls(frames=int(c["frames"]), owed=float(c["owed"]), train_seconds=float(c["train_seconds"]),
                     cpu_seconds=float(c["cpu_seconds"]), next_log=c["next_log"], next_eval=c["next_eval"],
-                    next_ckpt=c["next_ckpt"], eval_history=list(ckpt.get("eval_history") or []),
-                    stage_log=list(ckpt.get("stage_log") or []), wandb_id=ckpt.get("wandb_id"))
-        buffer = ckpt.get("buffer")
+                    next_ckpt=c["next_ckpt"], eval_history=list(ckpt["eval_history"]),
+                    stage_log=list(ckpt["stage_log"]), wandb_id=ckpt["wandb_id"])
+        buffer = ckpt["buffer"]
         if rb is not None and buffer is not None:
             from tensordict import TensorDict
 
@@ -297,12 +300,12 @@ class RunState:
         except (TypeError, ValueError, KeyError, IndexError, RuntimeError, OverflowError) as err:
             raise CheckpointError(f"cannot resume: the checkpoint's random-generator state is malformed "
                                   f"({type(err).__name__}: {err}); it is corrupt, start a new run") from None
-        entry = ckpt.get("collector")
+        entry = ckpt["collector"]
         if entry is not None and carrier_spec is not None:
             state.pending = {"collector": _collector_from(entry, carrier_spec), "rng": ckpt["rng"]}
         elif carrier_spec is not None:
-            log.info("resume: the checkpoint holds no collector state (written at the end of a run or by an older "
-                     "version): the innings in progress are not restored, the collector starts fresh ones")
+            log.info("resume: the checkpoint holds no collector state (it was written when no collector was running): "
+                     "the innings in progress are not restored, the collector starts fresh ones")
         return state
 
     def resume_collector(self, collector, env_rngs: EnvRngs, device: torch.device | None = None) -> None:
@@ -358,7 +361,7 @@ def check_counters(ckpt: dict[str, Any], what: str = "the checkpoint") -> dict[s
         if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or v < 0:
             bad.append(f"{key}={v!r} (a step >= 0 or inf)")
     for key in ("eval_history", "stage_log"):
-        if not isinstance(ckpt.get(key) or [], list):
+        if not isinstance(ckpt.get(key), list):
             bad.append(f"{key} (a list)")
     if bad:
         raise CheckpointError(f"cannot resume: {what} holds impossible counters: {', '.join(bad)}; "
@@ -373,16 +376,14 @@ def config_problem(config: Any, where: str = "config") -> str | None:
     """What keeps a stored training config (a checkpoint's, an exported policy's) from describing
     networks, or None: not plain data (an interpolation, an object), no algorithm of this
     version, hidden sizes other than 1 to :data:`MAX_LAYERS` widths in [1, :data:`MAX_WIDTH`],
-    env flags that are not booleans, a noise node its schema refuses."""
+    env flags that are not booleans, no noise node or one its schema refuses."""
     from billiards.physics.noise import noise_errors
-
-    from .agents import AGENTS
 
     if (bad := plain_data_problem(config, where)) or (bad := key_problem(config, {"algo": dict, "env": dict}, where)):
         return bad
     algo, env = config["algo"], config["env"]
-    if algo.get("name") not in AGENTS:
-        return f"{where}.algo.name={algo.get('name')!r}: not an algorithm of this version ({', '.join(AGENTS)})"
+    if algo.get("name") not in ALGO_SCHEMAS:
+        return f"{where}.algo.name={algo.get('name')!r}: not an algorithm of this version ({', '.join(ALGO_SCHEMAS)})"
     hidden = algo.get("hidden_sizes")
     if not (isinstance(hidden, list) and 0 < len(hidden) <= MAX_LAYERS
             and all(isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= MAX_WIDTH for h in hidden)):
@@ -390,12 +391,10 @@ def config_problem(config: Any, where: str = "config") -> str | None:
     for key in ("constrain_aim", "extra_features"):
         if not isinstance(env.get(key, False), bool):
             return f"{where}.env.{key}={env.get(key)!r}: not a boolean"
-    noise = config.get("noise")
-    if noise is not None:
-        if bad := key_problem(noise, {"preset": str}, f"{where}.noise"):
-            return bad
-        if errs := noise_errors(noise):
-            return f"{where}.noise: {errs[0]}"
+    if bad := key_problem(config, {"noise": dict}, where) or key_problem(config["noise"], {"preset": str}, f"{where}.noise"):
+        return bad
+    if errs := noise_errors(config["noise"]):
+        return f"{where}.noise: {errs[0]}"
     return None
 
 
@@ -404,16 +403,16 @@ def agent_from_config(config: dict):
     stored training config describes, and the config as a DictConfig: what a checkpoint's or an
     exported policy's tensors must fit. Only the observation and action layout matter (no
     shaping: no reward model is loaded); variable noise adds the level to the observation. The
-    algorithm's node is read through its schema (keys a config of an older version lacks take
-    their defaults). Check the config with :func:`config_problem` first; a config that still does
-    not build a network raises :class:`CheckpointError`."""
+    algorithm's node is merged into its schema (a key the stored config leaves out takes the
+    schema's default: :mod:`billiards.compat`). ``config``: in today's form (the loaders read it
+    through :mod:`billiards.compat`); check it with :func:`config_problem` first; a config that
+    still does not build a network raises :class:`CheckpointError`."""
     from omegaconf import OmegaConf
 
     from billiards.envs import make_env
     from billiards.physics.noise import noise_from_config
 
     from .agents import make_agent
-    from .config import ALGO_SCHEMAS
 
     cfg = OmegaConf.create(config)
     try:
@@ -421,7 +420,7 @@ def agent_from_config(config: dict):
         own = {f.name for f in dataclasses.fields(schema)}
         algo = OmegaConf.merge(OmegaConf.structured(schema), {k: v for k, v in config["algo"].items() if k in own})
         env = make_env(1, constrain_aim=bool(cfg.env.get("constrain_aim", False)),
-                       extra_features=bool(cfg.env.get("extra_features", False)), noise=noise_from_config(cfg.get("noise")))
+                       extra_features=bool(cfg.env.get("extra_features", False)), noise=noise_from_config(cfg.noise))
         obs_dim = env.observation_spec_unbatched["observation"].shape[-1]
         return make_agent(algo, obs_dim, env.action_spec_unbatched), cfg
     except Exception as err:  # a config that passed config_problem and still builds nothing: say so, no traceback
@@ -485,7 +484,7 @@ def _buffer_problem(buffer: Any, agent, cfg, frames: int) -> str | None:
     """What is wrong with a checkpoint's replay buffer: kept by an algorithm that has none, its
     row count outside [1, its capacity and the frames collected], a tensor of another row count,
     a replay key missing, a non-finite or complex value, a write cursor outside the buffer."""
-    if cfg.algo.name not in ("sac", "td3"):
+    if cfg.algo.name not in OFF_POLICY:
         return f"buffer: a replay buffer, but algo={cfg.algo.name} keeps none"
     if bad := key_problem(buffer, {"data": dict, "rows": int, "writer": dict}, "buffer"):
         return bad
@@ -520,7 +519,7 @@ def _history_problem(ckpt: dict[str, Any], frames: int) -> str | None:
     ``final`` flag (a boolean) or its mean (a finite number), a stage without its index."""
     for key, spec in (("eval_history", {"step": int, "final": bool, "eval_mean": (int, float)}),
                       ("stage_log", {"stage": int, "step": int})):
-        entries = ckpt.get(key) or []
+        entries = ckpt[key]
         if bad := plain_data_problem(entries, key):
             return bad
         for i, entry in enumerate(entries):
@@ -590,8 +589,9 @@ def _check_plain(value: Any, where: str) -> None:
 
 def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> Path:
     """Write ``state`` (tensors and plain types only, else TypeError naming the entry) as
-    ``run_dir/checkpoint.pt`` in format 2 (see the module docstring); returns the path."""
-    state = {"format_version": FORMAT_VERSION, **state}
+    ``run_dir/checkpoint.pt`` in format 2, content version :data:`billiards.compat.CHECKPOINT`'s
+    (see the module docstring); returns the path."""
+    state = {"format_version": FORMAT_VERSION, compat.SCHEMA_KEY: compat.CHECKPOINT.version, **state}
     _check_plain(state, "checkpoint")
     buf = io.BytesIO()
     torch.save(state, buf)
@@ -618,12 +618,9 @@ def _payload(path: Path) -> bytes:
     or its checksum does not match."""
     with path.open("rb") as f:
         head = f.read(_HEADER_MAX)
-        if head.startswith(_ZIP):
-            raise CheckpointError(
-                f"cannot resume: {path} was written by an older version of billiards in an unsafe format "
-                f"(checkpoint format 1, a pickle that can run code when loaded); this version loads only "
-                f"format {FORMAT_VERSION}. Finish that run with the commit that wrote it, or start a new run"
-            )
+        if (why := compat.checkpoint_format_refusal(head)) is not None:
+            raise CheckpointError(f"cannot resume: {path} {why}; this version loads only format {FORMAT_VERSION}. "
+                                  f"Finish that run with the commit that wrote it, or start a new run")
         m = _HEADER.match(head)
         if m is None:
             raise _corrupt(path, "no billiards checkpoint header")
@@ -679,6 +676,10 @@ def load_checkpoint(run_dir: str | Path, keep: bool = False) -> dict[str, Any]:
         raise CheckpointError(
             f"cannot resume: {path} is not a billiards training checkpoint of format {FORMAT_VERSION} (found {version!r})"
         )
+    try:
+        state = compat.upgrade_checkpoint(state)
+    except compat.NewerFormError as err:
+        raise CheckpointError(f"cannot resume: {path}: {err}") from None
     missing = [k for k in REQUIRED if k not in state]
     if missing:
         raise CheckpointError(f"cannot resume: {path} lacks {missing}; it is corrupt, start a new run")

@@ -29,20 +29,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, List, Optional
 
-from hydra.experimental.callback import Callback
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.device import device_error, threads_error
 from billiards.app_config import fixed_job_config as _fixed_job_config
-from billiards.app_config import (BASIC_SWEEPER, RESUME_AUTO, numeric_bound_errors, register_app, resolved_config,
-                                  upper_bound_errors)
+from billiards.app_config import (BASIC_SWEEPER, AppConfig, RESUME_AUTO, ValidatingCallback, claim_sweep_directories,
+                                  numeric_bound_errors, register_app, resolved_config, upper_bound_errors)
 from billiards.files import CHECKPOINT_FILE, repo_path
 from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
-from billiards.physics.config import PhysicsConfig, physics_errors
-from billiards.physics.noise import NoiseConfig, noise_errors
+from billiards.physics.config import physics_errors
+from billiards.physics.noise import noise_errors
+from billiards.shaping import ShapingOptions
 
-# Keys that configs saved by earlier versions have and the schema no longer does; a resume
-# drops them (the test-only kill switch left the schema: tests kill runs from outside).
 
 
 class Paradigm(str, enum.Enum):
@@ -109,26 +107,46 @@ def _need(ok: bool, message: str) -> list[str]:
 # DictConfig node, read by attribute); checks across nodes are :func:`_errors`'.
 
 @dataclass
-class OffPolicyConfig:
-    """Shared by SAC and TD3. ``utd`` is the update-to-data ratio: gradient updates per
-    collected env frame (one frame = one shot of one of the ``env.num_envs`` innings)."""
+class AlgoConfig:
+    """What every algorithm's node has (each algorithm's schema derives from it, setting its own
+    defaults): its name, the networks' hidden layers, the optimiser's learning rate, the discount
+    and the env frames of a collector batch; :meth:`errors` checks them and every key's upper
+    bound (the schema's ``UPPER``)."""
 
     name: str = MISSING
     hidden_sizes: List[int] = field(default_factory=lambda: [256, 256])
-    batch_size: int = 256
-    utd: float = 0.125
     lr: float = 3e-4
     gamma: float = 0.99
+    frames_per_batch: int = 0  # env frames per collector iteration (all innings together); off-policy: 0 = env.num_envs
+
+    UPPER: ClassVar[dict] = {"lr": RATE, "hidden_sizes": NETWORK}
+
+    @classmethod
+    def errors(cls, a) -> list[str]:
+        return [*_need(0 < len(a.hidden_sizes) <= MAX_LAYERS and all(h > 0 for h in a.hidden_sizes),
+                       f"algo.hidden_sizes must be a non-empty list of at most {MAX_LAYERS} positive widths, "
+                       f"got {list(a.hidden_sizes)}"),
+                *_positive("algo.lr", a.lr), *_need(0.0 < a.gamma <= 1.0, f"algo.gamma must lie in (0, 1], got {a.gamma!r}"),
+                *upper_bound_errors(a, "algo.", cls.UPPER)]
+
+
+@dataclass
+class OffPolicyConfig(AlgoConfig):
+    """Shared by SAC and TD3. ``utd`` is the update-to-data ratio: gradient updates per
+    collected env frame (one frame = one shot of one of the ``env.num_envs`` innings);
+    ``frames_per_batch`` 0 (the default) is one step of every inning."""
+
+    batch_size: int = 256
+    utd: float = 0.125
     tau: float = 0.005  # soft target update rate
     buffer_size: int = 1_000_000
-    frames_per_batch: int = 0  # env frames per collector iteration; 0 = env.num_envs (one step of every inning)
     # Polyak rate of an averaged copy of the actor, updated after every actor update and used
     # for evaluation (periodic and final; the live actor is evaluated beside it). 0 = off:
     # evaluate the live actor.
     actor_ema: float = 0.0
 
     UPPER: ClassVar[dict] = {
-        "lr": RATE, "hidden_sizes": NETWORK,
+        **AlgoConfig.UPPER,
         "batch_size": (65_536, "replay rows per gradient update"),
         "utd": (64.0, "gradient updates per collected frame"),
         "buffer_size": (10**7, "replay rows, allocated at the first batch"),
@@ -137,7 +155,7 @@ class OffPolicyConfig:
 
     @classmethod
     def errors(cls, a) -> list[str]:
-        return [*_network_errors(a, cls.UPPER), *_positive("algo.batch_size", a.batch_size), *_positive("algo.utd", a.utd),
+        return [*super().errors(a), *_positive("algo.batch_size", a.batch_size), *_positive("algo.utd", a.utd),
                 *_positive("algo.buffer_size", a.buffer_size), *_need(0.0 < a.tau <= 1.0, f"algo.tau must lie in (0, 1], got {a.tau!r}"),
                 *_need(0.0 <= a.actor_ema < 1.0, f"algo.actor_ema must lie in [0, 1) (0 = off), got {a.actor_ema!r}"),
                 *_positive("algo.frames_per_batch", a.frames_per_batch, strict=False)]
@@ -184,11 +202,9 @@ class TD3Config(OffPolicyConfig):
 
 
 @dataclass
-class PPOConfig:
+class PPOConfig(AlgoConfig):
     name: str = "ppo"
     hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
-    lr: float = 3e-4
-    gamma: float = 0.99
     gae_lambda: float = 0.95
     clip_epsilon: float = 0.2
     frames_per_batch: int = 2048  # on-policy rollout length (all envs together)
@@ -200,7 +216,7 @@ class PPOConfig:
     normalize_advantage: bool = True
 
     UPPER: ClassVar[dict] = {
-        "lr": RATE, "hidden_sizes": NETWORK,
+        **AlgoConfig.UPPER,
         "frames_per_batch": (2**20, "frames per rollout"),
         "epochs": (1000, "passes over a rollout"),
         "entropy_coeff": (100.0, "a loss coefficient"),
@@ -211,7 +227,7 @@ class PPOConfig:
     @classmethod
     def errors(cls, a) -> list[str]:
         updates = a.epochs * (a.frames_per_batch // a.minibatch_size) if a.minibatch_size > 0 else 0
-        return [*_network_errors(a, cls.UPPER), *_positive("algo.frames_per_batch", a.frames_per_batch),
+        return [*super().errors(a), *_positive("algo.frames_per_batch", a.frames_per_batch),
                 *_positive("algo.epochs", a.epochs),
                 *_positive("algo.entropy_coeff", a.entropy_coeff, strict=False),
                 *_positive("algo.critic_coeff", a.critic_coeff, strict=False),
@@ -226,14 +242,10 @@ class PPOConfig:
                 *_positive("algo.max_grad_norm", a.max_grad_norm)]
 
 
-def _network_errors(a, upper: dict) -> list[str]:
-    """What every algorithm's node says about its networks and optimiser, and every key's upper
-    bound (the schema's ``upper``)."""
-    return [*_need(0 < len(a.hidden_sizes) <= MAX_LAYERS and all(h > 0 for h in a.hidden_sizes),
-                   f"algo.hidden_sizes must be a non-empty list of at most {MAX_LAYERS} positive widths, "
-                   f"got {list(a.hidden_sizes)}"),
-            *_positive("algo.lr", a.lr), *_need(0.0 < a.gamma <= 1.0, f"algo.gamma must lie in (0, 1], got {a.gamma!r}"),
-            *upper_bound_errors(a, "algo.", upper)]
+# The algorithms, by algo.name: the one list (the algo group's schemas, validate's "one of ...";
+# billiards.rl.agents maps each to its agent). OFF_POLICY: those with a replay buffer.
+ALGO_SCHEMAS = {"sac": SACConfig, "td3": TD3Config, "ppo": PPOConfig}
+OFF_POLICY = tuple(name for name, schema in ALGO_SCHEMAS.items() if issubclass(schema, OffPolicyConfig))
 
 
 # ----------------------------------------------------------------------------- the rest
@@ -259,19 +271,16 @@ class EnvConfig:
 
 
 @dataclass
-class ShapingConfig:
-    """Reward shaping added to the carom score while training (evaluation never shapes)."""
+class ShapingConfig(ShapingOptions):
+    """Reward shaping added to the carom score while training (evaluation never shapes): the
+    env's shaping options (:class:`billiards.shaping.ShapingOptions`, the one schema: the keys,
+    their types, defaults and meaning), named by the shaping group's option, with the trainer's
+    reward model, bounds and checks."""
 
     name: str = "none"
-    foul_penalty: float = 0.0  # reward -= foul_penalty * foul
-    # on a score, reward += gentle * exp(-(d - 0.2)^2 / (2 0.1^2)), d the white's rest distance to
-    # the second red it hit (the paper: 0.2)
-    gentle: float = 0.0
-    gentle_kind: str = "leave"  # leave: the paper's leave-position bonus above; power: gentle * (1 - p)
-    near_miss: float = 0.0  # reward += near_miss * exp(-gap / near_miss_sigma) for a one-red miss (the paper: 0.05)
-    near_miss_sigma: float = 0.03
-    rm: float = 0.0  # reward += rm * V_rm(s, a), the learned reward model's P(score | s, a)
-    rm_model: str = "results/rm/model.pt"  # the reward model (python -m billiards.rm train); relative paths: cwd, then the repo
+    # the trainer's reward model is a path (the env's may also be a model object, and defaults to
+    # none): the committed one (python -m billiards.rm train); relative paths: cwd, then the repo
+    rm_model: str = "results/rm/model.pt"
 
     UPPER: ClassVar[dict] = {**{key: (100.0, "a reward coefficient; a point is 1")
                                 for key in ("foul_penalty", "gentle", "near_miss", "rm")},
@@ -411,10 +420,12 @@ class CheckpointConfig:
 
 
 @dataclass
-class TrainConfig:
+class TrainConfig(AppConfig):
+    """train.py's root schema: the shared keys (:class:`~billiards.app_config.AppConfig`: the
+    table and the execution noise of the training and evaluation envs, the seed, the progress
+    bar, ``resume=`` from the run's last checkpoint) and training's own."""
+
     algo: Any = MISSING  # SACConfig | TD3Config | PPOConfig, chosen by the algo group
-    physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
-    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise of the training and evaluation envs
     env: EnvConfig = field(default_factory=EnvConfig)
     shaping: ShapingConfig = field(default_factory=ShapingConfig)
     curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
@@ -422,27 +433,20 @@ class TrainConfig:
     budget: BudgetConfig = MISSING
     eval: EvalConfig = field(default_factory=EvalConfig)
     checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
-    seed: int = 0
     threads: int = 1  # torch (intra-op) and numba threads of this run; 1 when jobs run in parallel
     compile: bool = False  # torch.compile the update step (slow to start; see the README)
     # where the networks, losses and replay buffer live: auto (a CUDA GPU when torch sees one,
     # else the CPU), cpu, cuda, cuda:N; the simulator always runs on the CPU
     device: str = "auto"
-    progress: bool = True  # tqdm progress bar on stderr
     table: Optional[str] = None  # the paper table a variant (variant=<table>/<row>) belongs to
     row: Optional[str] = None  # the table's row that variant trains (the report groups runs by table and row)
     paper: Any = None  # an experiment preset's table: the paper's figures (billiards/tables.py reads it)
     paper_steps: int = 1_000_000  # the paper's budget for the table (budget=paper trains this long)
-    # a run dir to continue from its last checkpoint; auto: this job's own dir if it holds one
-    resume: Optional[str] = None
 
     UPPER: ClassVar[dict] = {"paper_steps": (MAX_STEPS, "frames")}
 
 
 Config = TrainConfig  # the former name (billiards/rl/train.py imports it)
-
-# algo.name -> its schema (the algo group's options)
-ALGO_SCHEMAS = {"sac": SACConfig, "td3": TD3Config, "ppo": PPOConfig}
 
 # `schema` (the root), schema/algo/<name>, schema/budget, schema/physics and the resolvers
 register_app("schema", TrainConfig, {"algo": ALGO_SCHEMAS, "budget": BudgetConfig})
@@ -483,17 +487,17 @@ def _errors(cfg: DictConfig) -> list[str]:
     for key, schema in (("budget", BudgetConfig), ("env", EnvConfig), ("eval", EvalConfig), ("shaping", ShapingConfig),
                         ("curriculum", CurriculumConfig), ("logger", LoggerConfig)):
         errs += schema.errors(cfg[key])
-    errs += physics_errors(cfg.physics) + (noise_errors(cfg.noise) if "noise" in cfg else [])
+    errs += physics_errors(cfg.physics) + noise_errors(cfg.noise)
     if a.name in ALGO_SCHEMAS:
         errs += ALGO_SCHEMAS[a.name].errors(a)
     else:
-        errs.append(f"algo.name must be one of sac, td3, ppo, got {a.name!r}")
+        errs.append(f"algo.name must be one of {', '.join(ALGO_SCHEMAS)}, got {a.name!r}")
     if a.name in ALGO_SCHEMAS:  # across nodes: a collector batch is whole steps of every inning
-        fpb = (a.frames_per_batch or e.num_envs) if a.name in ("sac", "td3") else a.frames_per_batch
+        fpb = (a.frames_per_batch or e.num_envs) if a.name in OFF_POLICY else a.frames_per_batch
         errs += _need(e.num_envs <= 0 or fpb % e.num_envs == 0,
                       f"algo.frames_per_batch ({fpb}) must be a multiple of env.num_envs ({e.num_envs})")
-    if cfg.curriculum.name != "none" and a.name not in ("sac", "td3"):
-        errs.append(f"curriculum={cfg.curriculum.name} needs an off-policy algorithm (sac, td3), got algo={a.name}")
+    if cfg.curriculum.name != "none" and a.name not in OFF_POLICY:
+        errs.append(f"curriculum={cfg.curriculum.name} needs an off-policy algorithm ({', '.join(OFF_POLICY)}), got algo={a.name}")
     # seed: random.seed, np.random.seed (which takes [0, 2**32)) and torch
     errs += _need(0 <= cfg.seed < 2**32, f"seed must be an integer in [0, 2**32 - 1] (a numpy seed), got {cfg.seed!r}")
     errs += list(filter(None, [threads_error(cfg.threads), device_error(cfg.device)])) + _positive("paper_steps", cfg.paper_steps)
@@ -538,36 +542,44 @@ def _refuse_other_apps_preset(config: DictConfig) -> None:
                          f"python {paper.app}.py -m experiment={config.get('table')}")
 
 
-class ValidateConfig(Callback):
+def _validate_job(cfg: DictConfig) -> None:
+    """:func:`validate`, any other exception it meets raised as a :class:`ConfigError` with the
+    same message: the callback exits with it (Hydra would only warn and go on)."""
+    try:
+        validate(cfg)
+    except ValueError:
+        raise
+    except Exception as err:
+        raise ConfigError(str(err)) from None
+
+
+class ValidateConfig(ValidatingCallback):
     """Hydra callback (``hydra.callbacks`` in conf/config.yaml): validates the training config
     before Hydra creates any directory. For a multirun it composes and validates every job
     first, so one bad job aborts the whole sweep before anything is written. Then it claims the
     run's directories (billiards.app_config, "Whose directory" in docs/reliability.md).
 
     Hydra turns exceptions raised by callbacks into warnings, so a failure exits the process
-    (``SystemExit``, status 1) with the message on stderr.
+    (``SystemExit``, status 1) with the message on stderr. It is search.py's and match.py's
+    :class:`~billiards.app_config.ValidatingCallback` with train.py's additions: another app's
+    preset is refused first, a multirun prints its sweep directory, and under another sweeper
+    (Optuna) what the sweeper does not vary is checked before the study starts.
     """
 
-    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
-        from billiards.app_config import claim_run_directory
+    validate = staticmethod(_validate_job)
 
+    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
         _refuse_other_apps_preset(config)
-        try:
-            validate(config)
-        except Exception as err:  # Hydra would only warn and go on
-            raise SystemExit(f"Error: {err}") from None
-        claim_run_directory(config)
+        super().on_run_start(config, **kwargs)
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        from billiards.app_config import claim_sweep_directories
-
         _refuse_other_apps_preset(config)
         print(f"sweep: {config.hydra.sweep.dir}", flush=True)
         if config.hydra.sweeper._target_ != BASIC_SWEEPER:
             self._check_fixed_part(config)
             claim_sweep_directories(config)
             return
-        claim_sweep_directories(config, validate)  # every job validated, then its directory claimed
+        super().on_multirun_start(config, **kwargs)  # every job validated, then its directory claimed
 
     @staticmethod
     def _check_fixed_part(config: DictConfig) -> None:
@@ -600,11 +612,11 @@ def env_options(cfg: DictConfig):
     from billiards.physics.noise import noise_from_config
 
     sh = cfg.shaping
+    shaping = {f.name: sh[f.name] for f in dataclasses.fields(ShapingOptions)}  # every key of the one schema
+    shaping["rm_model"] = str(resolve_rm_model(sh.rm_model)) if sh.rm else None
     return EnvOptions(paradigm=env_paradigm(cfg.env.paradigm), max_shots=cfg.env.max_shots, constrain_aim=cfg.env.constrain_aim,
-                      extra_features=cfg.env.extra_features, foul_penalty=sh.foul_penalty, gentle=sh.gentle,
-                      gentle_kind=sh.gentle_kind, near_miss=sh.near_miss, near_miss_sigma=sh.near_miss_sigma, rm=sh.rm,
-                      rm_model=str(resolve_rm_model(sh.rm_model)) if sh.rm else None,
-                      params=params_from_config(cfg.physics), noise=noise_from_config(cfg.get("noise")))
+                      extra_features=cfg.env.extra_features, **shaping,
+                      params=params_from_config(cfg.physics), noise=noise_from_config(cfg.noise))
 
 
 def wandb_env_defaults() -> None:

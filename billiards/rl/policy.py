@@ -18,9 +18,9 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from billiards import compat
 from billiards.files import CHECKPOINT_FILE, EVAL_FILE, SUMMARY_FILE, display_path, save_tagged
 from billiards.physics import PhysicsParams
-from billiards import compat
 from billiards.physics.config import params_from_config
 
 from .checkpoint import CheckpointError, agent_from_config, config_problem, load_checkpoint
@@ -31,7 +31,8 @@ _build_agent = agent_from_config  # the agent a stored config describes (billiar
 
 
 def check_policy(payload: dict, path):
-    """The one place an exported policy's content is checked, after its seal: its keys (a config,
+    """The one place an exported policy's content is checked, after its seal (and read in today's
+    form: :func:`billiards.compat.upgrade_policy_file`): its keys (a config,
     the actor's tensors; its evaluation and summary records, if any), the config plain data that
     describes networks (:func:`~billiards.rl.checkpoint.config_problem`: no interpolation, an
     algorithm of this version, positive layer widths ...), the actor's tensors real, finite and
@@ -56,16 +57,17 @@ def check_policy(payload: dict, path):
     expected = {k: v.shape for k, v in agent.actor.state_dict().items()}
     if why := shape_problem(expected, payload["actor"], "actor"):
         raise bad(f"{why} (its config: algo={cfg.algo.name}, hidden_sizes={list(cfg.algo.hidden_sizes)}, "
-                  f"extra_features={bool(cfg.env.get('extra_features', False))}, noise={cfg.get('noise', {}).get('preset')})")
+                  f"extra_features={bool(cfg.env.get('extra_features', False))}, noise={cfg.noise.preset})")
     agent.actor.load_state_dict(payload["actor"])
     return agent, cfg
 
 
 def _load_policy(path: Path):
-    """``(payload, agent, cfg)`` of an exported policy file, sealed and checked (:func:`check_policy`)."""
+    """``(payload, agent, cfg)`` of an exported policy file, sealed, in today's form
+    (:func:`billiards.compat.upgrade_policy_file`) and checked (:func:`check_policy`)."""
     from billiards.files import load_tagged
 
-    payload = load_tagged(path, POLICY_FORMAT, CheckpointError, "exported policy")
+    payload = compat.upgrade_policy_file(load_tagged(path, POLICY_FORMAT, CheckpointError, "exported policy"))
     return (payload, *check_policy(payload, path))
 
 
@@ -136,7 +138,7 @@ def reads_level(cfg) -> bool:
     (trained under variable noise, ``noise=variable``)."""
     from billiards.physics.noise import noise_from_config
 
-    return noise_from_config(cfg.get("noise")).is_variable
+    return noise_from_config(cfg.noise).is_variable
 
 
 def level_input_error(path, why: str) -> str:
@@ -145,8 +147,9 @@ def level_input_error(path, why: str) -> str:
 
 
 def policy_physics(cfg) -> PhysicsParams:
-    """The table a run trained on (runs saved before the presets existed: ``international``)."""
-    return params_from_config(compat.saved_physics_node(cfg))
+    """The table a run trained on (``cfg``: its config as :func:`load_policy` returns it, in
+    today's form)."""
+    return params_from_config(cfg.physics)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -121,7 +121,7 @@ def evaluate_policy(cfg, policy, n_innings: int, start: str):
         constrain_aim=cfg.env.constrain_aim,
         extra_features=cfg.env.extra_features,
         env_kwargs=dict(params=params_from_config(cfg.physics)),
-        noise=noise_from_config(cfg.get("noise")),
+        noise=noise_from_config(cfg.noise),
     )
 
 
@@ -135,11 +135,10 @@ def _plain(cfg) -> dict:
 
 
 def _typed(container: dict) -> DictConfig:
-    """A saved (plain) config merged back into the schema, so enums and types are checked and
-    keys added to the schema after the run started (e.g. ``algo.actor_ema``) take their
-    documented defaults."""
+    """A saved (plain) config brought to today's form (:func:`billiards.compat.upgrade_training_config`)
+    and merged into the schema, so enums and types are checked and every key has its value."""
     schema = OmegaConf.structured(Config)
-    container = compat.training_config(container)
+    container = compat.upgrade_training_config(container)
     algo = (container.get("algo") or {}).get("name")
     if algo in ALGO_SCHEMAS:
         schema.algo = OmegaConf.structured(ALGO_SCHEMAS[algo])
@@ -509,7 +508,7 @@ def finish(run: Run, bar) -> float:
         "frames": state.frames,
         "updates": agent.n_updates,
         **physics_record(params_from_config(cfg.physics)),
-        **noise_record(noise_from_config(cfg.get("noise"))),
+        **noise_record(noise_from_config(cfg.noise)),
         "device": str(run.device),
         "stopped_by": "total_steps" if state.frames >= cfg.budget.total_steps else "cpu_minutes",
         "train_seconds": round(train_seconds, 2),

@@ -33,6 +33,7 @@ import numba
 import numpy as np
 from tqdm import tqdm
 
+from billiards import compat
 from billiards.device import start_numba_threads
 from billiards.domain import ACTION_HIGH, ACTION_LOW
 from billiards.files import atomic_write_text
@@ -84,10 +85,11 @@ def draw_chunk(seed: int, i: int, size: int, params: PhysicsParams = DEFAULT_PAR
 
 
 def read_meta(out_dir) -> dict:
-    """The data set's ``meta.json`` as a dict; DatasetError if missing or unreadable."""
+    """The data set's ``meta.json`` as a dict, in today's form (:func:`billiards.compat.upgrade_artefact_meta`);
+    DatasetError if missing or unreadable."""
     path = Path(out_dir) / META_FILE
     try:
-        return json.loads(path.read_text())
+        return compat.upgrade_artefact_meta(json.loads(path.read_text()))
     except FileNotFoundError:
         raise DatasetError(f"{path} not found: {out_dir} is not a reward-model data set") from None
     except (OSError, json.JSONDecodeError) as err:
@@ -172,7 +174,7 @@ def _start(out_dir: Path, n: int, seed: int, chunk: int, params: PhysicsParams) 
                 f"chunk={found['chunk']}; asked for n={n}, seed={seed}, chunk={chunk}. "
                 f"Use another directory or delete this one."
             )
-        made_on = recorded_physics(meta.get("physics_params"))
+        made_on = recorded_physics(meta["physics_params"])
         if made_on != params:
             raise DatasetError(
                 f"{out_dir} holds a data set on physics {made_on.describe()!r}; asked for {params.describe()!r}. "

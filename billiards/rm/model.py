@@ -20,6 +20,7 @@ from torch import nn
 
 from billiards.files import save_tagged
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
+from billiards import compat
 from billiards.physics.config import physics_record, recorded_physics
 
 N_FEATURES = 13  # 8 normalised coordinates + cos(theta), sin(theta), 2p - 1, a, b
@@ -165,7 +166,7 @@ def check_reward_model(payload: dict, path) -> RewardModel:
         raise bad(why)
     model.load_state_dict(payload["state_dict"], strict=True)
     try:
-        model.params = recorded_physics(meta.get("physics_params"))
+        model.params = recorded_physics(compat.upgrade_artefact_meta(meta)["physics_params"])
     except (ValueError, TypeError, AttributeError) as err:
         raise bad(f"its metadata's table is not valid ({err})") from None
     model.meta = dict(meta)

@@ -195,7 +195,7 @@ def train_rm(
     data = load_dataset(data_dir)
     meta = read_meta(data_dir)
     block = int(meta["chunk"])
-    physics = recorded_physics(meta.get("physics_params"))
+    physics = recorded_physics(meta["physics_params"])
     rows = data["score"].shape[0] if max_rows is None else min(int(max_rows), data["score"].shape[0])
     n_hold = int(round(rows * holdout))
     n_train = rows - n_hold

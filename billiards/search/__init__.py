@@ -8,12 +8,13 @@ from importlib import import_module
 
 _WHERE = {
     "LookaheadActor": "actors", "PUCTActor": "actors", "SearchActor": "actors", "make_search_collector": "actors",
-    "H2Config": "lookahead", "SearchResult": "lookahead", "h2_search": "lookahead", "verifier_reward": "lookahead",
+    "SearchResult": "lookahead", "h2_search": "lookahead", "verifier_reward": "lookahead",
     "GeometricProposer": "proposers", "PolicyProposer": "proposers", "Proposer": "proposers",
     "load_policy_proposer": "proposers",
-    "PUCTConfig": "puct", "puct_search": "puct", "puct_reference": "puct_reference",
-    "NoisyPUCTActor": "actors", "RobustActor": "actors", "RobustConfig": "robust", "robust_search": "robust",
+    "puct_search": "puct", "puct_reference": "puct_reference",
+    "NoisyPUCTActor": "actors", "RobustActor": "actors", "robust_search": "robust",
     "noisy_puct_search": "puct_noise",
+    "H2Config": "settings", "PUCTConfig": "settings", "RobustConfig": "settings", "SearchSettings": "settings",
 }
 __all__ = sorted(_WHERE)
 

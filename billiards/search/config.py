@@ -2,14 +2,16 @@
 ConfigStore when this module is imported (the idiom both apps share, :mod:`billiards.app_config`).
 
 Every group option has its own closed schema, so a knob of another option fails while Hydra
-composes: ``search=h2 search.c_puct=5`` is rejected (``Key 'c_puct' not in
-'H2SearchConfig'``), ``search=puct search.c_puct=5`` works; likewise ``protocol=p3
-protocol.n_innings=5`` and ``proposer=geometric proposer.checkpoints=[...]``. The schemas of
-the options live at ``schema/<group>/<option>``, outside the option groups:
+composes: ``search=h2 search.c_puct=5`` is rejected (``Key 'c_puct' not in 'H2Config'``),
+``search=puct search.c_puct=5`` works; likewise ``protocol=p3 protocol.n_innings=5`` and
+``proposer=geometric proposer.checkpoints=[...]``. The schemas of the options live at
+``schema/<group>/<option>``, outside the option groups:
 
-* ``search``: ``h2`` (:class:`H2SearchConfig`) | ``puct`` (:class:`PUCTSearchConfig`) |
-  ``robust`` (:class:`RobustSearchConfig`, needs execution noise), ``conf/search/*.yaml``; the
-  default is ``for_noise_${noise}``: h2 without noise, robust under ``noise=fastfiz|fastfiz_x5|variable``
+* ``search``: ``h2`` (:class:`~billiards.search.settings.H2Config`) | ``puct``
+  (:class:`~billiards.search.settings.PUCTConfig`) | ``robust``
+  (:class:`~billiards.search.settings.RobustConfig`, needs execution noise): each the search
+  method's own settings (:mod:`billiards.search.settings`), ``conf/search/*.yaml``; the default
+  is ``for_noise_${noise}``: h2 without noise, robust under ``noise=fastfiz|fastfiz_x5|variable``
   (an explicit ``search=`` wins);
 * ``protocol``: ``p1`` (:class:`P1Config`) | ``p3`` (:class:`P3Config`), ``conf/protocol/*.yaml``;
 * ``noise``: the execution noise (:class:`~billiards.physics.noise.NoiseConfig`, ``conf/noise/*.yaml``,
@@ -25,7 +27,7 @@ the options live at ``schema/<group>/<option>``, outside the option groups:
 
 :func:`validate` checks what a type cannot express (budget split, sizes, files) before anything
 runs; :class:`ValidateSearchConfig` runs it before Hydra writes a directory, for every job of a
-multirun. The option schemas also build what they describe (:meth:`H2SearchConfig.settings`,
+multirun. The option schemas also build what they describe (:meth:`H2Config.actor`,
 :meth:`GeometricProposerConfig.build` ...): a closed table from kind to schema, not a
 ``_target_`` read from a file, so loading a saved config (``resume=``, a picture of a search
 run) never runs code named in it. :func:`saved_config` reads one, including the form written
@@ -35,7 +37,7 @@ before the per-option schemas (one union node per group).
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, List, Optional
 
@@ -44,187 +46,20 @@ from omegaconf.errors import OmegaConfBaseException
 
 from billiards import compat
 from billiards.tables import paper_tables
-from billiards.app_config import (RESUME_AUTO, ValidatingCallback, numeric_bound_errors, register_app, resolved_config,
+from billiards.app_config import (AppConfig, RESUME_AUTO, ValidatingCallback, numeric_bound_errors, register_app, resolved_config,
                                   upper_bound_errors)
 from billiards.device import device_error, threads_error
 from billiards.files import CONFIG_FILE, repo_path
-from billiards.physics.config import PhysicsConfig, physics_errors
-from billiards.physics.noise import NoiseConfig, noise_errors, noise_from_config
+from billiards.physics.config import physics_errors
+from billiards.physics.noise import noise_errors, noise_from_config
 
-# ----------------------------------------------------------------------------- bounds
-#
-# Every count and weight of a search has a finite upper bound, written once in its schema's
-# ``UPPER`` (key -> (bound, why); :func:`billiards.app_config.upper_bound_errors`) and listed in
-# docs/reliability.md ("Numbers with bounds after resolution").
-MAX_SEARCH = 10**5  # simulations per decision, and every count a decision spends them on
-MAX_WEIGHT = 100.0  # a weight in points (a score is worth 1)
-SIMS = (MAX_SEARCH, "simulations per decision")
-COUNT = (MAX_SEARCH, "at most the simulations of a decision")
-WEIGHT = (MAX_WEIGHT, "points; a score is worth 1")
-
+from .settings import MAX_SEARCH, H2Config, PUCTConfig, RobustConfig
 
 # ----------------------------------------------------------------------------- search
-
-
-class _SearchOption:
-    """What the search options share: their checks (the budget, every key's upper bound and the
-    knobs' own ranges as the search's settings object checks them)."""
-
-    UPPER: ClassVar[dict] = {}
-
-    def errors(self) -> list[str]:
-        if self.budget < 1:
-            return [f"search.budget must be >= 1, got {self.budget}"]
-        errs = upper_bound_errors(self, "search.", self.UPPER)
-        try:
-            self.settings()
-        except ValueError as err:
-            errs.append(f"search ({self.kind}): {err}")
-        return errs
-
-
-@dataclass
-class H2SearchConfig(_SearchOption):
-    """Greedy depth-2 K-expansion (paper §5): ``budget`` = k1 + m1 * k2 simulations per shot,
-    k2 derived (:meth:`billiards.search.lookahead.H2Config.from_budget`)."""
-
-    kind: str = "h2"
-    budget: int = 400
-    k1: int = 200
-    m1: int = 10
-    gamma: float = 0.99
-    foul_penalty: float = 1.0
-
-    UPPER: ClassVar[dict] = {"budget": SIMS, "k1": COUNT, "m1": COUNT, "foul_penalty": WEIGHT}
-
-    def settings(self):
-        """The :class:`~billiards.search.lookahead.H2Config` (ValueError if the split is invalid)."""
-        from .lookahead import H2Config
-
-        return H2Config.from_budget(self.budget, self.k1, self.m1, gamma=self.gamma, foul_penalty=self.foul_penalty)
-
-    def actor(self, proposer, seed: int, params, noise=None):
-        """The actor; ``noise`` (the execution noise the shots are played with) does not change
-        how h2 searches: it plans with exact simulations."""
-        from .actors import LookaheadActor
-
-        return LookaheadActor(proposer, self.settings(), seed=seed, params=params)
-
-
-@dataclass
-class PUCTSearchConfig(_SearchOption):
-    """PUCT over sampled continuous actions: ``budget`` simulations per shot, progressive
-    widening (pw_c, pw_alpha) over ``pool`` proposer samples per node. The knobs are those of
-    :class:`billiards.search.puct.PUCTConfig`, by name."""
-
-    kind: str = "puct"
-    budget: int = 400
-    c_puct: float = 1.0
-    pw_c: float = 1.0
-    pw_alpha: float = 0.5
-    pool: int = 16
-    max_depth: int = 8
-    gamma: float = 0.99
-    foul_penalty: float = 1.0
-
-    UPPER: ClassVar[dict] = {"budget": SIMS, "pool": COUNT, "max_depth": (1000, "plies of a tree"),
-                             "c_puct": (100.0, "an exploration weight"), "pw_c": (100.0, "a widening coefficient"),
-                             "foul_penalty": WEIGHT}
-
-    def settings(self):
-        """The :class:`~billiards.search.puct.PUCTConfig` (ValueError if a knob is out of range)."""
-        from .puct import PUCTConfig
-
-        return PUCTConfig(**{f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "kind"})
-
-    def actor(self, proposer, seed: int, params, noise=None):
-        """The actor; under execution noise (``noise`` a NoiseModel that is not exact) PUCT's
-        revisits are noisy replays (:mod:`billiards.search.puct_noise`)."""
-        from .actors import NoisyPUCTActor, PUCTActor
-
-        if noise is not None and not noise.is_exact:
-            return NoisyPUCTActor(proposer, self.settings(), noise, seed=seed, params=params)
-        return PUCTActor(proposer, self.settings(), seed=seed, params=params)
-
-
-@dataclass
-class RobustSearchConfig(_SearchOption):
-    """Noise-aware search (:mod:`billiards.search.robust`): each candidate scored by its verifier
-    reward over noisy replays; ``budget`` = [k1 exact screen] + noisy samples + m1 * k2
-    simulations per shot. Needs execution noise (``noise=fastfiz|fastfiz_x5|variable``; under
-    variable noise it replays each shot at the level the env told with it). The knobs are
-    those of :class:`billiards.search.robust.RobustConfig`, by name."""
-
-    kind: str = "robust"
-    budget: int = 400
-    k1: int = 300
-    samples: int = 4  # schedule=uniform: noisy samples per candidate (k1 * samples + m1 * k2 = budget)
-    schedule: str = "halving"  # uniform | halving (successive halving over the candidates left)
-    screen: bool = True  # one exact simulation per candidate first; only scoring ones get noisy samples
-    quantile: Optional[float] = None  # the candidate's statistic over its samples: null = mean, else this quantile
-    m1: int = 0
-    k2: int = 0  # children per expanded candidate
-    target: int = 10  # adaptive screen: stop screening a state once `target` candidates score (0: screen all k1)
-    wave: int = 50  # candidates per screening wave when target > 0
-    antithetic: bool = False  # noisy samples in antithetic pairs (z, -z)
-    gamma: float = 0.99
-    foul_penalty: float = 1.0
-    position: float = 0.0  # position play: a replay that scores is worth 1 + position * V(its leave)
-    leave: float = 0.0  # safety play (two-player): a replay that misses costs leave * V(the opponent's table)
-    safeties: int = 0  # safety play: also weigh this many screened misses that leave the opponent the hardest table
-    safety_draws: int = 0  # safety play: screen this many soft shots into a red's cone too, as safety candidates
-    value: Optional[str] = None  # the table value file (billiards.search.value) that prices the leaves
-
-    UPPER: ClassVar[dict] = {"budget": SIMS, **{key: COUNT for key in ("k1", "samples", "m1", "k2", "target", "wave", "safeties",
-                                                                       "safety_draws")},
-                             **{key: WEIGHT for key in ("foul_penalty", "position", "leave")}}
-
-    def settings(self):
-        """The :class:`~billiards.search.robust.RobustConfig` (ValueError if a knob is out of range)."""
-        from .robust import RobustConfig
-
-        return RobustConfig(**{f.name: getattr(self, f.name) for f in dataclasses.fields(self)
-                               if f.name not in ("kind", "value")})
-
-    def errors(self) -> list[str]:
-        """The knobs, and the table value file (loaded and checked now) where the leaves are priced."""
-        errs = super().errors()
-        if errs or not (self.position or self.leave):
-            return errs
-        if self.value is None:
-            return [f"search.position={self.position} / search.leave={self.leave} price the leaves with a table "
-                    f"value: name its file, search.value=<file> (made by: {VALUE_COMMAND})"]
-        if not Path(str(repo_path(self.value))).is_file():
-            return [f"search.value: no table value file at {self.value} (made by: {VALUE_COMMAND})"]
-        from .value import TableValue, ValueFileError
-
-        try:
-            TableValue.load(repo_path(self.value))
-        except ValueFileError as err:
-            return [f"search.value: {err}"]
-        return []
-
-    def table_value(self, params):
-        """The table value pricing the leaves (None where no weight is set); one trained on
-        another table warns (PhysicsMismatchWarning)."""
-        if not (self.position or self.leave):
-            return None
-        from billiards.physics.config import warn_physics_mismatch
-
-        from .value import TableValue
-
-        value = TableValue.load(repo_path(self.value))
-        warn_physics_mismatch(f"search.value ({self.value})", value.params, params)
-        return value
-
-    def actor(self, proposer, seed: int, params, noise=None):
-        """The actor, sampling ``noise`` (a NoiseModel; :func:`errors` refuses robust without noise)."""
-        from billiards.physics.noise import get_noise
-
-        from .actors import RobustActor
-
-        return RobustActor(proposer, self.settings(), get_noise(noise), seed=seed, params=params,
-                           value=self.table_value(params))
+#
+# The search options are the search methods' own settings (billiards/search/settings.py): one
+# dataclass per method, with its checks (errors(), check()) and bounds (UPPER, listed in
+# docs/reliability.md), registered below by kind.
 
 
 # ----------------------------------------------------------------------------- protocols
@@ -313,7 +148,6 @@ FORGIVING = dict(name="forgiving", power_low=0.5, power_high=1.0, u_low=0.3, u_h
 
 
 RANKER_COMMAND = "python -m billiards.search.ranker --out {out} --noise {noise}"
-VALUE_COMMAND = "python -m billiards.search.value --out results/values/value.pt --states 100000 --pool 500 --top 24"
 
 
 @dataclass
@@ -433,19 +267,15 @@ def shipped_proposer(name: str) -> PolicyProposerConfig:
 
 
 @dataclass
-class SearchAppConfig:
+class SearchAppConfig(AppConfig):
+    """search.py's root schema: the shared keys (:class:`~billiards.app_config.AppConfig`; a
+    resumed P3 continues from its next chain, a finished run does nothing) and the search's own."""
+
     proposer: Any = MISSING  # GeometricProposerConfig | PolicyProposerConfig, chosen by proposer=
-    physics: PhysicsConfig = field(default_factory=PhysicsConfig)  # the table: physics=korean_medium|international
-    search: Any = MISSING  # H2SearchConfig | PUCTSearchConfig | RobustSearchConfig, chosen by search=
+    search: Any = MISSING  # H2Config | PUCTConfig | RobustConfig, chosen by search=
     protocol: Any = MISSING  # P1Config | P3Config, chosen by protocol=
-    noise: NoiseConfig = field(default_factory=NoiseConfig)  # execution noise: noise=none|fastfiz|fastfiz_x5|variable
-    seed: int = 0
     threads: Optional[int] = None  # threads for the simulator's batches (numba) and the proposer networks (torch); default: all cores
-    progress: bool = True
     picture: bool = True
-    # a stopped search's run dir: continue it (P3: from its next chain); auto: this job's own dir
-    # if it holds a stopped run (a finished one does nothing), else a fresh run there
-    resume: Optional[str] = None
     table: Optional[str] = None  # the paper table an experiment preset reproduces (experiment=table6)
     paper: Any = None  # that table's paper figures (billiards/tables.py reads them)
     # where a policy proposer's networks run: auto | cpu | cuda | cuda:N (billiards/device.py); the
@@ -455,7 +285,7 @@ class SearchAppConfig:
 
 # group -> (the key naming the option inside its node, {option: schema})
 OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
-    "search": ("kind", {"h2": H2SearchConfig, "puct": PUCTSearchConfig, "robust": RobustSearchConfig}),
+    "search": ("kind", {"h2": H2Config, "puct": PUCTConfig, "robust": RobustConfig}),
     "protocol": ("name", {"p1": P1Config, "p3": P3Config}),
     "proposer": ("kind", {"geometric": GeometricProposerConfig, "policy": PolicyProposerConfig,
                           "ranked": RankedProposerConfig}),
@@ -564,8 +394,8 @@ def search_config(search: str = "h2", protocol: str = "p3", proposer: str = "geo
 # those that were not its own (the robust knobs and the geometric u_*/spin_* ranges: the union
 # nodes of the runs under execution noise, results/noise/).
 def upgrade(saved: dict) -> dict:
-    """A saved search config (a plain dict) in today's form (:func:`billiards.compat.search_config`)."""
-    return compat.search_config(saved, lambda group, node: {f.name for f in dataclasses.fields(option_schema(group, node))})
+    """A saved search config (a plain dict) in today's form (billiards.compat.upgrade_search_config)."""
+    return compat.upgrade_search_config(saved, lambda group, node: {f.name for f in dataclasses.fields(option_schema(group, node))})
 
 
 def saved_config(run_dir: str | Path) -> DictConfig:
@@ -622,10 +452,10 @@ def errors(cfg) -> list[str]:
     if cfg.get("resume") and cfg.resume != RESUME_AUTO and not (Path(cfg.resume) / CONFIG_FILE).is_file():
         errs.append(f"resume={cfg.resume!r}: not a search run directory (no {CONFIG_FILE} there)")
     errs.extend(physics_errors(cfg.physics))
-    noise = cfg.get("noise")  # absent from a plain config written before it existed: exact play
-    noise_errs = noise_errors(noise) if noise is not None else []
+    noise = cfg.noise
+    noise_errs = noise_errors(noise)
     errs.extend(noise_errs)
-    if isinstance(search, RobustSearchConfig) and not noise_errs and noise_from_config(noise).is_exact:
+    if isinstance(search, RobustConfig) and not noise_errs and noise_from_config(noise).is_exact:
         errs.append("search=robust scores candidates over noisy replays: it needs execution noise "
                     "(noise=fastfiz|fastfiz_x5|variable or noise.aim_deg=...); without noise use search=h2")
     return errs
@@ -645,7 +475,7 @@ class ValidateSearchConfig(ValidatingCallback):
     validate = staticmethod(validate)
 
 
-__all__ = ["FORGIVING", "GeometricProposerConfig", "H2SearchConfig", "OPTIONS", "P1Config", "P3Config",
-           "PUCTSearchConfig", "PolicyProposerConfig", "RankedProposerConfig", "RobustSearchConfig", "SHIPPED_PROPOSERS", "SearchAppConfig",
+__all__ = ["FORGIVING", "GeometricProposerConfig", "H2Config", "OPTIONS", "P1Config", "P3Config",
+           "PUCTConfig", "PolicyProposerConfig", "RankedProposerConfig", "RobustConfig", "SHIPPED_PROPOSERS", "SearchAppConfig",
            "SearchConfigError", "ValidateSearchConfig", "errors", "option", "proposer_options", "saved_config",
            "shipped_proposer", "typed", "upgrade", "validate"]

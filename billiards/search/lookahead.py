@@ -22,7 +22,7 @@ import numpy as np
 from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, BatchResult, PhysicsParams, simulate_batch
 
-VERIFIER_FOUL_PENALTY = 1.0  # the paper's verifier: aim constraint + features + foul penalty 1.0
+from .settings import VERIFIER_FOUL_PENALTY, H2Config  # H2Config: the options of h2_search
 
 
 def verifier_reward(result: BatchResult, foul_penalty: float = VERIFIER_FOUL_PENALTY) -> np.ndarray:
@@ -39,45 +39,11 @@ class SearchResult:
     n_sims: int  # shots simulated for this decision (all states)
 
 
-@dataclass(frozen=True)
-class H2Config:
-    """The K1 / M1 / K2 split of a depth-2 lookahead. ``from_budget`` derives K2."""
-
-    k1: int = 200
-    m1: int = 10
-    k2: int = 20
-    gamma: float = 0.99
-    foul_penalty: float = VERIFIER_FOUL_PENALTY
-
-    def __post_init__(self):
-        if self.k1 < 1 or self.m1 < 0 or self.k2 < 0:
-            raise ValueError(f"h2 search needs k1 >= 1, m1 >= 0, k2 >= 0; got k1={self.k1}, m1={self.m1}, k2={self.k2}")
-        if self.m1 > self.k1:
-            raise ValueError(f"h2 search cannot expand m1={self.m1} of only k1={self.k1} candidates")
-        if not 0.0 <= self.gamma <= 1.0:
-            raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
-        domain.check_coefficient("foul_penalty", self.foul_penalty)
-
-    @classmethod
-    def from_budget(cls, budget: int, k1: int, m1: int, **kw) -> "H2Config":
-        """Split ``budget`` simulations per decision: K2 = (budget - K1) / M1, exactly."""
-        if m1 == 0:
-            if budget != k1:
-                raise ValueError(f"without expansion (m1=0) the budget {budget} must equal k1={k1}")
-            return cls(k1=k1, m1=0, k2=0, **kw)
-        rest = budget - k1
-        if rest < 0 or rest % m1:
-            raise ValueError(f"budget {budget} - k1 {k1} = {rest} is not a non-negative multiple of m1={m1}")
-        return cls(k1=k1, m1=m1, k2=rest // m1, **kw)
-
-    @property
-    def sims_per_decision(self) -> int:
-        return self.k1 + self.m1 * self.k2
-
-
 def h2_search(positions: np.ndarray, proposer, cfg: H2Config, rng: np.random.Generator,
               params: PhysicsParams = DEFAULT_PARAMS) -> SearchResult:
-    """Choose one action for each of S table states (positions (S, 4, 2)) by depth-2 lookahead."""
+    """Choose one action for each of S table states (positions (S, 4, 2)) by depth-2 lookahead
+    (ValueError if ``cfg`` has a knob out of range, :meth:`H2Config.check`)."""
+    cfg.check()
     positions = np.asarray(positions, dtype=np.float64)
     S, K1 = positions.shape[0], cfg.k1
     rows = np.arange(S)[:, None]

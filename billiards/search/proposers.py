@@ -276,7 +276,7 @@ class PolicyProposer:
     ``"auto"`` (default) is batched when the networks are of the kind it reproduces, else
     reference. Both consume the caller's generator identically (same draws, same order) and
     give the same candidates up to float32 rounding of the network (torch's kernels sum in
-    their own, CPU-dependent orders; see ``tests/test_search.py``). ``self.impl`` is the one in use.
+    their own, CPU-dependent orders; see ``tests/search/test_search.py``). ``self.impl`` is the one in use.
     The batched proposer copies the weights when it is built: later changes to the torch
     modules do not reach it (build a new proposer).
 

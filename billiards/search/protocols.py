@@ -142,17 +142,16 @@ def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int =
     return length, history
 
 
-def read_chains(path: str | Path | None, run: str | None = None, *, legacy: bool = False,
-                repair: bool = False) -> dict[int, dict]:
+def read_chains(path: str | Path | None, run: str | None = None, *, repair: bool = False) -> dict[int, dict]:
     """The finished chains of a P3 ledger (``chains.jsonl``), by seed: every line a sealed chain
     record of the run ``run`` (None: of one run, whichever), each seed once
     (:func:`billiards.files.read_ledger`; :class:`billiards.files.LedgerError` naming the file
     and the line otherwise). A torn last line (a kill mid-append) is left out; with ``repair``
-    (the resume path) it is cut off the file, so its chain is played again. ``legacy``: accept
-    records written before ledgers were sealed (read-only views only; a resume never does)."""
+    (the resume path) it is cut off the file, so its chain is played again. (A read-only view of
+    any ledger: :func:`billiards.compat.ledger_records`.)"""
     if path is None:
         return {}
-    return {r["seed"]: r for r in read_ledger(path, CHAINS, run, legacy=legacy, repair=repair).records}
+    return {r["seed"]: r for r in read_ledger(path, CHAINS, run, repair=repair).records}
 
 
 def run_p3(actor: SearchActor, seeds=range(10), cap: int = 10_000, params: PhysicsParams = DEFAULT_PARAMS,

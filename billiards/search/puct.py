@@ -25,9 +25,6 @@ decisions.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numba
 import numpy as np
 
@@ -36,36 +33,10 @@ from billiards.physics import DEFAULT_PARAMS, PhysicsParams, core, simulate_batc
 from billiards.physics.api import PARALLEL_MIN_BATCH, POSITION_TOL
 
 from . import puct_tree as tree
-from .lookahead import VERIFIER_FOUL_PENALTY, SearchResult, verifier_reward
+from .lookahead import SearchResult, verifier_reward
+from .settings import PUCTConfig  # the options of puct_search
 
 IMPLS = ("compiled", "reference")
-
-
-@dataclass(frozen=True)
-class PUCTConfig:
-    budget: int = 400
-    c_puct: float = 1.0
-    pw_c: float = 1.0
-    pw_alpha: float = 0.5
-    pool: int = 16  # prior samples drawn when a node is created (more on demand)
-    max_depth: int = 8
-    gamma: float = 0.99
-    foul_penalty: float = VERIFIER_FOUL_PENALTY
-
-    def __post_init__(self):
-        if self.budget < 1 or self.pool < 1 or self.max_depth < 1:
-            raise ValueError(f"PUCT needs budget, pool and max_depth >= 1; got {self.budget}, {self.pool}, {self.max_depth}")
-        finite = all(math.isfinite(v) for v in (self.c_puct, self.pw_c, self.pw_alpha, self.gamma))
-        if not finite or self.c_puct < 0 or self.pw_c <= 0 or not 0 < self.pw_alpha <= 1:
-            raise ValueError(f"PUCT needs finite c_puct >= 0, pw_c > 0 and 0 < pw_alpha <= 1; got c_puct={self.c_puct}, "
-                             f"pw_c={self.pw_c}, pw_alpha={self.pw_alpha}")
-        if not 0.0 <= self.gamma <= 1.0:
-            raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
-        domain.check_coefficient("foul_penalty", self.foul_penalty)
-
-    @property
-    def sims_per_decision(self) -> int:
-        return self.budget
 
 
 def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random.Generator,
@@ -73,8 +44,10 @@ def puct_search(positions: np.ndarray, proposer, cfg: PUCTConfig, rng: np.random
     """Choose one action for each of S table states (positions (S, 4, 2)) by PUCT.
 
     ``impl="compiled"`` walks the array trees of :mod:`billiards.search.puct_tree`;
-    ``"reference"`` runs the pure-Python tree (same decisions, several times slower).
+    ``"reference"`` runs the pure-Python tree (same decisions, several times slower). ValueError
+    if ``cfg`` has a knob out of range (:meth:`PUCTConfig.check`).
     """
+    cfg.check()
     if impl not in IMPLS:
         raise ValueError(f"puct_search impl must be one of {', '.join(IMPLS)}; got {impl!r}")
     positions = np.asarray(positions, dtype=np.float64)

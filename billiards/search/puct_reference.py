@@ -2,7 +2,7 @@
 
 The same algorithm as :func:`billiards.search.puct.puct_search` (read its module docstring),
 one Python object per node and a Python loop per simulation. The compiled tree must make the
-same decisions from the same generator state (``tests/test_search.py``), and
+same decisions from the same generator state (``tests/search/test_search.py``), and
 ``benchmarks/bench_search.py`` times both; select it with ``puct_search(..., impl="reference")``.
 """
 

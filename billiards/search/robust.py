@@ -47,85 +47,16 @@ after the screen).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
-from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, simulate_batch
 from billiards.envs.sagu import SWAP
 from billiards.physics.noise import NoiseModel, noise_level
 
-from .lookahead import VERIFIER_FOUL_PENALTY, SearchResult, verifier_reward
-
-SCHEDULES = ("uniform", "halving")
-
-
-@dataclass(frozen=True)
-class RobustConfig:
-    budget: int = 400
-    k1: int = 300
-    samples: int = 4  # noisy samples per candidate (schedule=uniform)
-    schedule: str = "halving"
-    screen: bool = True
-    quantile: Optional[float] = None  # None: the mean over samples
-    target: int = 10  # adaptive screen: stop screening a state once `target` candidates score (0: all k1 at once;
-    # no screen, screen=False: unused)
-    wave: int = 50  # candidates per screening wave (target > 0)
-    antithetic: bool = False  # noisy samples in antithetic pairs (z, -z)
-    m1: int = 0
-    k2: int = 0
-    gamma: float = 0.99
-    foul_penalty: float = VERIFIER_FOUL_PENALTY
-    position: float = 0.0  # a replay that scores is worth 1 + position * V(its leave) (needs a table value)
-    leave: float = 0.0  # two-player: a replay that misses costs leave * V(the opponent's view of its leave)
-    safeties: int = 0  # two-player: also replay the screened misses whose exact leave V rates hardest for the opponent
-    safety_draws: int = 0  # two-player: soft shots into a red's contact cone screened beside the proposer's (safeties)
-
-    def __post_init__(self):
-        if not (math.isfinite(self.position) and self.position >= 0 and math.isfinite(self.leave) and self.leave >= 0):
-            raise ValueError(f"position and leave must be finite weights >= 0; got position={self.position}, "
-                             f"leave={self.leave}")
-        if self.safeties < 0 or (self.safeties and not (self.leave and self.screen)):
-            raise ValueError(f"safeties (safety shots replayed beside the scoring ones) must be >= 0 and need leave > 0 "
-                             f"and the exact screen; got safeties={self.safeties}, leave={self.leave}, screen={self.screen}")
-        if self.safety_draws < 0 or (self.safety_draws and not self.safeties):
-            raise ValueError(f"safety_draws (soft shots screened as safety candidates) must be >= 0 and need "
-                             f"safeties > 0; got safety_draws={self.safety_draws}, safeties={self.safeties}")
-        if self.schedule not in SCHEDULES:
-            raise ValueError(f"robust search schedule must be one of {', '.join(SCHEDULES)}; got {self.schedule!r}")
-        if self.target < 0 or self.wave < 1:
-            raise ValueError(f"robust search needs target >= 0 and wave >= 1; got target={self.target}, wave={self.wave}")
-        if self.budget < 1 or self.k1 < 1 or self.samples < 1 or self.m1 < 0 or self.k2 < 0:
-            raise ValueError(f"robust search needs budget, k1, samples >= 1 and m1, k2 >= 0; got budget={self.budget}, "
-                             f"k1={self.k1}, samples={self.samples}, m1={self.m1}, k2={self.k2}")
-        if self.m1 > self.k1:
-            raise ValueError(f"robust search cannot expand m1={self.m1} of only k1={self.k1} candidates")
-        if self.quantile is not None and not (math.isfinite(self.quantile) and 0.0 <= self.quantile <= 1.0):
-            raise ValueError(f"quantile must lie in [0, 1] (or be null: the mean), got {self.quantile}")
-        if not 0.0 <= self.gamma <= 1.0:
-            raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
-        domain.check_coefficient("foul_penalty", self.foul_penalty)
-        expand = self.m1 * self.k2
-        if self.schedule == "uniform":
-            if self.screen:
-                raise ValueError("schedule=uniform gives every candidate `samples` noisy samples, so it takes "
-                                 "screen=false (a screen leaves a varying number of candidates)")
-            if self.k1 * self.samples + expand != self.budget:
-                raise ValueError(f"schedule=uniform spends k1 * samples + m1 * k2 = {self.k1} * {self.samples} + "
-                                 f"{self.m1} * {self.k2} = {self.k1 * self.samples + expand}, not the budget {self.budget}")
-        else:
-            rest = self.budget - expand - (self.k1 + self.safety_draws if self.screen else 0)
-            need = 1 if self.screen else self.k1
-            if rest < need:
-                raise ValueError(f"schedule=halving leaves {rest} simulations for noisy samples after "
-                                 f"{'the screen of k1=' + str(self.k1) + ' (+ safety_draws) and ' if self.screen else ''}"
-                                 f"m1 * k2 = {expand}: it needs at least {need} of the budget {self.budget}")
-
-    @property
-    def sims_per_decision(self) -> int:
-        return self.budget
+from .lookahead import SearchResult, verifier_reward
+from .settings import SCHEDULES, RobustConfig  # RobustConfig: the options of robust_search
 
 
 def _stat(samples: list, quantile: Optional[float]) -> float:
@@ -236,7 +167,9 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
     drawn for the shot and told to the player); without it every state plays ``noise`` itself.
     ``value`` (a :class:`~billiards.search.value.TableValue`) prices the replays' leaves by
     ``cfg.position`` and ``cfg.leave`` (:func:`leave_terms`); the statistic is then over the
-    replays' reward plus that term, ``r1`` stays the mean verifier reward."""
+    replays' reward plus that term, ``r1`` stays the mean verifier reward. ValueError if ``cfg``
+    has a knob out of range (:meth:`RobustConfig.check`)."""
+    cfg.check()
     if (cfg.position or cfg.leave) and value is None:
         raise ValueError("robust search with position or leave weights needs a table value (search.value=<file>)")
     noise = noise if noise is not None else NoiseModel()

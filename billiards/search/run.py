@@ -39,7 +39,7 @@ def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchA
     """The search actor ``cfg.search`` describes, seeded with ``cfg.seed``, over ``proposer``,
     for the execution noise ``cfg.noise`` (under noise PUCT's revisits are noisy replays,
     :mod:`billiards.search.puct_noise`, and ``robust`` samples the noise model)."""
-    return option("search", cfg.search).actor(proposer, cfg.seed, params, noise=noise_from_config(cfg.get("noise")))
+    return option("search", cfg.search).actor(proposer, cfg.seed, params, noise=noise_from_config(cfg.noise))
 
 
 RUNTIME_KEYS = ("threads", "progress", "picture", "device")  # taken from the command line when resuming
@@ -123,7 +123,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
     as it is (None is returned), a stopped P3 there continues, anything else starts fresh.
 
     Every chain record carries the run's identity (:func:`search_identity`) and a seal; a resume
-    refuses a ledger line that is unsealed (ledgers written before the seals included), edited,
+    refuses a ledger line that is unsealed, edited,
     of another run or a repeated seed, and cuts a torn last line off (its chain is played again)."""
     commit = git_commit()  # the code that runs (read before anything runs: files may change meanwhile)
     out_dir = Path(out_dir)
@@ -164,7 +164,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
     if cfg.threads is not None:
         set_threads(cfg.threads)
     params = params_from_config(cfg.physics)
-    noise = noise_from_config(cfg.get("noise"))
+    noise = noise_from_config(cfg.noise)
     print(f"search: {describe(cfg, params)}\noutput: {display_path(out_dir)}", flush=True)
     warm_up(params, log=lambda msg: print(msg, flush=True))
     device = resolve_device(cfg.get("device", "auto"))

@@ -197,7 +197,7 @@ def search_run_entry(run_dir: Path) -> Entry:
 
     def build() -> Entry:
         cfg = saved_config(run_dir)
-        params, noise = params_from_config(cfg.physics), noise_from_config(cfg.get("noise"))
+        params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
         actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
         name = f"{cfg.search.kind} search, proposer {cfg.proposer.name}, {cfg.search.budget} simulations"
         return Entry(name, SearchActorAgent(actor, name), cfg.physics.preset, noise.describe(), params, noise)

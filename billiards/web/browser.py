@@ -1,4 +1,4 @@
-"""Headless Chromium for the viewer's browser tests and screenshots (tests/test_web_browser.py,
+"""Headless Chromium for the viewer's browser tests and screenshots (tests/web/test_web_browser.py,
 benchmarks/web_screenshots.py): where the binary is, how it is started, and the app served by
 uvicorn in a thread of this process. Playwright is imported by the callers, not here."""
 

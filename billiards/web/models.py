@@ -53,29 +53,31 @@ class ShotRequest(_Table):
     paths: bool = True
 
 
-class AgentRequest(_Table):
+class _AgentOnTable(_Table):
+    """What every question to an agent holds: the table, the seed the agent is reseeded with, the
+    shot's noise level (variable noise) and the noisy replays a candidate is scored over."""
+
     positions: Positions
-    agent: Annotated[str, Field(min_length=1, max_length=200)]
     seed: Seed = 0
     level: Optional[Annotated[float, Field(strict=True, ge=0.0, le=100.0, allow_inf_nan=False)]] = None
     replays: Annotated[int, Field(strict=True, ge=0, le=500)] = 50
 
 
-class ConsideredRequest(_Table):
+class AgentRequest(_AgentOnTable):
+    agent: Annotated[str, Field(min_length=1, max_length=200)]
+
+
+class ConsideredRequest(_AgentOnTable):
     """What an agent considers for a recorded shot: the run it played in (``run``: a search run's
     P3 or P1, or a benchmark scorecard's run; its own agent, table and noise) or an agent of the
     list (``agent`` with ``physics`` and ``noise``), the table before the shot, the shot it
     commanded (replayed under the noise), the shooter, the shot's noise level and the seed the
     agent is reseeded with."""
 
-    positions: Positions
     run: Optional[Annotated[str, Field(min_length=1, max_length=1000)]] = None
     agent: Optional[Annotated[str, Field(min_length=1, max_length=200)]] = None
     commanded: Optional[Action] = None
     shooter: Literal[0, 1] = 0
-    seed: Seed = 0
-    level: Optional[Annotated[float, Field(strict=True, ge=0.0, le=100.0, allow_inf_nan=False)]] = None
-    replays: Annotated[int, Field(strict=True, ge=0, le=500)] = 50
 
     @model_validator(mode="after")
     def _one_agent(self):

@@ -288,7 +288,7 @@ def replay_p1(d: Path, max_shots: int = MAX_P1_SHOTS) -> dict:
                             f"generator) would have to be played again whole; the viewer plays at most {max_shots:,}")
     results = json.loads((d / "results.json").read_text())
     params = params_from_config(cfg.physics)
-    noise = noise_from_config(cfg.get("noise"))
+    noise = noise_from_config(cfg.noise)
     actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
     env = BilliardsEnv(batch_size=[n], start="random", on_miss="continue", max_shots=shots, seed=seed, params=params, noise=noise)
     actor.reseed(seed)
@@ -350,13 +350,15 @@ def replay_training(d: Path, policy: Path) -> dict:
     from billiards.rl.checkpoint import CheckpointError
     from billiards.rl.policy import load_policy
 
-    ev = json.loads((d / "eval.json").read_text())
+    from billiards import compat
+
+    ev = compat.upgrade_eval_record(json.loads((d / "eval.json").read_text()))
     try:
         module, cfg = load_policy(policy)
     except (CheckpointError, OSError, ValueError) as err:
         raise ReplayRefused(f"its policy {policy} cannot be loaded: {err}") from None
     params = params_from_config(cfg.physics)
-    noise = noise_from_config(cfg.get("noise"))
+    noise = noise_from_config(cfg.noise)
     n, shots, seed, start = int(ev["n_innings"]), int(ev["max_shots"]), int(ev["seed"]), ev.get("start", "random")
     constrain = bool(cfg.env.constrain_aim)
     env = make_env(n, start=start, on_miss="continue", max_shots=shots, constrain_aim=constrain,

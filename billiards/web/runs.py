@@ -44,7 +44,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from billiards.files import CHAINS, CHAINS_FILE, EVAL_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT, LedgerError, read_ledger
+from billiards import compat
+from billiards.files import CHAINS, CHAINS_FILE, EVAL_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT, LedgerError
 
 from . import replays
 from .replays import ReplayRefused, match_shot
@@ -257,7 +258,7 @@ class RunStore:
             cfg = yaml.load(path.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)) or {}
         except (OSError, yaml.YAMLError):
             cfg = {}
-        self._settings[key] = out = self._settings_of(cfg if isinstance(cfg, dict) else {})
+        self._settings[key] = out = self._settings_of(compat.upgrade_config_nodes(cfg) if isinstance(cfg, dict) and cfg else {})
         return out
 
     @staticmethod
@@ -269,7 +270,7 @@ class RunStore:
         if isinstance(noise, dict):
             name = noise.get("preset", "none")
             overridden = any(noise.get(k) is not None for k in ("aim_deg", "speed", "tip_mm", "level_range"))
-            if overridden or noise.get("scale", 1) not in (1, 1.0, None):
+            if overridden or noise.get("scale") not in (1, 1.0, None):
                 name += "+custom"
         else:
             name = "none"
@@ -334,7 +335,7 @@ class RunStore:
 
     def _load_p3(self, d: Path) -> dict:
         physics, noise = self._p3_settings(d)
-        records = read_ledger(d / CHAINS_FILE, CHAINS, legacy=True).records
+        records = compat.ledger_records(d / CHAINS_FILE, CHAINS)
         units = []
         for rec in sorted(records, key=lambda r: r["seed"]):
             shots, n = [], len(rec["last_shots"])
@@ -355,7 +356,7 @@ class RunStore:
     def _load_matches(self, d: Path, unit: int | None) -> dict:
         league = _read_json(d / LEAGUE_FILE) or {}
         web = league.get("app") == WEB_APP
-        records = read_ledger(d / MATCHES_FILE, MATCHES, legacy=True).records
+        records = compat.ledger_records(d / MATCHES_FILE, MATCHES)
         units = []
         for i, r in enumerate(records):
             s = r["scores"]

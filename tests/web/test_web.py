@@ -1,0 +1,495 @@
+"""The viewer's JSON API (billiards.web) through FastAPI's TestClient: its shots are the
+simulator's bit for bit, bad input is a 4xx with a message and the next request still
+succeeds, agents answer, recorded runs list and replay exactly (P3 chains from their ledgers;
+benchmark scorecards' units, P1 innings and training evaluations played again, their scores
+equal to the recorded ones), a scorecard whose agent names code is refused, what a search
+considered is shown for a recorded shot, paths outside the allowed folders are refused, a match
+plays to its end and is saved as a league ledger."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("fastapi")
+pytest.importorskip("httpx")  # FastAPI's TestClient
+from fastapi.testclient import TestClient  # noqa: E402
+
+from billiards.envs.sagu import shooter_view  # noqa: E402
+from billiards.files import ROOT, verify  # noqa: E402
+from billiards.physics import canonical_rack, get_params, simulate_shot  # noqa: E402
+from billiards.physics.noise import get_noise  # noqa: E402
+from billiards.web import create_app  # noqa: E402
+
+P3_RUN = "results/search/paper/table6/geometric/h2_p3"  # a committed exact P3 run (20 chains, their last shots)
+NOISY_P3 = "results/noisy_track/headline/position_fastfiz_p3"  # the position-aware search under fastfiz (a table value)
+P1_RUN = "results/noisy_track/runs/h2_fastfiz_p1"  # a committed P1: 20 innings x 50 shots of h2 under fastfiz
+SCORECARDS = "results/bench/scorecards"
+CODE_SPEC = "tests/web/test_web.py:GOOD"  # a spec that names code: never built by the viewer
+RACK = canonical_rack().tolist()
+GOOD = {"positions": RACK, "action": [1.0, 0.6, 0.2, -0.1]}
+
+
+@pytest.fixture(scope="module")
+def extra_runs(tmp_path_factory):
+    """A run directory given on the command line, holding a symlink that leads out of it."""
+    d = tmp_path_factory.mktemp("runs")
+    (d / "out").symlink_to(ROOT / "billiards")
+    code = d / "code_scorecard"  # a scorecard of a committed run, its agent spec changed to one that names code
+    code.mkdir()
+    src = ROOT / SCORECARDS / "p1-exact-v1" / "random"
+    ev = json.loads((src / "evaluation.json").read_text())
+    ev["agent"]["spec"] = CODE_SPEC
+    (code / "evaluation.json").write_text(json.dumps(ev))
+    (code / "units.jsonl").write_bytes((src / "units.jsonl").read_bytes())
+    return d
+
+
+@pytest.fixture(scope="module")
+def out_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("web_out")
+
+
+@pytest.fixture(scope="module")
+def client(extra_runs, out_dir):
+    return TestClient(create_app(run_dirs=[extra_runs], out_dir=out_dir))
+
+
+# ----------------------------------------------------------------------------- shots
+
+
+@pytest.mark.parametrize("action", [[1.0, 0.6, 0.2, -0.1], [math.pi, 0.5, 0.0, 0.0], [4.71238898038469, 0.93, -0.7, 0.55]])
+def test_shot_on_the_opening_rack_is_simulate_shot_bit_for_bit(client, action):
+    r = client.post("/api/shot", json={"positions": RACK, "action": action})
+    assert r.status_code == 200, r.text
+    out = r.json()
+    res = simulate_shot(np.array(RACK), np.array(action))
+    assert out["final"] == res.positions.tolist()  # JSON floats round-trip exactly
+    assert (out["result"]["score"], out["result"]["foul"]) == (res.score, res.foul)
+    assert out["result"]["cushions"] == res.cushions
+    assert list(out["result"]["hits"].values()) == res.hits.tolist()
+    assert out["played"] == action
+    xy = np.array(out["paths"]["xy"])
+    assert xy.shape == (len(out["paths"]["t"]), 4, 2) and np.allclose(xy[0], RACK) and np.allclose(xy[-1], res.positions, atol=1e-5)
+
+
+def test_a_noisy_shot_is_the_noise_model_then_the_simulator(client):
+    action = [1.3, 0.7, 0.1, 0.2]
+    r = client.post("/api/shot", json={"positions": RACK, "action": action, "noise": "fastfiz_x5", "seed": 11}).json()
+    played = get_noise("fastfiz_x5").perturb(np.array(action)[None], np.random.default_rng(11))[0]
+    assert r["played"] == played.tolist() and r["commanded"] == action
+    assert r["final"] == simulate_shot(np.array(RACK), played).positions.tolist()
+
+
+def test_a_yellow_shot_is_simulated_from_the_yellow_view(client):
+    action = [0.4, 0.8, 0.0, 0.3]
+    r = client.post("/api/shot", json={"positions": RACK, "action": action, "shooter": 1}).json()
+    res = simulate_shot(shooter_view(np.array(RACK), 1), np.array(action))
+    assert r["final"] == shooter_view(res.positions, 1).tolist()
+    assert set(r["result"]["hits"]) == {"white", "red1", "red2"}
+
+
+# ----------------------------------------------------------------------------- bad input
+
+BAD = [  # (id, method, url, json body or raw bytes, status, words the message holds)
+    ("overlap", "POST", "/api/shot", {**GOOD, "positions": [RACK[0], RACK[0], RACK[2], RACK[3]]}, 422, "overlaps"),
+    ("off-table", "POST", "/api/shot", {**GOOD, "positions": [[3.0, 1.0], *RACK[1:]]}, 422, "off the table"),
+    ("power", "POST", "/api/shot", {**GOOD, "action": [1.0, 1.5, 0.0, 0.0]}, 422, "power p"),
+    ("tip", "POST", "/api/shot", {**GOOD, "action": [1.0, 0.5, 2.0, 0.0]}, 422, "tip offset a"),
+    ("nan", "POST", "/api/shot", b'{"positions": %s, "action": [NaN, 0.5, 0, 0]}' % json.dumps(RACK).encode(), 422, "finite"),
+    ("shape", "POST", "/api/shot", {**GOOD, "positions": RACK[:3]}, 422, "positions"),
+    ("bool", "POST", "/api/shot", {**GOOD, "action": [1.0, True, 0.0, 0.0]}, 422, "action.1"),
+    ("extra-key", "POST", "/api/shot", {**GOOD, "spin": 1}, 422, "spin"),
+    ("physics", "POST", "/api/shot", {**GOOD, "physics": "snooker"}, 422, "unknown physics preset 'snooker'"),
+    ("noise", "POST", "/api/shot", {**GOOD, "noise": "loud"}, 422, "unknown noise preset 'loud'"),
+    ("malformed", "POST", "/api/shot", b'{"positions": [[0.1, ', 400, "malformed JSON"),
+    ("agent-code", "POST", "/api/agent", {"positions": RACK, "agent": "tests/web/test_web.py:GOOD"}, 422, "unknown agent"),
+    ("agent-league", "POST", "/api/agent", {"positions": RACK, "agent": "league:nobody"}, 422, "unknown agent"),
+    ("agent-table", "POST", "/api/agent", {"positions": [[0.0, 0.0], *RACK[1:]], "agent": "random"}, 422, "off the table"),
+    ("opponent", "POST", "/api/match", {"opponent": "nobody"}, 422, "no league player"),
+    ("target", "POST", "/api/match", {"opponent": "random", "target": 0}, 422, "target"),
+    ("no-match", "POST", "/api/match/abc/shot", {"action": [1.0, 0.5, 0.0, 0.0]}, 404, "no match"),
+    ("dotdot", "GET", "/api/run?path=results/../pyproject.toml", None, 403, "'..'"),
+    ("absolute", "GET", "/api/run?path=/etc/passwd", None, 403, "outside"),
+    ("repo-file", "GET", "/api/run?path=pyproject.toml", None, 403, "outside"),
+    ("missing", "GET", "/api/run?path=results/no_such_run", None, 404, "no run"),
+    ("not-a-run", "GET", "/api/run?path=results/README.md", None, 404, "not a run"),
+    ("considered-two", "POST", "/api/considered", {"positions": RACK, "run": P3_RUN, "agent": "random"}, 422, "either run"),
+    ("considered-none", "POST", "/api/considered", {"positions": RACK}, 422, "either run"),
+    ("considered-outside", "POST", "/api/considered", {"positions": RACK, "run": "/etc"}, 403, "outside"),
+    ("considered-league", "POST", "/api/considered", {"positions": RACK, "run": "results/sagu/fastfiz_x5_run"}, 404,
+     "not a run whose agent"),
+    ("considered-table", "POST", "/api/considered", {"positions": [RACK[0], RACK[0], *RACK[2:]], "run": P3_RUN}, 422, "overlaps"),
+    ("considered-action", "POST", "/api/considered", {"positions": RACK, "run": P3_RUN, "commanded": [1.0, 2.0, 0.0, 0.0]},
+     422, "power p"),
+    ("unit-missing", "GET", f"/api/run?path={SCORECARDS}/p3-exact-v1/nearest&unit=99", None, 404, "no chain 99"),
+    ("p1-inning-missing", "GET", f"/api/run?path={P1_RUN}&unit=20", None, 404, "innings 0..19"),
+]
+
+
+@pytest.mark.parametrize("method,url,body,status,words", [b[1:] for b in BAD], ids=[b[0] for b in BAD])
+def test_bad_input_is_a_4xx_with_a_message_and_the_server_goes_on(client, method, url, body, status, words):
+    if isinstance(body, bytes):
+        r = client.request(method, url, content=body, headers={"content-type": "application/json"})
+    else:
+        r = client.request(method, url, json=body)
+    assert r.status_code == status, r.text
+    assert words in r.json()["error"], r.json()
+    assert client.post("/api/shot", json=GOOD).status_code == 200
+
+
+def test_a_symlink_out_of_a_run_directory_is_refused(client, extra_runs):
+    r = client.get("/api/run", params={"path": str(extra_runs / "out")})
+    assert r.status_code == 403 and "symlink" in r.json()["error"]
+    assert str(extra_runs) in client.get("/api/runs").json()["folders"]
+
+
+# ----------------------------------------------------------------------------- agents
+
+
+def test_agents_random_and_nearest_answer(client):
+    from billiards import domain
+
+    a = client.post("/api/agent", json={"positions": RACK, "agent": "random", "seed": 3}).json()
+    b = client.post("/api/agent", json={"positions": RACK, "agent": "random", "seed": 3}).json()
+    c = client.post("/api/agent", json={"positions": RACK, "agent": "random", "seed": 4}).json()
+    assert a["action"] == b["action"] != c["action"] and a["considered"] is None
+    n = client.post("/api/agent", json={"positions": RACK, "agent": "nearest", "noise": "fastfiz", "replays": 20}).json()
+    theta = float(domain.aim_window(np.array(RACK)[None], get_params().ball_radius)[0].reshape(-1)[0])
+    assert n["action"] == [theta, 0.5, 0.0, 0.0]
+    assert n["noisy"]["n"] == 20 and len(n["noisy"]["white_ends"]) == 20
+    assert "search:h2" in client.get("/api/config").json()["agents"]
+
+
+# ----------------------------------------------------------------------------- runs
+
+
+def test_runs_list_a_committed_p3_run_and_its_shots_replay_exactly(client):
+    runs = {r["path"]: r for r in client.get("/api/runs").json()["runs"]}
+    assert runs[P3_RUN]["kind"] == "p3" and runs[P3_RUN]["replayable"]
+    assert any(r["kind"] == "league" for r in runs.values()) and any(r["kind"] == "scorecard" for r in runs.values())
+    run = client.get("/api/run", params={"path": P3_RUN}).json()
+    assert run["physics"] == "korean_medium" and len(run["units"]) == 20
+    records = {json.loads(line)["seed"]: json.loads(line) for line in (ROOT / P3_RUN / "chains.jsonl").read_text().splitlines()}
+    chain = run["units"][0]
+    assert [s["positions"] for s in chain["shots"]] == [s[0] for s in records[chain["id"]]["last_shots"]]
+    for shot, nxt in zip(chain["shots"], chain["shots"][1:] + [None]):
+        r = client.post("/api/shot", json={"positions": shot["positions"], "action": shot["played"], "paths": False}).json()
+        assert r["result"]["score"] == shot["scored"]
+        if nxt is not None:
+            assert r["final"] == nxt["positions"]  # the chain's next table, bit for bit
+
+
+@pytest.mark.slow
+def test_every_committed_p3_shot_replays_onto_the_next_recorded_table(client):
+    """Through the viewer's loader, every recorded shot of every committed P3 run (the played
+    shot, on its run's table) scores as recorded and ends exactly on the chain's next table."""
+    from billiards.web.runs import RunStore
+
+    store, checked = RunStore(), 0
+    for entry in store.list_runs():
+        if entry["kind"] != "p3" or not entry["path"].startswith("results/"):
+            continue
+        run = store.load(entry["path"])
+        assert run["replayable"], entry["path"]
+        params = get_params(run["physics"])
+        for unit in run["units"]:
+            shots = unit["shots"]
+            for shot, nxt in zip(shots, shots[1:] + [None]):
+                res = simulate_shot(np.array(shot["positions"]), np.array(shot["played"]), params)
+                assert res.score == shot["scored"], (entry["path"], unit["id"])
+                if nxt is not None:
+                    assert res.positions.tolist() == nxt["positions"], (entry["path"], unit["id"])
+                checked += 1
+    assert checked > 10_000
+
+
+@pytest.mark.slow
+def test_a_league_match_is_played_again_with_its_recorded_scores(client):
+    r = client.get("/api/run", params={"path": "results/sagu/fastfiz_x5_run", "unit": 0})
+    assert r.status_code == 200, r.text
+    unit = r.json()["units"][0]
+    assert unit["reproduced"] and unit["replayed_scores"] == unit["record"]["scores"]
+    assert unit["shots"][-1]["scores"] == [unit["record"]["scores"]["white"], unit["record"]["scores"]["yellow"]]
+
+
+def _replays_onto_each_other(client, shots, physics="korean_medium"):
+    """Every shot, played again exactly from its played action, scores as recorded and ends on
+    the next shot's table."""
+    for shot, nxt in zip(shots, shots[1:] + [None]):
+        r = client.post("/api/shot", json={"positions": shot["positions"], "action": shot["played"], "physics": physics,
+                                           "shooter": shot["shooter"], "paths": False})
+        assert r.status_code == 200, r.text
+        assert r.json()["result"]["score"] == shot["scored"]
+        if nxt is not None:
+            assert r.json()["final"] == nxt["positions"]
+
+
+def test_runs_list_every_kind_the_viewer_replays(client):
+    runs = {r["path"]: r for r in client.get("/api/runs").json()["runs"]}
+    card = runs[f"{SCORECARDS}/p3-exact-v1/nearest"]
+    assert card["kind"] == "scorecard" and card["replayable"] and card["units"] == 20 and card["agent"] == "nearest"
+    assert runs[P1_RUN]["kind"] == "p1" and runs[P1_RUN]["replayable"] and runs[P1_RUN]["units"] == 20
+    shipped = runs["results/training/noisy/aim_features_fastfiz/seed0"]
+    assert shipped["kind"] == "training" and shipped["replayable"] and shipped["policy"] == "results/policies/fastfiz_aim_features/seed0.pt"
+    unshipped = runs["results/training/table4/aim_s0"]
+    assert unshipped["kind"] == "training" and not unshipped["replayable"] and "no weights of this run were shipped" in unshipped["why_not"]
+    code = next(r for p, r in runs.items() if p.endswith("code_scorecard"))
+    assert not code["replayable"] and "names code to import" in code["why_not"]
+    big = runs["results/search/paper/table6/geometric/puct_p1"]  # 100 x 100 shots: under the cap, listed as replayable
+    assert big["kind"] == "p1" and big["replayable"]
+
+
+@pytest.mark.parametrize("run,unit", [(f"{SCORECARDS}/p3-exact-v1/nearest", 4), (f"{SCORECARDS}/p1-exact-v1/random", 57)])
+def test_a_scorecard_unit_is_played_again_with_the_ledger_s_scores(client, run, unit):
+    listing = client.get("/api/run", params={"path": run}).json()
+    assert listing["kind"] == "scorecard" and listing["replayable"] and not listing["considers"]
+    assert all(u["shots"] is None for u in listing["units"])
+    r = client.get("/api/run", params={"path": run, "unit": unit})
+    assert r.status_code == 200, r.text
+    got = r.json()["units"][0]
+    assert got["matches_ledger"] is True and got["differences"] == [] and "gives the ledger's record" in got["check"]
+    assert got["replayed"] == got["record"]  # the inning's points, or the chain's length and how it ended
+    if "points" in got["record"]:
+        assert len(got["shots"]) == 20 and sum(s["scored"] for s in got["shots"]) == got["record"]["points"]
+    else:
+        assert len(got["shots"]) == got["record"]["length"] + 1
+    _replays_onto_each_other(client, got["shots"])
+
+
+def test_a_scorecard_whose_agent_names_code_is_refused(client, extra_runs):
+    path = str(extra_runs / "code_scorecard")
+    listing = client.get("/api/run", params={"path": path}).json()
+    assert not listing["replayable"] and CODE_SPEC in listing["note"] and "never imports code" in listing["note"]
+    assert len(listing["units"]) == 100  # its innings are listed, with their recorded points
+    r = client.get("/api/run", params={"path": path, "unit": 0})
+    assert r.status_code == 422 and "cannot be played again" in r.json()["error"] and CODE_SPEC in r.json()["error"]
+    r = client.post("/api/considered", json={"positions": RACK, "run": path})
+    assert r.status_code == 422 and "names code" in r.json()["error"]
+    assert client.post("/api/shot", json=GOOD).status_code == 200
+
+
+@pytest.mark.slow
+def test_a_p1_search_run_is_played_again_with_its_points_per_inning(client):
+    recorded = json.loads((ROOT / P1_RUN / "results.json").read_text())["values"]
+    r = client.get("/api/run", params={"path": P1_RUN, "unit": 3})
+    assert r.status_code == 200, r.text
+    inning = r.json()["units"][0]
+    assert inning["matches_record"] is True and "every inning's points equal results.json's" in inning["check"]
+    assert inning["replayed"]["points"] == inning["record"]["points"] == recorded[3]
+    assert len(inning["shots"]) == 50 and any(s["noisy"] for s in inning["shots"])
+    _replays_onto_each_other(client, inning["shots"])
+    again = client.get("/api/run", params={"path": P1_RUN, "unit": 7}).json()["units"][0]  # the same replay, kept
+    assert again["replayed"]["points"] == recorded[7] and again["shots"][0]["caption"].startswith("inning 7,")
+
+
+def test_a_training_evaluation_is_played_again_with_its_shipped_policy(tmp_path):
+    """A training run whose weights are shipped (a policy under results/policies whose source
+    is the run) plays its evaluation again; its points equal eval.json's. The run here is made
+    in a repository copy of its own: a shipped policy re-sealed with that run as its source, the
+    run's eval.json written by billiards.evaluation.evaluate (the committed runs' eval.json were
+    written by older code: docs/reproducibility.md)."""
+    from billiards.evaluation import evaluate
+    from billiards.files import SEAL_KEY, load_tagged, save_tagged
+    from billiards.physics.config import params_from_config
+    from billiards.physics.noise import noise_from_config
+    from billiards.rl.checkpoint import CheckpointError
+    from billiards.rl.policy import POLICY_FORMAT, load_policy
+
+    root, name = tmp_path / "repo", "results/training/tiny/seed0"
+    run = root / name
+    run.mkdir(parents=True)
+    shipped = ROOT / "results/policies/fastfiz_aim_features/seed0.pt"
+    payload = load_tagged(shipped, POLICY_FORMAT, CheckpointError, "exported policy")
+    payload = {k: v for k, v in payload.items() if k != SEAL_KEY}
+    save_tagged(root / "results/policies/tiny/seed0.pt", {**payload, "source": name})
+    (run / "config.yaml").write_bytes((ROOT / "results/training/noisy/aim_features_fastfiz/seed0/config.yaml").read_bytes())
+    policy, cfg = load_policy(shipped)
+    evaluate(policy, n_innings=12, max_shots=6, seed=5, constrain_aim=cfg.env.constrain_aim, extra_features=cfg.env.extra_features,
+             env_kwargs=dict(params=params_from_config(cfg.physics)), noise=noise_from_config(cfg.get("noise"))).to_json(run / "eval.json")
+    recorded = json.loads((run / "eval.json").read_text())["points"]
+    client = TestClient(create_app(out_dir=None, root=root))
+    listed = {r["path"]: r for r in client.get("/api/runs").json()["runs"]}
+    assert listed[name]["replayable"] and listed[name]["policy"] == "results/policies/tiny/seed0.pt"
+    r = client.get("/api/run", params={"path": name, "unit": 4})
+    assert r.status_code == 200, r.text
+    inning = r.json()["units"][0]
+    assert inning["matches_record"] is True and inning["replayed"]["points"] == recorded[4] and len(inning["shots"]) == 6
+    _replays_onto_each_other(client, inning["shots"])
+
+
+def test_a_committed_training_run_with_shipped_weights_is_played_again(client):
+    """The committed noisy run's evaluation plays again; the answer says whether today's code
+    gives eval.json's points (it does not: that eval.json was written by older code), and a run
+    without shipped weights is refused with the sentence that says so."""
+    path = "results/training/noisy/aim_features_fastfiz/seed0"
+    inning = client.get("/api/run", params={"path": path, "unit": 0}).json()["units"][0]
+    assert isinstance(inning["matches_record"], bool) and inning["check"].startswith("played again")
+    assert len(inning["shots"]) == 10 and all(s["noisy"] for s in inning["shots"])
+    _replays_onto_each_other(client, inning["shots"])
+    r = client.get("/api/run", params={"path": "results/training/table4/aim_s0", "unit": 0})
+    assert r.status_code == 422 and "no weights of this run were shipped" in r.json()["error"]
+
+
+def test_what_a_search_considered_for_a_recorded_shot(client):
+    run = client.get("/api/run", params={"path": P3_RUN}).json()
+    assert run["considers"]
+    chain = run["units"][0]
+    shot = chain["shots"][0]
+    r = client.post("/api/considered", json={"run": P3_RUN, "positions": shot["positions"], "commanded": shot["commanded"],
+                                             "seed": chain["seed"]})
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["recorded"] == shot["commanded"] and isinstance(out["same_choice"], bool) and out["noisy"] is None  # exact play
+    cands = out["considered"]["candidates"]
+    assert cands["count"] >= len(cands["top"]) > 0 and out["considered"]["sims"] == 400
+    assert all(len(c["action"]) == 4 and isinstance(c["score"], bool) for c in cands["top"])
+    again = client.post("/api/considered", json={"run": P3_RUN, "positions": shot["positions"], "commanded": shot["commanded"],
+                                                 "seed": chain["seed"]}).json()
+    assert again["action"] == out["action"]  # reseeded: the same answer
+
+
+def test_what_the_position_aware_search_considered_under_noise(client):
+    run = client.get("/api/run", params={"path": NOISY_P3}).json()
+    chain = run["units"][0]
+    shot = chain["shots"][-2]
+    r = client.post("/api/considered", json={"run": NOISY_P3, "positions": shot["positions"], "commanded": shot["commanded"],
+                                             "seed": chain["seed"], "replays": 40})
+    assert r.status_code == 200, r.text
+    noisy, leave = r.json()["noisy"], r.json()["noisy"]["leave"]
+    assert noisy["n"] == len(noisy["white_ends"]) == len(leave["values"]) == 40 and r.json()["noise"] == "fastfiz"
+    assert leave["position"] == 8.0 and all(0 < v < 1 for v in leave["values"])
+    assert (leave["mean_if_scored"] is None) == (not any(noisy["scored"]))
+
+
+def test_what_a_scorecard_s_search_agent_considers(client):
+    run = f"{SCORECARDS}/p3-exact-v1/h2_geometric"
+    assert client.get("/api/run", params={"path": run}).json()["considers"]
+    r = client.post("/api/considered", json={"run": run, "positions": RACK, "seed": 7300000})
+    assert r.status_code == 200, r.text
+    assert r.json()["recorded"] is None and r.json()["considered"]["candidates"]["top"]
+
+
+@pytest.mark.slow
+def test_a_match_track_scorecard_unit_is_played_again_with_the_ledger_s_scores(client):
+    r = client.get("/api/run", params={"path": f"{SCORECARDS}/match-x5-v1/random", "unit": 11})
+    assert r.status_code == 200, r.text
+    match = r.json()["units"][0]
+    assert match["matches_ledger"] is True and match["replayed"] == match["record"]
+    last = match["shots"][-1]
+    assert last["scores"] == match["record"]["points"] and {s["agent_shot"] for s in match["shots"]} == {True, False}
+    _replays_onto_each_other(client, match["shots"][:1])
+
+
+# ----------------------------------------------------------------------------- a match
+
+
+def test_a_match_against_random_to_one_point_plays_to_its_end_and_is_saved(client, out_dir):
+    start = client.post("/api/match", json={"opponent": "random", "noise": "none", "target": 1, "seed": 5})
+    assert start.status_code == 200, start.text
+    state = start.json()["state"]
+    assert state["to_play"] == "human" and state["positions"] == RACK
+    for _ in range(20):
+        if state["over"]:
+            break
+        hint = client.post("/api/agent", json={"positions": state["positions"], "agent": "search:h2"}).json()
+        r = client.post(f"/api/match/{state['id']}/shot", json={"action": hint["action"]})
+        assert r.status_code == 200, r.text
+        shots, state = r.json()["shots"], r.json()["state"]
+        assert shots[0]["who"] == "human" and all(s["paths"]["xy"] for s in shots)
+        for s in shots:  # every shot of the match is the simulator's, from its shooter's view
+            res = simulate_shot(shooter_view(np.array(s["positions"]), s["shooter"]), np.array(s["played"]))
+            assert shooter_view(res.positions, s["shooter"]).tolist() == s["final"]
+    assert state["over"] and max(state["scores"].values()) == 1
+    assert client.post(f"/api/match/{state['id']}/shot", json={"action": [1.0, 0.5, 0.0, 0.0]}).status_code == 409
+    saved = Path(state["saved"]) if Path(state["saved"]).is_absolute() else ROOT / state["saved"]
+    assert saved.is_relative_to(out_dir)
+    problems, _ = verify(saved)
+    assert problems == []
+    listed = [r for r in client.get("/api/runs").json()["runs"] if r["kind"] == "web"]
+    assert listed
+    run = client.get("/api/run", params={"path": listed[0]["path"]}).json()
+    assert run["kind"] == "web" and run["units"][0]["shots"][-1]["scores"] == [state["scores"]["human"], state["scores"]["random"]]
+
+
+# ----------------------------------------------------------------------------- the server process
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_slow_agent_does_not_block_a_shot(monkeypatch, out_dir):
+    """The endpoints that compute run in the thread pool: a shot is answered while an agent thinks."""
+    import uvicorn
+
+    import billiards.web.agents as web_agents
+
+    real_ask = web_agents.ask
+    thinking, release = threading.Event(), threading.Event()
+
+    def slow_ask(*args, **kwargs):  # an agent that thinks until the test lets it answer
+        thinking.set()
+        release.wait(600)
+        return real_ask(*args, **kwargs)
+
+    monkeypatch.setattr(web_agents, "ask", slow_ask)
+    port = _free_port()
+    server = uvicorn.Server(uvicorn.Config(create_app(out_dir=out_dir), host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        for _ in range(200):
+            if server.started:
+                break
+            time.sleep(0.05)
+        url = f"http://127.0.0.1:{port}"
+
+        def post(path, body):
+            req = urllib.request.Request(url + path, json.dumps(body).encode(), {"content-type": "application/json"})
+            with urllib.request.urlopen(req, timeout=600) as resp:  # a limit against a hang only
+                return json.loads(resp.read())
+
+        slow = threading.Thread(target=post, args=("/api/agent", {"positions": RACK, "agent": "random"}))
+        slow.start()
+        assert thinking.wait(600), "the agent request never reached the agent"
+        # answered while the agent is still held: had the shot waited for the agent, it would hang here
+        assert post("/api/shot", GOOD)["final"]
+        assert slow.is_alive() and not release.is_set()
+        release.set()
+        slow.join(600)
+    finally:
+        release.set()
+        server.should_exit = True
+        thread.join(10)
+
+
+@pytest.mark.slow
+def test_python_m_billiards_web_prints_its_url_and_serves(out_dir):
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "billiards.web", "--port", "0", "--out", str(out_dir)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = proc.stdout.readline().strip()
+        assert line.startswith("billiards viewer: http://127.0.0.1:"), line + proc.stderr.read()[-2000:] if not line else line
+        url = line.split(": ", 1)[1]
+        with urllib.request.urlopen(url + "api/config", timeout=600) as resp:
+            assert "korean_medium" in json.loads(resp.read())["physics"]
+        with urllib.request.urlopen(url, timeout=600) as resp:
+            assert b"/static/app.js" in resp.read()
+    finally:
+        proc.terminate()
+        proc.wait(30)
