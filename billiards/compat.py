@@ -90,7 +90,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from billiards.physics.params import PRESETS, PhysicsParams
 
 SCHEMA_KEY = "schema"  # the version of a file's form, in the files that carry one
 LEGACY_PHYSICS = "international"  # the table of files saved before the physics presets existed
@@ -190,6 +189,8 @@ def with_physics(container: dict) -> dict:
     before the presets)."""
     if container.get("physics") is not None:
         return container
+    from billiards.physics.params import PhysicsParams  # here: loading compat must not load the simulator
+
     node = {"preset": LEGACY_PHYSICS, **{f.name: None for f in dataclasses.fields(PhysicsParams)}}
     return {**container, "physics": node}
 
@@ -333,6 +334,8 @@ def upgrade_policy_file(payload: Any) -> Any:
 def _artefact_physics(meta: dict) -> dict:
     if meta.get("physics_params"):
         return meta
+    from billiards.physics.params import PRESETS
+
     return {**meta, "physics": LEGACY_PHYSICS, "physics_params": PRESETS[LEGACY_PHYSICS].to_dict()}
 
 

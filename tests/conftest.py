@@ -32,7 +32,8 @@ def pytest_configure(config):
 
         warm_up(log=lambda message: None)
 
-SHIPPED_BASE = Path(__file__).resolve().parents[1] / "results" / "policies" / "base" / "seed0.pt"
+REPO = Path(__file__).resolve().parents[1]
+SHIPPED_BASE = REPO / "results" / "policies" / "base" / "seed0.pt"
 
 
 @pytest.fixture
@@ -68,3 +69,48 @@ def international_policy(tmp_path) -> Path:
     state.pop(SEAL_KEY)
     state["config"]["physics"] = {"preset": "international"}
     return save_tagged(tmp_path / "made_on_international.pt", state)
+
+
+APP_CONFIGS = {"train.py": ("config", "billiards.rl.config"), "search.py": ("search", "billiards.search.config"),
+               "match.py": ("match", "billiards.league.config"), "evaluate.py": ("evaluate", "billiards.bench.config")}
+
+
+def refusal(app: str, *overrides: str, cwd: Path | None = None) -> str:
+    """What ``python <app> <overrides>`` says when it refuses them, found in this process: the
+    entry point's command-line guard, Hydra's composition (a key not in a schema, a missing
+    option) and the app's validating callback, in that order -- the steps the app takes before
+    Hydra writes anything. An AssertionError if the app would accept the command line.
+
+    For a single run; a multirun's jobs (``-m``) and the guard's flags are the subprocess tests'.
+    The run directory is judged relative to ``cwd`` (default: the current directory)."""
+    import contextlib
+    import importlib
+    import os
+
+    from hydra import compose, initialize_config_dir
+    from hydra.utils import get_class
+
+    from billiards.app_config import override_errors
+
+    config_name, module = APP_CONFIGS[app]
+    assert "-m" not in overrides and "--multirun" not in overrides, "a multirun is the subprocess tests'"
+    errors = override_errors(list(overrides))
+    if errors:
+        return "Error: " + "\n".join(errors)
+    importlib.import_module(module)
+    here = os.getcwd()
+    with contextlib.ExitStack() as stack:
+        if cwd is not None:
+            os.chdir(cwd)
+            stack.callback(os.chdir, here)
+        try:
+            with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+                cfg = compose(config_name, overrides=list(overrides), return_hydra_config=True)
+        except Exception as err:  # what Hydra prints for a composition error, its cause included
+            return "\n".join(str(e) for e in (err, err.__cause__) if e is not None)
+        callback = get_class(cfg.hydra.callbacks.validate._target_)()
+        try:
+            callback.on_run_start(config=cfg)
+        except SystemExit as err:
+            return str(err.code)
+    raise AssertionError(f"{app} accepts {' '.join(overrides)}")

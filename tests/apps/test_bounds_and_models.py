@@ -145,7 +145,7 @@ def test_the_bounds_are_listed_in_the_docs_and_the_shipped_configurations_keep_w
 @pytest.mark.slow
 def test_an_app_refuses_a_bound_before_writing_anything(tmp_path):
     proc = subprocess.run([sys.executable, str(ROOT / "train.py"), "algo.utd=2147483647", f"hydra.run.dir={tmp_path}/run"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+                          cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 1 and "algo.utd must be at most 64" in proc.stderr, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr and list(tmp_path.iterdir()) == []
 
@@ -353,7 +353,7 @@ def test_an_app_naming_a_file_that_means_nothing_writes_nothing(tmp_path, app, k
         payload.pop(key)
     path = save_tagged(tmp_path / "resealed.pt", payload)
     proc = subprocess.run([sys.executable, str(ROOT / app), *(o.format(f=path) for o in overrides),
-                           f"hydra.run.dir={tmp_path}/run"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+                           f"hydra.run.dir={tmp_path}/run"], cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 1 and "resealed.pt" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["resealed.pt"]
 

@@ -47,7 +47,7 @@ def file_handler(node: str, victim: Path) -> list[str]:
 
 def run_app(app: str, *args: str, cwd: Path, script_dir: Path = REPO, env: dict | None = None):
     return subprocess.run([sys.executable, str(script_dir / f"{app}.py"), *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, env={**os.environ, "PYTHONPATH": str(REPO), **(env or {})})
+                          timeout=900, env={**os.environ, "PYTHONPATH": str(REPO), **(env or {})})
 
 
 def refused(proc, message: str) -> None:

@@ -356,7 +356,7 @@ def test_hydra_never_writes_its_records_over_another_run(app, tmp_path):
     done = MAKE[app](tmp_path / "done")
     before = files(tmp_path)
     proc = subprocess.run([sys.executable, str(REPO / f"{app}.py"), f"hydra.run.dir={done}"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=300,
+                          capture_output=True, text=True, timeout=900,
                           env={**os.environ, "PYTHONPATH": str(REPO), "HYDRA_FULL_ERROR": "0"})
     assert proc.returncode == 1, proc.stderr[-3000:]
     assert f"Error: {done} holds a finished " in proc.stderr and "resume=" in proc.stderr, proc.stderr[-3000:]

@@ -100,7 +100,7 @@ def test_bad_scale_and_level_range_are_named(node, message):
 @pytest.mark.slow
 def test_a_bad_noise_scale_fails_before_any_directory_is_written(tmp_path, app, override):
     proc = subprocess.run([sys.executable, str(ROOT / app), "noise=fastfiz", override], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=120)
+                          text=True, timeout=900)
     assert proc.returncode != 0 and "noise.scale must be a finite number >= 0" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr and list(tmp_path.iterdir()) == []
 

@@ -199,8 +199,8 @@ def test_physics_reaches_the_envs_the_verifier_and_the_rm_data(tmp_path):
     np.testing.assert_array_equal(info["positions"], simulate_batch(rack[None], acts[:1].astype(np.float32), I).positions[0])
 
     cfg = OmegaConf.create({"kind": "geometric", "power_low": 0.15, "power_high": 0.9})
-    search_cfg = OmegaConf.create({"seed": 0, "noise": {"preset": "none"}, "search": {"kind": "h2", "budget": 40, "k1": 20, "m1": 2, "gamma": 0.99,
-                                                         "foul_penalty": 1.0}})
+    search_cfg = OmegaConf.create({"seed": 0, "noise": {"preset": "none"},
+                                   "search": {"kind": "h2", "budget": 40, "k1": 20, "m1": 2, "gamma": 0.99, "foul_penalty": 1.0}})
     actor = make_actor(search_cfg, make_proposer(cfg, I), I)
     assert actor.params is I and actor.proposer.R == I.ball_radius
     res = actor.search(rack[None])

@@ -731,8 +731,19 @@ BAD = [
 ]
 
 
+# what only the entry point shows: its flags, multiruns (every job validated first), a Hydra
+# callback that would run code (./pwned), and one refusal of each step -- the guard, Hydra's
+# composition, the validator -- exiting with the message, no traceback and nothing written
+THROUGH_THE_APP = {"algo=dqn", "foo=1", "budget.total_steps=-5", "resume=nowhere"}
+
+
+def _through_the_app(overrides) -> bool:
+    return overrides[0].startswith(("-", "+hydra", "hydra")) or " ".join(overrides) in THROUGH_THE_APP
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("overrides,message", BAD, ids=[" ".join(o) for o, _ in BAD])
+@pytest.mark.parametrize("overrides,message", [b for b in BAD if _through_the_app(b[0])],
+                         ids=[" ".join(o) for o, _ in BAD if _through_the_app(o)])
 def test_bad_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
     # failing before any training is what "fast" means here (no run dir, no checkpoint); the
     # subprocess limit only guards against a hang: a loaded machine must not fail a correct run
@@ -740,6 +751,19 @@ def test_bad_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message)
     assert proc.returncode != 0
     assert message in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
+    assert list(tmp_path.iterdir()) == [], f"wrote {list(tmp_path.rglob('*'))}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("overrides,message", [b for b in BAD if "-m" not in b[0] and not b[0][0].startswith("--")],
+                         ids=[" ".join(o) for o, _ in BAD if "-m" not in o and not o[0].startswith("--")])
+def test_each_bad_override_is_refused_with_its_message_before_anything_runs(tmp_path, overrides, message):
+    """Each single-run case, through the steps the app takes before Hydra writes anything (the
+    guard, the composition, the validating callback) in this process; nothing is written."""
+    from conftest import refusal
+
+    said = refusal("train.py", *overrides, "progress=false", cwd=tmp_path)
+    assert message in said, said
     assert list(tmp_path.iterdir()) == [], f"wrote {list(tmp_path.rglob('*'))}"
 
 

@@ -122,9 +122,19 @@ BAD = [
 
 @pytest.mark.slow
 @pytest.mark.parametrize("overrides,message", BAD, ids=[" ".join(o) for o, _ in BAD])
+def test_each_bad_noise_override_is_refused_with_its_message(tmp_path, overrides, message):
+    from conftest import refusal
+
+    said = refusal("search.py", *overrides, cwd=tmp_path)
+    assert message in said, said
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("overrides,message", [BAD[0], BAD[5]], ids=[" ".join(BAD[0][0]), " ".join(BAD[5][0])])
 def test_bad_noise_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
     proc = subprocess.run([sys.executable, str(ROOT / "search.py"), *overrides], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=120)
+                          text=True, timeout=900)  # guards against a hang only
     assert proc.returncode != 0 and message in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
     assert list(tmp_path.iterdir()) == []

@@ -282,13 +282,26 @@ def test_search_entry_point_writes_results(tmp_path):
     assert row[1:5] == ["— \\| —", "— \\| —", f"{data['mean']:.1f} ({data['max']:.0f}, cap 4, 2 chains) \\| —", "— \\| —"], row
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("override, message", [
+SEARCH_BAD = [
     ("search.kind=bfs", "search.kind must be one of h2, puct"),
     ("search.k1=175", "not a non-negative multiple of m1"),
     ("protocol=p9", "protocol"),
     ("search.budgett=3", "budgett"),
-])
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("override, message", SEARCH_BAD)
+def test_each_bad_search_knob_is_refused_with_its_message(tmp_path, override, message):
+    from conftest import refusal
+
+    out = tmp_path / "never"
+    assert message in refusal("search.py", override, f"hydra.run.dir={out}")
+    assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("override, message", SEARCH_BAD[1:2])
 def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, override, message):
     out = tmp_path / "never"
     proc = run_search(override, f"hydra.run.dir={out}")
