@@ -137,6 +137,7 @@ LAYERS = [  # lowest first; a new top-level module or subpackage takes its place
     ("billiards.search",),
     ("billiards.pictures", "billiards.report", "billiards.league"),
     ("billiards.bench",),
+    ("billiards.offline",),  # datasets played by any agent the benchmark adapts
     ("billiards.campaign",),
     ("billiards.web",),  # the viewer: plays agents (bench), leagues and runs, on top of everything
 ]

@@ -87,6 +87,18 @@ def test_every_repository_file_a_page_names_exists(page, name):
     assert _exists(name), f"{_rel(page)} names {name}, which is not in the repository"
 
 
+def _named_tests():
+    for page in PAGES:
+        for path, name in sorted(set(re.findall(r"(tests/[\w/]+\.py)::(\w+)", page.read_text()))):
+            yield pytest.param(page, path, name, id=f"{_rel(page)}:{path}::{name}")
+
+
+@pytest.mark.parametrize("page,path,name", list(_named_tests()))
+def test_every_test_a_page_cites_exists(page, path, name):
+    text = (REPO / path).read_text() if (REPO / path).is_file() else ""
+    assert re.search(rf"^def {name}\(", text, flags=re.M), f"{_rel(page)} cites {path}::{name}, which is not a test there"
+
+
 # ----------------------------------------------------------------------------- commands
 
 

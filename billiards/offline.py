@@ -1,0 +1,243 @@
+"""Offline datasets in Minari's format: innings played by an agent, every transition with the
+gymnasium env's observation, the shot, the reward, the flags and the env's info.
+
+An episode is one inning of the benchmark's ``innings-v1`` protocol (a random rack, continue on a
+miss, 10 shots; ``docs/benchmark.md``), played on the gymnasium vector env with raw actions, its
+rack and noise from its own seed (``DATASET_SEED`` + the inning's index: far from every
+benchmark track's held-out seeds). The agent is any spec the benchmark takes
+(:func:`billiards.bench.agents.resolve_agent`), under the track's simulation budget. The
+datasets of the issue, per noise preset (``none``, ``fastfiz``):
+
+* ``expert``: the default search of ``search.py`` for that noise (``search:h2`` exact,
+  ``search:robust`` -- the position-aware search over the learned shot ranker -- under noise);
+* ``medium``: SAC with the aim constraint and the carom features (``results/policies/base``
+  exact, ``results/policies/fastfiz_aim_features`` under fastfiz, seed 0);
+* ``random``: uniform raw shots.
+
+``python -m billiards.offline generate --dataset expert --noise none --shots 200000 --out DIR``
+plays blocks of innings side by side and writes each block to ``DIR/blocks/`` as it ends (a
+killed run keeps its finished blocks; the same command resumes with the rest);
+``python -m billiards.offline build DIR`` writes the Minari dataset
+(``billiards/<noise>/<dataset>-v0``) under ``DIR/minari`` and prints its size and the sha256 of its content;
+``minari.load_dataset`` reads it with ``MINARI_DATASETS_PATH=DIR/minari``, and TorchRL's
+``MinariExperienceReplay(..., load_from_local_minari=True)`` too.
+
+The actions are the raw shots as played (float64 theta, p, a, b): the searches' angles come
+from ``atan2`` (within one turn either way), so the dataset's action space spans
+``[-2pi, 2pi]`` for the angle, not the env's ``[0, 2pi]``; the simulator plays either.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from billiards.files import atomic_write_bytes
+
+DATASET_SEED = 9_000_000
+BLOCK = 100  # innings played side by side, one file each
+SHOTS = 10  # shots per inning (the innings-v1 protocol)
+NOISES = ("none", "fastfiz")
+DATASETS = {
+    "expert": {"none": "search:h2", "fastfiz": "search:robust"},
+    "medium": {"none": "results/policies/base/seed0.pt", "fastfiz": "results/policies/fastfiz_aim_features/seed0.pt"},
+    "random": {"none": "random", "fastfiz": "random"},
+}
+INFO = ("score", "foul", "miss", "first_contact", "second_red", "cushions", "positions", "raw_action", "commanded_action")
+
+
+def dataset_id(dataset: str, noise: str) -> str:
+    return f"billiards/{noise}/{dataset}-v0"
+
+
+def track_for(noise: str):
+    """The ``innings-v1`` track with the dataset's noise and seeds (its budget for a search)."""
+    from billiards.bench.tracks import get_track
+
+    return dataclasses.replace(get_track("innings-v1"), noise=noise, seed=DATASET_SEED, name="innings-v1")
+
+
+def play_block(agent, track, first: int, n: int) -> dict[str, np.ndarray]:
+    """Innings ``first .. first + n - 1``: observations (n, T+1, D), actions (n, T, 4), rewards,
+    terminations, truncations (n, T) and the env's info keys :data:`INFO` (n, T+1, ...; the
+    entry before the first shot holds the rack and zeros)."""
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    env = Billiards4BallVectorEnv(n, start="random", on_miss="continue", max_shots=track.shots, physics=track.physics,
+                                  noise=track.noise, normalize_actions=False)
+    obs, info = env.reset(seed=track.seed + first)
+    agent.reset(track.seed + first)
+    out = {"observations": [obs], "actions": [], "rewards": [], "terminations": [], "truncations": []}
+    infos = {k: [np.zeros_like(info[k]) if k in info and k != "positions" else None] for k in INFO}
+    infos["positions"] = [info["positions"]]
+    for t in range(track.shots):
+        raw = np.asarray(agent.act(obs, info["positions"].copy(), None), dtype=np.float64)
+        obs, reward, term, trunc, info = env.step(raw)
+        if t < track.shots - 1 and (term.any() or trunc.any()):
+            raise RuntimeError("an inning ended before its last shot: the protocol continues on a miss")
+        out["observations"].append(obs)
+        out["actions"].append(raw)
+        out["rewards"].append(reward)
+        out["terminations"].append(term)
+        out["truncations"].append(trunc)
+        for k in INFO:
+            infos[k].append(info[k])
+    env.close()
+    arrays = {k: np.stack(v, axis=1) for k, v in out.items()}
+    for k, v in infos.items():
+        first_row = v[0] if v[0] is not None else np.zeros_like(v[1])
+        arrays[f"info/{k}"] = np.stack([first_row, *v[1:]], axis=1)
+    return arrays
+
+
+def _block_path(out: Path, index: int) -> Path:
+    return out / "blocks" / f"block{index:05d}.npz"
+
+
+def _manifest(out: Path) -> dict:
+    return json.loads((out / "dataset.json").read_text())
+
+
+def generate(dataset: str, noise: str, shots: int, out: Path, agent_spec: str | None = None, progress: bool = True) -> dict:
+    """Play ``shots`` shots (rounded up to whole blocks of innings) into ``out``; resumes."""
+    from billiards.bench.agents import resolve_agent
+    from billiards.provenance import git_commit
+
+    if noise not in NOISES and agent_spec is None:
+        raise SystemExit(f"Error: --noise must be one of {', '.join(NOISES)} (or give --agent), got {noise!r}")
+    if dataset not in DATASETS and agent_spec is None:
+        raise SystemExit(f"Error: --dataset must be one of {', '.join(DATASETS)} (or give --agent), got {dataset!r}")
+    if shots < 1:
+        raise SystemExit(f"Error: --shots must be >= 1, got {shots}")
+    spec = agent_spec or DATASETS[dataset][noise]
+    track = track_for(noise)
+    blocks = math.ceil(shots / (SHOTS * BLOCK))
+    manifest = {"dataset_id": dataset_id(dataset, noise), "dataset": dataset, "noise": noise, "agent": spec,
+                "physics": track.physics, "shots_per_inning": SHOTS, "block": BLOCK, "blocks": blocks,
+                "seed": DATASET_SEED, "budget": track.budget}
+    out.mkdir(parents=True, exist_ok=True)
+    if (out / "dataset.json").exists():
+        held = {k: v for k, v in _manifest(out).items() if k != "commit"}
+        if held != manifest:
+            raise SystemExit(f"Error: {out} holds another dataset ({held}); give another --out")
+    else:
+        atomic_write_bytes(out / "dataset.json", json.dumps({**manifest, "commit": git_commit()}, indent=1).encode())
+    todo = [b for b in range(blocks) if not _block_path(out, b).exists()]
+    if not todo:
+        return manifest
+    agent = resolve_agent(spec, track)
+    print(f"{manifest['dataset_id']}: {blocks} blocks of {BLOCK} innings x {SHOTS} shots by {spec}; "
+          f"{blocks - len(todo)} done, {len(todo)} to play -> {out}", flush=True)
+    import time
+
+    start = time.perf_counter()
+    for i, b in enumerate(todo):
+        arrays = play_block(agent, track, b * BLOCK, BLOCK)
+        path = _block_path(out, b)
+        path.parent.mkdir(exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, **arrays)
+        os.replace(tmp, path)
+        if progress:
+            left = (time.perf_counter() - start) / (i + 1) * (len(todo) - i - 1)
+            print(f"block {b + 1}/{blocks} written; about {left / 60:.1f} min left", file=sys.stderr, flush=True)
+    return manifest
+
+
+def episodes(out: Path):
+    """The dataset's innings as Minari episode buffers, in seed order."""
+    manifest = _manifest(out)
+    for b in range(manifest["blocks"]):
+        with np.load(_block_path(out, b)) as data:
+            arrays = {k: data[k] for k in data.files}
+        for i in range(arrays["observations"].shape[0]):
+            yield {"observations": arrays["observations"][i], "actions": arrays["actions"][i],
+                   "rewards": arrays["rewards"][i], "terminations": arrays["terminations"][i],
+                   "truncations": arrays["truncations"][i], "id": b * manifest["block"] + i,
+                   "seed": manifest["seed"] + b * manifest["block"] + i,
+                   "infos": {k.split("/", 1)[1]: arrays[k][i] for k in arrays if k.startswith("info/")}}
+
+
+def build(out: Path, root: Path | None = None):
+    """The Minari dataset of the blocks in ``out`` (every block must be there), under ``root``
+    (default ``out/minari``); returns it."""
+    import gymnasium as gym
+    import minari
+
+    from billiards import GYM_ID
+
+    manifest = _manifest(out)
+    missing = [b for b in range(manifest["blocks"]) if not _block_path(out, b).exists()]
+    if missing:
+        raise SystemExit(f"Error: {out}: {len(missing)} of {manifest['blocks']} blocks not played yet; run generate again")
+    root = Path(root or out / "minari").resolve()  # Minari resolves a relative one against itself
+    os.environ["MINARI_DATASETS_PATH"] = str(root)
+    env = gym.make(GYM_ID, start="random", on_miss="continue", max_shots=SHOTS, physics=manifest["physics"],
+                   noise=manifest["noise"], normalize_actions=False)
+    action_space = gym.spaces.Box(low=np.array([-2 * math.pi, 0.0, -1.0, -1.0]), high=np.array([2 * math.pi, 1.0, 1.0, 1.0]),
+                                  dtype=np.float64)
+    from minari.data_collector import EpisodeBuffer
+
+    buffers = [EpisodeBuffer(**ep) for ep in episodes(out)]
+    if (root / manifest["dataset_id"]).exists():
+        raise SystemExit(f"Error: {root / manifest['dataset_id']} exists already; remove it to build the dataset again")
+    import warnings
+
+    with warnings.catch_warnings():  # no e-mail address and no URL of the code: the commit names the code
+        warnings.filterwarnings("ignore", message=".*(author_email|code_permalink).*is set to None", category=UserWarning)
+        return minari.create_dataset_from_buffers(
+            dataset_id=manifest["dataset_id"], buffer=buffers, env=env, action_space=action_space,
+            algorithm_name=manifest["agent"], author="billiards", code_permalink=f"billiards commit {manifest.get('commit')}",
+            description=(f"Korean 4-ball billiards, {manifest['noise']} execution noise: innings of the innings-v1 protocol "
+                         f"(random rack, continue on a miss, {SHOTS} shots) played by {manifest['agent']}; episode k from seed "
+                         f"{manifest['seed']} + k"), eval_env=env)
+
+
+def checksum(out: Path) -> str:
+    """sha256 over the dataset's content: every block's arrays in order (name, dtype, shape and
+    bytes), so the same command gives the same checksum whatever Minari's files hold besides."""
+    h = hashlib.sha256()
+    for b in range(_manifest(out)["blocks"]):
+        with np.load(_block_path(out, b)) as data:
+            for name in sorted(data.files):
+                a = np.ascontiguousarray(data[name])
+                h.update(f"{name}:{a.dtype.str}:{a.shape}".encode())
+                h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m billiards.offline", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    g = sub.add_parser("generate", help="play the dataset's innings into --out (resumable)")
+    g.add_argument("--dataset", default="expert", help=f"one of {', '.join(DATASETS)} (default expert)")
+    g.add_argument("--noise", default="none", help=f"one of {', '.join(NOISES)} (default none)")
+    g.add_argument("--shots", type=int, default=200_000, help="shots to play, in whole blocks of innings (default 200000)")
+    g.add_argument("--agent", default=None, help="another agent spec (docs/benchmark.md) instead of the dataset's own")
+    g.add_argument("--out", type=Path, required=True, help="the dataset's folder (blocks/, dataset.json)")
+    g.add_argument("--no-progress", action="store_true")
+    b = sub.add_parser("build", help="write the Minari dataset of a generated folder and print its size and checksum")
+    b.add_argument("out", type=Path)
+    b.add_argument("--root", type=Path, default=None, help="Minari's datasets folder (default OUT/minari)")
+    args = parser.parse_args(argv)
+    if args.command == "generate":
+        generate(args.dataset, args.noise, args.shots, args.out, args.agent, progress=not args.no_progress)
+        return 0
+    ds = build(args.out, args.root)
+    root = Path(args.root or args.out / "minari").resolve()
+    size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+    print(f"{ds.spec.dataset_id}: {ds.total_episodes} episodes, {ds.total_steps} steps, {size / 2**20:.0f} MiB under {root}; "
+          f"content sha256 {checksum(args.out)}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,107 @@
+"""Offline datasets (billiards.offline): a small sample generated here, loaded with
+``minari.load_dataset`` and TorchRL's ``MinariExperienceReplay`` from local storage; its fields
+are the env's, a replayed transition gives the recorded next observation and reward, a killed
+generation resumes to the same data, and a folder of another dataset is refused."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from billiards import offline
+
+pytest.importorskip("minari")
+pytestmark = pytest.mark.slow  # plays and builds a dataset (about 10 s)
+
+
+@pytest.fixture(scope="module")
+def sample(tmp_path_factory):
+    """One block (100 innings x 10 shots) of the nearest-red agent under exact play, built."""
+    out = tmp_path_factory.mktemp("offline") / "nearest"
+    offline.generate("nearest", "none", 1000, out, agent_spec="nearest", progress=False)
+    offline.build(out)
+    return out
+
+
+@pytest.fixture
+def minari_home(sample, monkeypatch):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(sample / "minari"))
+    return sample / "minari"
+
+
+def test_minari_loads_the_dataset_with_the_envs_fields(minari_home):
+    import minari
+
+    ds = minari.load_dataset(offline.dataset_id("nearest", "none"))
+    assert ds.total_episodes == offline.BLOCK and ds.total_steps == offline.BLOCK * offline.SHOTS
+    ep = next(iter(ds.iterate_episodes()))
+    assert ep.observations.shape == (offline.SHOTS + 1, 28) and ep.actions.shape == (offline.SHOTS, 4)
+    assert ep.rewards.shape == ep.terminations.shape == ep.truncations.shape == (offline.SHOTS,)
+    assert not ep.terminations.any() and ep.truncations.tolist() == [False] * (offline.SHOTS - 1) + [True]
+    assert set(offline.INFO) <= set(ep.infos)
+    assert ep.infos["positions"].shape == (offline.SHOTS + 1, 4, 2)
+    rewards = np.concatenate([e.rewards for e in ds.iterate_episodes()])
+    assert 0 < rewards.mean() < 1  # the nearest-red agent scores some of its shots
+    assert ds.storage.metadata["algorithm_name"] == "nearest"
+
+
+def test_a_replayed_transition_gives_the_recorded_next_observation_and_reward(minari_home):
+    import gymnasium as gym
+    import minari
+
+    ds = minari.load_dataset(offline.dataset_id("nearest", "none"))
+    env = gym.make("Billiards4Ball-v0", start="random", on_miss="continue", max_shots=offline.SHOTS, normalize_actions=False)
+    env.reset(seed=0)
+    for k, ep in enumerate(ds.iterate_episodes(episode_indices=[0, 7, 42])):
+        for t in range(offline.SHOTS):
+            obs, _ = env.reset(options={"positions": ep.infos["positions"][t]})
+            np.testing.assert_array_equal(obs, ep.observations[t])
+            nxt, reward, _, _, info = env.step(ep.actions[t])
+            np.testing.assert_array_equal(nxt, ep.observations[t + 1])
+            assert reward == ep.rewards[t] and bool(info["score"]) == bool(ep.infos["score"][t + 1])
+
+
+def test_torchrl_reads_the_dataset_from_local_storage(minari_home, tmp_path):
+    from torchrl.data.datasets import MinariExperienceReplay
+
+    rb = MinariExperienceReplay(offline.dataset_id("nearest", "none"), batch_size=16, root=tmp_path / "trl",
+                                load_from_local_minari=True)
+    assert len(rb) == offline.BLOCK * offline.SHOTS
+    batch = rb.sample()
+    assert batch["observation"].shape == (16, 28) and batch["action"].shape == (16, 4)
+    assert batch["next", "reward"].shape == (16, 1) and batch["next", "observation"].shape == (16, 28)
+
+
+def test_a_killed_generation_resumes_to_the_same_data(sample, tmp_path):
+    out = tmp_path / "again"
+    offline.generate("nearest", "none", 2000, out, agent_spec="nearest", progress=False)
+    first = {k: v for k, v in np.load(out / "blocks" / "block00000.npz").items()}
+    (out / "blocks" / "block00001.npz").unlink()  # killed while playing the second block
+    offline.generate("nearest", "none", 2000, out, agent_spec="nearest", progress=False)
+    for k, v in np.load(out / "blocks" / "block00000.npz").items():
+        np.testing.assert_array_equal(v, first[k])
+    with np.load(sample / "blocks" / "block00000.npz") as one:  # the same seeds, the same innings
+        np.testing.assert_array_equal(one["actions"], first["actions"])
+    assert len(list(offline.episodes(out))) == 2 * offline.BLOCK
+
+
+def test_another_datasets_folder_or_a_bad_choice_is_refused(sample, tmp_path):
+    with pytest.raises(SystemExit, match="holds another dataset"):
+        offline.generate("nearest", "none", 1000, sample, agent_spec="random", progress=False)
+    with pytest.raises(SystemExit, match="--noise must be one of none, fastfiz"):
+        offline.generate("expert", "loud", 1000, tmp_path / "x")
+    with pytest.raises(SystemExit, match="--dataset must be one of expert, medium, random"):
+        offline.generate("superb", "none", 1000, tmp_path / "y")
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+    manifest = json.loads((sample / "dataset.json").read_text())
+    assert manifest["agent"] == "nearest" and manifest["seed"] == offline.DATASET_SEED
+
+
+def test_the_datasets_seeds_are_far_from_every_tracks():
+    from billiards.bench.tracks import TRACKS
+
+    for track in TRACKS.values():
+        seeds = track.seeds()
+        assert max(seeds) < offline.DATASET_SEED - 100_000 or min(seeds) > offline.DATASET_SEED + 10**6, track.name
