@@ -234,7 +234,9 @@ def main(argv=None) -> int:
     ds = build(args.out, args.root)
     root = Path(args.root or args.out / "minari").resolve()
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+    rewards = np.stack([ep["rewards"] for ep in episodes(args.out)])
     print(f"{ds.spec.dataset_id}: {ds.total_episodes} episodes, {ds.total_steps} steps, {size / 2**20:.0f} MiB under {root}; "
+          f"success per shot {rewards.mean():.2%}, points per inning {rewards.sum(axis=1).mean():.3f}; "
           f"content sha256 {checksum(args.out)}", flush=True)
     return 0
 
