@@ -222,20 +222,29 @@ def job_configs(config: DictConfig) -> list[DictConfig]:
 
 def validate_jobs(config: DictConfig, validate, errors: tuple[type[BaseException], ...] = (Exception,)) -> None:
     """Compose every job of a basic-sweeper multirun and ``validate`` each, before any job
-    runs: SystemExit naming every failing job (``errors`` are the exceptions that mean an
-    invalid config), or naming the job that does not compose (Hydra would only warn and go on)."""
+    runs: SystemExit with each problem once, naming the jobs that have it (``every job of the
+    multirun (9)`` when all do; ``errors`` are the exceptions that mean an invalid config), or
+    naming the job that does not compose (Hydra would only warn and go on)."""
     try:
         jobs = job_configs(config)
     except Exception as err:
         raise SystemExit(f"Error: {err}") from None
-    errs = []
+    failing: dict[str, list[list[str]]] = {}  # message -> the jobs it is the problem of, in order
     for job in jobs:
         try:
             validate(job)
         except errors as err:
-            errs.append(f"job {list(job.hydra.overrides.task)}: {err}")
-    if errs:
-        raise SystemExit("Error: " + "\n".join(errs))
+            failing.setdefault(str(err), []).append(list(job.hydra.overrides.task))
+    if failing:
+        said = []
+        for message, which in failing.items():
+            if len(which) == 1:
+                said.append(f"job {which[0]}: {message}")
+            elif len(which) == len(jobs):
+                said.append(f"every job of the multirun ({len(jobs)}): {message}")
+            else:
+                said.append(f"{len(which)} of {len(jobs)} jobs ({', '.join(map(str, which))}): {message}")
+        raise SystemExit("Error: " + "\n".join(said))
 
 
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"

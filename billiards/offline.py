@@ -8,8 +8,9 @@ benchmark track's held-out seeds). The agent is any spec the benchmark takes
 (:func:`billiards.bench.agents.resolve_agent`), under the track's simulation budget. The
 datasets of the issue, per noise preset (``none``, ``fastfiz``):
 
-* ``expert``: the default search of ``search.py`` for that noise (``search:h2`` exact,
-  ``search:robust`` -- the position-aware search over the learned shot ranker -- under noise);
+* ``expert``: the default search of ``search.py`` for that noise (``search:h2`` exact -- the
+  default's h2 over the geometric proposer --, ``search:default`` under noise: the position-aware
+  robust search over the learned shot ranker);
 * ``medium``: SAC with the aim constraint and the carom features (``results/policies/base``
   exact, ``results/policies/fastfiz_aim_features`` under fastfiz, seed 0);
 * ``random``: uniform raw shots.
@@ -47,7 +48,7 @@ BLOCK = 100  # innings played side by side, one file each
 SHOTS = 10  # shots per inning (the innings-v1 protocol)
 NOISES = ("none", "fastfiz")
 DATASETS = {
-    "expert": {"none": "search:h2", "fastfiz": "search:robust"},
+    "expert": {"none": "search:h2", "fastfiz": "search:default"},
     "medium": {"none": "results/policies/base/seed0.pt", "fastfiz": "results/policies/fastfiz_aim_features/seed0.pt"},
     "random": {"none": "random", "fastfiz": "random"},
 }
