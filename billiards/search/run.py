@@ -35,11 +35,13 @@ def make_proposer(cfg, params: PhysicsParams = DEFAULT_PARAMS, device=None):
     return option("proposer", cfg).build(params, device=device)
 
 
-def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS) -> SearchActor:
+def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS, noise=None) -> SearchActor:
     """The search actor ``cfg.search`` describes, seeded with ``cfg.seed``, over ``proposer``,
-    for the execution noise ``cfg.noise`` (under noise PUCT's revisits are noisy replays,
-    :mod:`billiards.search.puct_noise`, and ``robust`` samples the noise model)."""
-    return option("search", cfg.search).actor(proposer, cfg.seed, params, noise=noise_from_config(cfg.noise))
+    for the execution noise ``noise`` (a NoiseModel the caller built; default: ``cfg.noise``'s)
+    -- under noise PUCT's revisits are noisy replays (:mod:`billiards.search.puct_noise`) and
+    ``robust`` samples the noise model."""
+    noise = noise_from_config(cfg.noise) if noise is None else noise  # the caller's, where it has built it
+    return option("search", cfg.search).actor(proposer, cfg.seed, params, noise=noise)
 
 
 RUNTIME_KEYS = ("threads", "progress", "picture", "device")  # taken from the command line when resuming
@@ -56,13 +58,13 @@ def search_identity(out_dir: Path) -> str:
     return run_identity(saved, runtime=(*RUNTIME_KEYS, "resume"))
 
 
-def describe(cfg, params) -> str:
+def describe(cfg, params, noise) -> str:
     """What a search run will do, in one line (printed before it starts)."""
     s, p = cfg.search, cfg.protocol
     what = (f"P1: {p.n_innings} random-start innings x {p.shots} shots" if p.name == "p1"
             else f"P3: {p.seeds} chains from the opening rack, each up to {p.cap:,} shots")
     return (f"{what}; {s.kind} search, {s.budget} simulations per shot, proposer {cfg.proposer.name}, physics {params.describe()}"
-            f", noise {noise_from_config(cfg.get('noise')).describe()}")
+            f", noise {noise.describe()}")
 
 
 def resume_config(out_dir: Path, current):
@@ -165,13 +167,13 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
         set_threads(cfg.threads)
     params = params_from_config(cfg.physics)
     noise = noise_from_config(cfg.noise)
-    print(f"search: {describe(cfg, params)}\noutput: {display_path(out_dir)}", flush=True)
+    print(f"search: {describe(cfg, params, noise)}\noutput: {display_path(out_dir)}", flush=True)
     warm_up(params, log=lambda msg: print(msg, flush=True))
     device = resolve_device(cfg.get("device", "auto"))
     proposer = make_proposer(cfg.proposer, params, device=device)
     if (warning := noise_mismatch(proposer, noise)) is not None:
         print(f"warning: {warning}", flush=True)
-    actor = make_actor(cfg, proposer, params)
+    actor = make_actor(cfg, proposer, params, noise)
     interrupted = False
     if proto == "p1":
         result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress,
