@@ -58,6 +58,11 @@ class AppConfig:
     progress: bool = True  # progress with totals and ETA on stderr
     resume: Optional[str] = None  # a run dir of this app to continue; auto: this job's own dir if it holds a run
 
+    # the keys that say how a run runs, not what it finds: a resume takes them from its own
+    # command line, and a run's identity leaves them out. Each app adds its own (a plain class
+    # attribute, not a field)
+    RUNTIME = ("threads", "progress")
+
 
 # ``resume=auto``: continue the job's own run directory if an earlier attempt left one there
 # (a finished run does nothing), else start fresh in it: what a re-launched multirun job wants

@@ -7,9 +7,6 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-RUNTIME_KEYS = ("threads", "progress", "picture", "resume")  # how a league runs, not what it finds
-
-
 def league_settings(cfg):
     """``(config, settings as started, the starting command's overrides)`` of the league ``cfg``
     asks for: with ``resume=<dir>`` the league's own settings -- what Hydra saved in
@@ -28,7 +25,7 @@ def league_settings(cfg):
         saved = OmegaConf.load(path)
         if not isinstance(saved, DictConfig):
             raise ValueError("not a mapping")
-        for key in RUNTIME_KEYS:  # the league's own settings, this command line's runtime keys
+        for key in MatchAppConfig.RUNTIME:  # the league's own settings, this command line's runtime keys
             saved[key] = cfg[key]
         merged = OmegaConf.merge(OmegaConf.structured(MatchAppConfig), saved)
         path = path.with_name("overrides.yaml")
@@ -49,9 +46,11 @@ def league_run_identity(started) -> str:
 
     from billiards.files import run_identity
 
+    from .config import MatchAppConfig
+
     settings = OmegaConf.to_container(started, resolve=True)
     settings["agents"] = {name: settings["agents"][name] for name in settings["players"]}
-    return run_identity(settings, runtime=RUNTIME_KEYS)
+    return run_identity(settings, runtime=MatchAppConfig.RUNTIME)
 
 
 def resume_state(run_dir: Path, config, finished: bool) -> str | None:

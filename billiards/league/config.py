@@ -41,6 +41,7 @@ class MatchAppConfig(AppConfig):
     UPPER: ClassVar[dict] = {"target": (10_000, "points"), "max_innings": (10**5, "innings of a match"),
                              "matches": (10**5, "matches per ordered pair"),
                              "foul_penalty": (100.0, "points; a score is worth 1")}
+    RUNTIME = (*AppConfig.RUNTIME, "picture", "resume")  # a resumed league plays on with its own settings
 
 
 register_app("match_schema", MatchAppConfig, {})

@@ -444,6 +444,7 @@ class TrainConfig(AppConfig):
     paper_steps: int = 1_000_000  # the paper's budget for the table (budget=paper trains this long)
 
     UPPER: ClassVar[dict] = {"paper_steps": (MAX_STEPS, "frames")}
+    RUNTIME = (*AppConfig.RUNTIME, "compile", "device")
 
 
 Config = TrainConfig  # the former name (billiards/rl/train.py imports it)

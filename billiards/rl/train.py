@@ -72,7 +72,7 @@ from .metrics import MetricLogger, Window, eval_row
 log = logging.getLogger(__name__)
 
 # Keys taken from the command line when resuming (everything else comes from the checkpoint).
-RUNTIME_KEYS = ("threads", "progress", "compile", "device")
+RUNTIME_KEYS = Config.RUNTIME
 # Keys a resume takes from the command line only when given there (else the checkpoint's value):
 # a killed run can be given a CPU-time limit, e.g. to end it within one CPU hour.
 RESUME_KEYS = ("budget.cpu_minutes",)

@@ -282,6 +282,8 @@ class SearchAppConfig(AppConfig):
     # simulator, the search and the geometric proposers stay on the CPU
     device: str = "auto"
 
+    RUNTIME = (*AppConfig.RUNTIME, "picture", "device")
+
 
 # group -> (the key naming the option inside its node, {option: schema})
 OPTIONS: dict[str, tuple[str, dict[str, type]]] = {

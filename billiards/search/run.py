@@ -21,7 +21,7 @@ from billiards.physics.warmup import warm_up
 from billiards.provenance import git_commit
 
 from .actors import SearchActor
-from .config import option, saved_config, typed, validate
+from .config import SearchAppConfig, option, saved_config, typed, validate
 from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, run_p1, run_p3
 from .ranker import noise_mismatch
 
@@ -44,7 +44,7 @@ def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS, noise=None
     return option("search", cfg.search).actor(proposer, cfg.seed, params, noise=noise)
 
 
-RUNTIME_KEYS = ("threads", "progress", "picture", "device")  # taken from the command line when resuming
+RUNTIME_KEYS = SearchAppConfig.RUNTIME  # taken from the command line when resuming
 
 
 def search_identity(out_dir: Path) -> str:
