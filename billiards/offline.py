@@ -77,8 +77,8 @@ def play_block(agent, track, first: int, n: int) -> dict[str, np.ndarray]:
     obs, info = env.reset(seed=track.seed + first)
     agent.reset(track.seed + first)
     out = {"observations": [obs], "actions": [], "rewards": [], "terminations": [], "truncations": []}
-    infos = {k: [np.zeros_like(info[k]) if k in info and k != "positions" else None] for k in INFO}
-    infos["positions"] = [info["positions"]]
+    rack = info["positions"]
+    infos = {k: [] for k in INFO}
     for t in range(track.shots):
         raw = np.asarray(agent.act(obs, info["positions"].copy(), None), dtype=np.float64)
         obs, reward, term, trunc, info = env.step(raw)
@@ -93,9 +93,8 @@ def play_block(agent, track, first: int, n: int) -> dict[str, np.ndarray]:
             infos[k].append(info[k])
     env.close()
     arrays = {k: np.stack(v, axis=1) for k, v in out.items()}
-    for k, v in infos.items():
-        first_row = v[0] if v[0] is not None else np.zeros_like(v[1])
-        arrays[f"info/{k}"] = np.stack([first_row, *v[1:]], axis=1)
+    for k, v in infos.items():  # row 0, before the first shot: the rack, zeros for the rest
+        arrays[f"info/{k}"] = np.stack([rack if k == "positions" else np.zeros_like(v[0]), *v], axis=1)
     return arrays
 
 

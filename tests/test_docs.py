@@ -6,17 +6,18 @@ package or a script of benchmarks/ -- answers ``--help`` and takes the options i
 
 from __future__ import annotations
 
+import importlib
 import re
 import shlex
 import sys
-from functools import lru_cache
 from pathlib import Path
 
 import pytest
+from conftest import APP_CONFIGS
 
 REPO = Path(__file__).resolve().parents[1]
 PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
-APPS = {"train.py": "config", "search.py": "search", "match.py": "match", "evaluate.py": "evaluate"}
+APPS = APP_CONFIGS  # entry point -> (its config, the module that registers its schema)
 PLACEHOLDER = re.compile(r"<[^>]*>|\.\.\.|\bRUN_DIR\b|\bDIR\b|\bFILE\b|\$\{?[A-Z]")
 
 
@@ -142,14 +143,6 @@ def _app_commands():
             yield pytest.param(argv, refused, id=f"{_rel(page)}:{' '.join(argv)}")
 
 
-@lru_cache(maxsize=None)
-def _registered(app: str) -> None:
-    import importlib
-
-    importlib.import_module({"train.py": "billiards.rl.config", "search.py": "billiards.search.config",
-                             "match.py": "billiards.league.config", "evaluate.py": "billiards.bench.config"}[app])
-
-
 def _readers_own(args: list[str]) -> bool:
     """A command that names the reader's own files (a run of theirs to resume, an agent or a
     model file they wrote, a GPU) is composed but not validated: its files are not here."""
@@ -183,10 +176,10 @@ def test_every_app_command_composes_and_validates(argv, refused, monkeypatch):
     if any(a.startswith("hydra/sweeper=optuna") for a in args):
         pytest.importorskip("hydra_plugins.hydra_optuna_sweeper")
     assert not override_errors(args), override_errors(args)
-    _registered(app)
+    importlib.import_module(APPS[app][1])  # registers the app's schema, as its entry point does
     monkeypatch.chdir(REPO)
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
-        cfg = compose(APPS[app], overrides=args, return_hydra_config=True)
+        cfg = compose(APPS[app][0], overrides=args, return_hydra_config=True)
     if flags or _readers_own(args) or (app == "evaluate.py" and not args):  # a bare `python evaluate.py` names the app
         return
     validator = get_class(cfg.hydra.callbacks.validate._target_)
