@@ -1,4 +1,4 @@
-"""Train SAC, TD3 or PPO on Korean 4-ball billiards. The configuration lives in conf/.
+"""Train SAC, TD3, PPO or expert iteration (algo=exit) on Korean 4-ball billiards. The configuration lives in conf/.
 
     python train.py algo=sac env.paradigm=random_continue
     python train.py algo=td3 env=aim_features shaping=foul_penalty budget=paper seed=1
@@ -27,10 +27,11 @@ def main(cfg: DictConfig) -> float:
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 
+    from billiards.exit import train_exit
     from billiards.rl.train import train
 
     try:
-        return train(cfg)
+        return train(cfg, loops={"exit": train_exit})
     except SystemExit as err:
         # train() exits on a bad config; in a multirun that would end every job with this one
         # (Hydra records only Exceptions as failed jobs), so it becomes this job's failure.

@@ -135,7 +135,7 @@ LAYERS = [  # lowest first; a new top-level module or subpackage takes its place
     ("billiards.evaluation",),
     ("billiards.rl",),
     ("billiards.search",),
-    ("billiards.pictures", "billiards.report", "billiards.league"),
+    ("billiards.pictures", "billiards.report", "billiards.league", "billiards.exit"),  # exit: search labels, rl learns
     ("billiards.bench",),
     ("billiards.offline",),  # datasets played by any agent the benchmark adapts
     ("billiards.campaign",),

@@ -55,7 +55,7 @@ from torchrl.objectives import (
     ValueEstimators,
 )
 
-from .config import ALGO_SCHEMAS, OFF_POLICY, PPOConfig, SACConfig, TD3Config  # noqa: F401  (OFF_POLICY re-exported)
+from .config import ALGO_SCHEMAS, OFF_POLICY, ExItConfig, PPOConfig, SACConfig, TD3Config  # noqa: F401  (OFF_POLICY re-exported)
 from .curriculum import HoldActions
 
 ACTION_NORM = "action_norm"
@@ -380,7 +380,34 @@ class TD3Agent(_OffPolicyBase):
         self.n_updates = int(state["n_updates"])
 
 
-class PPOAgent(nn.Module):
+class _OneOptimizer(nn.Module):
+    """An agent with one optimiser over its losses' parameters (PPO, expert iteration): an update
+    is ``self._step`` on a batch (its loss outputs returned), counted; the optimiser's state and
+    the count are what a checkpoint keeps beside the networks."""
+
+    optimizer: torch.optim.Optimizer
+    n_updates: int
+
+    def _step(self, batch: TensorDictBase):
+        raise NotImplementedError
+
+    def update(self, batch: TensorDictBase):
+        out = self._step(batch)
+        self.n_updates += 1
+        return out
+
+    def compile(self, **kwargs) -> None:
+        self._step = torch.compile(self._step, **kwargs)
+
+    def state_dict_extra(self) -> dict:
+        return {"optimizer": self.optimizer.state_dict(), "n_updates": self.n_updates}
+
+    def load_state_dict_extra(self, state: dict) -> None:
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.n_updates = int(state["n_updates"])
+
+
+class PPOAgent(_OneOptimizer):
     """Clipped PPO with GAE on a tanh-Gaussian policy (``"action_norm"`` log-probabilities).
     No averaged actor: ``eval_policy`` is ``policy`` and ``explore`` too (sampling)."""
 
@@ -430,25 +457,53 @@ class PPOAgent(nn.Module):
         self.optimizer.zero_grad(set_to_none=True)
         return out.detach()
 
-    def update(self, batch: TensorDictBase) -> TensorDictBase:
-        out = self._step(batch)
-        self.n_updates += 1
-        return out
 
-    def compile(self, **kwargs) -> None:
-        self._step = torch.compile(self._step, **kwargs)
 
-    def state_dict_extra(self) -> dict:
-        return {"optimizer": self.optimizer.state_dict(), "n_updates": self.n_updates}
+class ExItAgent(_OneOptimizer):
+    """The policy of expert iteration (:mod:`billiards.exit`): the tanh-Gaussian actor of SAC and
+    PPO (so its exported files play, propose and evaluate like theirs), trained by maximum
+    likelihood on the search's labelled shots. A replayed row holds ``"observation"`` and
+    ``"target"``, the label's normalised action in [-1, 1]^4; the loss is the Gaussian negative
+    log-likelihood of ``atanh(target)`` (the label kept :data:`TARGET_EDGE` inside the box), which
+    is the TanhNormal's up to a term that does not depend on the network. ``eval_policy`` and
+    ``explore`` are ``policy``."""
 
-    def load_state_dict_extra(self, state: dict) -> None:
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.n_updates = int(state["n_updates"])
+    metric_names = ("loss_nll", "scale_mean")
+    replay_keys = ("observation", "target")
+    TARGET_EDGE = 1e-3
+
+    def __init__(self, cfg, obs_dim: int, action_spec, num_envs: int = 1, device: torch.device | str = "cpu"):
+        super().__init__()
+        norm = normalized_spec(action_spec, device)
+        self.actor = gaussian_actor(obs_dim, norm, cfg.hidden_sizes, return_log_prob=False)
+        self.scale = ScaleAction(action_spec.space.low, action_spec.space.high)
+        self.policy = TensorDictSequential(self.actor, self.scale)
+        self.explore = self.eval_policy = self.policy
+        self.to(device)
+        self.optimizer = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
+        self.n_updates = 0
+
+    @property
+    def eval_actor(self) -> nn.Module:
+        return self.actor
+
+    def _step(self, batch: TensorDictBase) -> dict[str, torch.Tensor]:
+        loc, scale = self.actor.module[0].module(batch.get("observation"))
+        edge = 1.0 - self.TARGET_EDGE
+        z = torch.atanh(batch.get("target").clamp(-edge, edge))
+        loss = (torch.log(scale) + 0.5 * ((z - loc) / scale) ** 2).sum(-1).mean()
+        loss.backward()
+        self.optimizer.step()
+        self.optimizer.zero_grad(set_to_none=True)
+        return {"loss_nll": loss.detach(), "scale_mean": scale.detach().mean()}
+
+    def set_warmup(self, warm: bool) -> None:
+        pass
 
 
 # algo.name -> its agent, for the algorithms of the one list (billiards.rl.config.ALGO_SCHEMAS,
 # each name's schema); OFF_POLICY (re-exported): those with a replay buffer
-_AGENT_OF = {SACConfig: SACAgent, TD3Config: TD3Agent, PPOConfig: PPOAgent}
+_AGENT_OF = {SACConfig: SACAgent, TD3Config: TD3Agent, PPOConfig: PPOAgent, ExItConfig: ExItAgent}
 AGENTS = {name: _AGENT_OF[schema] for name, schema in ALGO_SCHEMAS.items()}
 
 

@@ -66,7 +66,7 @@ import torch
 from billiards import compat
 from billiards.files import atomic_open, key_problem, plain_data_problem, shape_problem, tensor_problem
 
-from .config import ALGO_SCHEMAS, CHECKPOINT_FILE, MAX_LAYERS, MAX_WIDTH, OFF_POLICY
+from .config import ALGO_SCHEMAS, CHECKPOINT_FILE, MAX_LAYERS, MAX_WIDTH, REPLAY
 
 FORMAT_VERSION = 2
 MAGIC = b"billiards-checkpoint"
@@ -324,9 +324,12 @@ class RunState:
 
 def _most_owed(config: Any) -> float:
     """The most gradient updates a checkpoint may owe: one batch's (utd x the batch's frames; a
-    run stopped amid a batch's updates owes the rest), plus the fraction carried over."""
+    run stopped amid a batch's updates owes the rest; expert iteration: one round's), plus the
+    fraction carried over."""
     try:
         algo, env = config["algo"], config["env"]
+        if algo.get("name") == "exit":  # a round's passes over the labelled shots kept
+            return float(algo["epochs"]) * int(algo["buffer_size"]) / int(algo["batch_size"]) + 1.0
         batch = max(int(algo.get("frames_per_batch") or 0), int(env.get("num_envs") or 1))
         return float(algo.get("utd", 0.0)) * batch + 1.0
     except (KeyError, TypeError, ValueError, AttributeError, OverflowError):
@@ -484,7 +487,7 @@ def _buffer_problem(buffer: Any, agent, cfg, frames: int) -> str | None:
     """What is wrong with a checkpoint's replay buffer: kept by an algorithm that has none, its
     row count outside [1, its capacity and the frames collected], a tensor of another row count,
     a replay key missing, a non-finite or complex value, a write cursor outside the buffer."""
-    if cfg.algo.name not in OFF_POLICY:
+    if cfg.algo.name not in REPLAY:
         return f"buffer: a replay buffer, but algo={cfg.algo.name} keeps none"
     if bad := key_problem(buffer, {"data": dict, "rows": int, "writer": dict}, "buffer"):
         return bad

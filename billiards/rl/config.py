@@ -120,6 +120,7 @@ class AlgoConfig:
     frames_per_batch: int = 0  # env frames per collector iteration (all innings together); off-policy: 0 = env.num_envs
 
     UPPER: ClassVar[dict] = {"lr": RATE, "hidden_sizes": NETWORK}
+    KEEPS_REPLAY: ClassVar[bool] = False  # a replay buffer, held in the checkpoints
 
     @classmethod
     def errors(cls, a) -> list[str]:
@@ -145,6 +146,7 @@ class OffPolicyConfig(AlgoConfig):
     # evaluate the live actor.
     actor_ema: float = 0.0
 
+    KEEPS_REPLAY: ClassVar[bool] = True
     UPPER: ClassVar[dict] = {
         **AlgoConfig.UPPER,
         "batch_size": (65_536, "replay rows per gradient update"),
@@ -242,10 +244,63 @@ class PPOConfig(AlgoConfig):
                 *_positive("algo.max_grad_norm", a.max_grad_norm)]
 
 
+@dataclass
+class ExItConfig(AlgoConfig):
+    """Expert iteration (``billiards.exit``): rounds of ``shots_per_round`` shots labelled by the
+    depth-2 lookahead (``search_budget`` simulations per shot: ``k1`` candidates, the ``m1`` best
+    expanded) over the current policy as its proposer (the geometric proposer in round 0), each
+    label the best-valued candidate nearest the proposer's own shot; after each round,
+    ``epochs`` passes (``batch_size`` rows per update) of maximum likelihood on the last
+    ``buffer_size`` labelled shots. ``innings``: innings played side by side in one block."""
+
+    name: str = "exit"
+    lr: float = 1e-3
+    batch_size: int = 512
+    buffer_size: int = 200_000
+    shots_per_round: int = 20_000
+    epochs: float = 10.0
+    innings: int = 200
+    search_budget: int = 400
+    k1: int = 200
+    m1: int = 10
+
+    KEEPS_REPLAY: ClassVar[bool] = True
+    UPPER: ClassVar[dict] = {
+        **AlgoConfig.UPPER,
+        "batch_size": (65_536, "rows per gradient update"),
+        "buffer_size": (10**7, "labelled shots kept"),
+        "shots_per_round": (10**7, "labelled shots per round"),
+        "epochs": (1000.0, "passes over the labelled shots per round"),
+        "innings": (65_536, "innings played side by side"),
+        "search_budget": (10**6, "simulations per labelled shot"),
+        "k1": (10**6, "candidates per shot"), "m1": (10**6, "expanded candidates per shot"),
+    }
+
+    @classmethod
+    def errors(cls, a) -> list[str]:
+        rest = a.search_budget - a.k1
+        return [*super().errors(a), *_positive("algo.batch_size", a.batch_size), *_positive("algo.buffer_size", a.buffer_size),
+                *_positive("algo.shots_per_round", a.shots_per_round), *_positive("algo.epochs", a.epochs),
+                *_positive("algo.innings", a.innings), *_positive("algo.k1", a.k1), *_positive("algo.m1", a.m1, strict=False),
+                *_need(a.m1 <= a.k1 and rest >= 0 and (rest % a.m1 == 0 if a.m1 else rest == 0),
+                       f"algo.search_budget - algo.k1 ({a.search_budget} - {a.k1}) must be a multiple of algo.m1 ({a.m1}) "
+                       f"(0 without expansion), with algo.m1 <= algo.k1"),
+                *_need(a.innings > 0 and a.shots_per_round % (a.innings * EXIT_SHOTS) == 0,
+                       f"algo.shots_per_round ({a.shots_per_round}) must be whole blocks of algo.innings x {EXIT_SHOTS} "
+                       f"shots ({a.innings * EXIT_SHOTS})")]
+
+
+EXIT_SHOTS = 10  # shots of an expert-iteration inning (the benchmark's innings-v1 protocol)
+
+
 # The algorithms, by algo.name: the one list (the algo group's schemas, validate's "one of ...";
-# billiards.rl.agents maps each to its agent). OFF_POLICY: those with a replay buffer.
-ALGO_SCHEMAS = {"sac": SACConfig, "td3": TD3Config, "ppo": PPOConfig}
+# billiards.rl.agents maps each to its agent). OFF_POLICY: those trained from a collector and a
+# replay buffer; REPLAY: those keeping a replay buffer (a checkpoint holds it); EXIT: expert
+# iteration (trained from the search's labels, its loop in billiards.exit).
+ALGO_SCHEMAS = {"sac": SACConfig, "td3": TD3Config, "ppo": PPOConfig, "exit": ExItConfig}
 OFF_POLICY = tuple(name for name, schema in ALGO_SCHEMAS.items() if issubclass(schema, OffPolicyConfig))
+REPLAY = tuple(name for name, schema in ALGO_SCHEMAS.items() if schema.KEEPS_REPLAY)
+EXIT = "exit"
 
 
 # ----------------------------------------------------------------------------- the rest
@@ -497,6 +552,14 @@ def _errors(cfg: DictConfig) -> list[str]:
         fpb = (a.frames_per_batch or e.num_envs) if a.name in OFF_POLICY else a.frames_per_batch
         errs += _need(e.num_envs <= 0 or fpb % e.num_envs == 0,
                       f"algo.frames_per_batch ({fpb}) must be a multiple of env.num_envs ({e.num_envs})")
+    if a.name == EXIT:  # the labels are aim-constrained shots of the exact search
+        errs += _need(bool(e.constrain_aim), "algo=exit learns aim-constrained shots: it needs env.constrain_aim=true "
+                                             "(env=aim or env=aim_features)")
+        if not noise_errors(cfg.noise):
+            from billiards.physics.noise import noise_from_config
+
+            errs += _need(noise_from_config(cfg.noise).is_exact, f"algo=exit labels with the exact depth-2 search: it needs "
+                                                                 f"exact play (noise=none), got noise={cfg.noise.preset}")
     if cfg.curriculum.name != "none" and a.name not in OFF_POLICY:
         errs.append(f"curriculum={cfg.curriculum.name} needs an off-policy algorithm ({', '.join(OFF_POLICY)}), got algo={a.name}")
     # seed: random.seed, np.random.seed (which takes [0, 2**32)) and torch

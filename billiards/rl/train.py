@@ -58,6 +58,7 @@ from .checkpoint import CheckpointError, RunState, load_checkpoint, save_checkpo
 from .config import (
     ALGO_SCHEMAS,
     CONFIG_FILE,
+    REPLAY,
     EVAL_FILE,
     EVAL_HISTORY_FILE,
     METRICS_FILE,
@@ -371,7 +372,7 @@ def make_run(cfg: DictConfig, run_dir: Path, ckpt: dict | None = None) -> Run:
     if cfg.compile:
         agent.compile()
     stages = make_curriculum(cfg, agent)
-    rb = make_replay_buffer(cfg, device) if cfg.algo.name in OFF_POLICY else None
+    rb = make_replay_buffer(cfg, device) if cfg.algo.name in REPLAY else None
     if ckpt is None:
         state = RunState.fresh(cfg.budget)
     else:
@@ -623,11 +624,14 @@ def train_ppo(run: Run) -> float:
         return finish(run, bar)
 
 
-def train(cfg: DictConfig, run_dir: str | Path | None = None) -> float:
+def train(cfg: DictConfig, run_dir: str | Path | None = None, loops: dict | None = None) -> float:
     """Train as configured; returns the final mean points per inning (primary eval start).
 
     ``run_dir`` defaults to Hydra's output dir of the job (or the resumed run's dir).
     Resuming a finished run builds and writes nothing: it says so and returns its result.
+    ``loops``: training loops by algorithm name, each given the built :class:`Run`, beside the
+    ones here (SAC, TD3, PPO): ``algo=exit``'s lives above this layer
+    (:func:`billiards.exit.train_exit`; train.py passes it).
     """
     if run_dir is None:
         from hydra.core.hydra_config import HydraConfig
@@ -640,9 +644,16 @@ def train(cfg: DictConfig, run_dir: str | Path | None = None) -> float:
             mean, frames = finished
             log.warning(finished_line(run_dir, frames, mean))
             return mean
+        loop = {**LOOPS, **(loops or {})}.get(cfg.algo.name)
+        if loop is None:
+            raise ConfigError(f"algo={cfg.algo.name} has no training loop here: train it with train.py")
         run = make_run(cfg, run_dir, ckpt)
         record_start(run_dir, "fresh" if ckpt is None else "resume", run.state.frames,
                      command=["python", "train.py", *_command_line_overrides()])
     except (CheckpointError, ConfigError) as err:
         raise SystemExit(f"Error: {err}") from None
-    return (train_off_policy if cfg.algo.name in OFF_POLICY else train_ppo)(run)
+    return loop(run)
+
+
+# algo.name -> its loop (algo=exit's is billiards.exit.train_exit, passed by train.py)
+LOOPS = {**{name: train_off_policy for name in OFF_POLICY}, "ppo": train_ppo}

@@ -91,7 +91,7 @@ def test_option_groups_list_only_real_options():
     assert group_options("proposer") == ["base", "both", "for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none",
                                          "for_noise_variable", "forgiving", "gentle", "geometric", "near_miss", "policy", "ranked"]
     assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none", "variable"]
-    assert group_options("algo") == ["ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
+    assert group_options("algo") == ["exit", "ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
     assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name
 
 
@@ -258,7 +258,7 @@ def test_the_algorithms_are_listed_once():
     assert list(AGENTS) == list(schemas) and OFF_POLICY == train_config.OFF_POLICY == ("sac", "td3")
     assert all(issubclass(s, train_config.AlgoConfig) for s in schemas.values())
     assert config_problem({"algo": {"name": "dqn"}, "env": {}}) == \
-        "config.algo.name='dqn': not an algorithm of this version (sac, td3, ppo)"
+        "config.algo.name='dqn': not an algorithm of this version (sac, td3, ppo, exit)"
     assert issubclass(train_config.ValidateConfig, ValidatingCallback)
 
 

@@ -1,0 +1,146 @@
+"""Expert iteration: the search teaches a policy, the policy proposes for the search
+(``python train.py algo=exit env=aim_features``; docs/expert_iteration.md).
+
+A run is rounds of ``algo.shots_per_round`` labelled shots. In a round, blocks of
+``algo.innings`` innings (the benchmark's ``innings-v1`` protocol: a random rack, continue on a
+miss, 10 shots) are played side by side; at every table the depth-2 lookahead
+(:func:`billiards.search.lookahead.h2_values`, ``algo.search_budget`` simulations: ``algo.k1``
+candidates, the ``algo.m1`` best expanded) values the proposer's candidates, and the label is
+:func:`nearest_best`: among the candidates of the best value, the one nearest the proposer's own
+shot (candidate 0). The labelled shot is played, so the tables are those the search visits.
+The proposer is the geometric one in round 0 and the policy itself from round 1 on
+(:class:`~billiards.search.proposers.PolicyProposer`: its deterministic shot, then draws from
+its distribution): the label is the search's improvement of the policy's own shot, the nearest
+one that does best, which keeps the targets one function of the table where plain imitation of
+the search's choice averages over its many equally good shots. After the round's last block,
+``algo.epochs`` passes of maximum likelihood (:class:`~billiards.rl.agents.ExItAgent`) over the
+last ``algo.buffer_size`` labelled shots, continuing from the round before.
+
+Everything else is the trainer's: the run directory, ``resume=``, checkpoints (the labelled
+shots included) every ``budget.checkpoint_every`` shots and on a stop request at a block's end
+or between two updates, the periodic and final evaluations of the policy alone
+(``eval.json``), ``metrics.csv`` (``train_score_pct``: the searched shots' success),
+``summary.json``. Rack and search seeds come from the run's seed and the block's index
+(:data:`EXIT_SEED`, far from every benchmark track's held-out seeds), so a resumed run labels
+exactly what the uninterrupted one did.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+
+from billiards import domain
+from billiards.physics import PhysicsParams
+from billiards.physics.config import params_from_config
+from billiards.rl.config import EXIT_SHOTS
+from billiards.rl.train import Run, StopRequests, finish, gradient_updates, periodic, session
+from billiards.search.lookahead import h2_values
+from billiards.search.proposers import GeometricProposer, PolicyProposer
+from billiards.search.settings import H2Config
+
+log = logging.getLogger("billiards.exit")
+
+EXIT_SEED = 20_000_000  # inning i of seed s plays the rack of EXIT_SEED + 10,000,000 s + i
+
+
+def normalized_target(positions: np.ndarray, actions: np.ndarray, R: float) -> np.ndarray:
+    """Raw shots (..., 4) on tables (..., 4, 2) as the aim-constrained policy's normalised action
+    (u, 2p - 1, a, b), u the shot's angle inside the nearest red's window
+    (:func:`billiards.domain.aim_window`; the angle's difference taken within half a turn)."""
+    target, half = domain.aim_window(positions, R)
+    u = (np.mod(actions[..., 0] - target + math.pi, 2.0 * math.pi) - math.pi) / half
+    return domain.normalize_action(np.stack([u, actions[..., 1], actions[..., 2], actions[..., 3]], axis=-1),
+                                   constrain_aim=True)
+
+
+def nearest_best(positions: np.ndarray, proposer, cfg: H2Config, rng: np.random.Generator, params: PhysicsParams):
+    """The depth-2 lookahead's labels for tables (S, 4, 2): among the expanded candidates of the
+    best value (:func:`~billiards.search.lookahead.h2_values`; all candidates by r1 without
+    expansion), the one nearest candidate 0 (the proposer's own shot) in the normalised
+    aim-constrained action (:func:`normalized_target`; ties: proposer order). Returns
+    ``(raw shots (S, 4), targets (S, 4), simulations)``."""
+    v = h2_values(positions, proposer, cfg, rng, params)
+    S = positions.shape[0]
+    rows = np.arange(S)[:, None]
+    x = normalized_target(positions[:, None], v.candidates, params.ball_radius)  # (S, K1, 4)
+    if v.top.shape[1]:
+        pool, value = v.top, v.value
+    else:
+        pool, value = np.broadcast_to(np.arange(v.r1.shape[1]), v.r1.shape), v.r1
+    distance = np.linalg.norm(x[rows, pool] - x[:, :1], axis=-1)
+    distance = np.where(value >= value.max(axis=1, keepdims=True), distance, np.inf)
+    pick = pool[rows[:, 0], np.argmin(distance, axis=1)]
+    return v.candidates[rows[:, 0], pick], x[rows[:, 0], pick], v.n_sims
+
+
+def labeller(run: Run, round_index: int, params: PhysicsParams):
+    """The proposer of round ``round_index``: the geometric one in round 0, then the policy."""
+    if round_index == 0:
+        return GeometricProposer(R=params.ball_radius)
+    return PolicyProposer([run.agent.policy], constrain_aim=True, extra_features=bool(run.cfg.env.extra_features),
+                          name="exit", R=params.ball_radius)
+
+
+def play_block(run: Run, block: int, proposer, search: H2Config, params: PhysicsParams) -> tuple[TensorDict, int]:
+    """Block ``block`` of the run (``algo.innings`` innings of :data:`EXIT_SHOTS` shots): every
+    table's observation and label, and how many of the played shots scored."""
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    cfg, a = run.cfg, run.cfg.algo
+    env = Billiards4BallVectorEnv(a.innings, start="random", on_miss="continue", max_shots=EXIT_SHOTS, physics=params,
+                                  normalize_actions=False)
+    _, info = env.reset(seed=EXIT_SEED + 10_000_000 * int(cfg.seed) + block * a.innings)
+    rng = np.random.default_rng([int(cfg.seed), block])
+    positions, observations, targets, scored = info["positions"], [], [], 0
+    for _ in range(EXIT_SHOTS):
+        raw, x, _ = nearest_best(positions, proposer, search, rng, params)
+        observations.append(domain.observation(positions, bool(cfg.env.extra_features)))
+        targets.append(x.astype(np.float32))
+        _, _, _, _, info = env.step(raw)
+        scored += int(info["score"].sum())
+        positions = info["positions"]
+    data = TensorDict({"observation": torch.from_numpy(np.concatenate(observations)),
+                       "target": torch.from_numpy(np.concatenate(targets))}, batch_size=[a.innings * EXIT_SHOTS])
+    return data.to(run.device), scored
+
+
+def train_exit(run: Run) -> float:
+    """Expert iteration to the budget (the module docstring); returns the final mean points per
+    inning of the policy alone."""
+    cfg, rb, state = run.cfg, run.rb, run.state
+    a = cfg.algo
+    params = params_from_config(cfg.physics)
+    search = H2Config(budget=a.search_budget, k1=a.k1, m1=a.m1).settings()
+    block_shots = a.innings * EXIT_SHOTS
+    with session(run) as bar, StopRequests() as stop:
+        if state.owed >= 1:  # stopped amid a round's updates: the rest first, as the uninterrupted run made them
+            gradient_updates(run, stop, state.take_updates(0.0))
+            stop.stop_if_requested(run)
+        while not run.budget_spent():
+            round_index = state.frames // a.shots_per_round
+            data, scored = play_block(run, state.frames // block_shots, labeller(run, round_index, params), search, params)
+            rb.extend(data)
+            state.frames += block_shots
+            run.window.frames += block_shots
+            run.window.score += scored
+            run.window.reward += scored
+            bar.update(block_shots)
+            if state.frames % a.shots_per_round == 0 or run.budget_spent():  # the round's end: learn
+                log.info("round %d: the search scored %.2f %% of the block's shots; %d labelled shots kept",
+                         round_index, 100.0 * scored / block_shots, len(rb))
+                count = state.take_updates(a.epochs * len(rb) / a.batch_size)
+                if not gradient_updates(run, stop, count):
+                    stop.stop_if_requested(run)
+            periodic(run, bar)
+            stop.stop_if_requested(run)
+            if run.cpu_spent():
+                break
+        return finish(run, bar)
+
+
+__all__ = ["EXIT_SEED", "labeller", "nearest_best", "normalized_target", "play_block", "train_exit"]

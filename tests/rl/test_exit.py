@@ -1,0 +1,157 @@
+"""Expert iteration (``python train.py algo=exit``, billiards/exit.py): the labelling rule, the
+loop end to end on a tiny budget, a stop and resume to the uninterrupted run's bits, the
+exported policy played alone and as a proposer, and the config's refusals."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from test_train import ENV, REPO, TRAIN, check_finished, ok, same, train
+
+TINY = ["algo=exit", "env=aim_features", "algo.innings=10", "algo.shots_per_round=200", "algo.search_budget=60",
+        "algo.k1=20", "algo.m1=2", "algo.batch_size=64", "algo.epochs=2", "budget=smoke", "budget.total_steps=600",
+        "budget.eval_every=200", "budget.checkpoint_every=200", "budget.log_every=200", "budget.eval_innings=5",
+        "budget.final_eval_innings=10"]
+
+
+def test_the_label_is_the_best_valued_candidate_nearest_the_proposers_own_shot():
+    from billiards import domain
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+    from billiards.exit import nearest_best, normalized_target
+    from billiards.physics import DEFAULT_PARAMS
+    from billiards.search.lookahead import h2_values
+    from billiards.search.proposers import GeometricProposer
+    from billiards.search.settings import H2Config
+
+    _, info = Billiards4BallVectorEnv(40, start="random").reset(seed=11)
+    positions = info["positions"]
+    for cfg in (H2Config(budget=60, k1=20, m1=2).settings(), H2Config(budget=30, k1=30, m1=0).settings()):
+        raw, target, sims = nearest_best(positions, GeometricProposer(), cfg, np.random.default_rng(3), DEFAULT_PARAMS)
+        v = h2_values(positions, GeometricProposer(), cfg, np.random.default_rng(3), DEFAULT_PARAMS)
+        assert sims == v.n_sims == 40 * cfg.sims_per_decision
+        pool = v.top if cfg.m1 else np.broadcast_to(np.arange(cfg.k1), v.r1.shape)
+        value = v.value if cfg.m1 else v.r1
+        x = normalized_target(positions[:, None], v.candidates, DEFAULT_PARAMS.ball_radius)
+        for s in range(40):
+            chosen = [j for j, k in enumerate(pool[s]) if np.array_equal(v.candidates[s, k], raw[s])]
+            assert chosen and value[s, chosen[0]] == value[s].max()  # a best-valued candidate
+            best = [k for j, k in enumerate(pool[s]) if value[s, j] == value[s].max()]
+            distance = [np.linalg.norm(x[s, k] - x[s, 0]) for k in best]
+            assert np.linalg.norm(target[s] - x[s, 0]) == pytest.approx(min(distance))  # nearest the proposer's own shot
+        # the target is the label's own aim-constrained, normalised action: it plays the same shot
+        assert np.abs(target).max() <= 1.0
+        again = domain.raw_action(target, positions, constrain_aim=True, normalized=True)
+        assert np.allclose(np.mod(again[:, 0] - raw[:, 0] + np.pi, 2 * np.pi) - np.pi, 0.0, atol=1e-12)
+        assert np.allclose(again[:, 1:], raw[:, 1:], atol=1e-12)
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (("algo=exit",), "algo=exit learns aim-constrained shots: it needs env.constrain_aim=true"),
+    (("algo=exit", "env=aim_features", "noise=fastfiz"), "algo=exit labels with the exact depth-2 search"),
+    (("algo=exit", "env=aim_features", "algo.k1=395"), "algo.search_budget - algo.k1 (400 - 395) must be a multiple"),
+    (("algo=exit", "env=aim_features", "algo.innings=300"), "must be whole blocks of algo.innings x 10 shots (3000)"),
+])
+def test_bad_exit_configs_are_refused_with_their_message(tmp_path, overrides, message):
+    from conftest import refusal
+
+    assert message in refusal("train.py", *overrides, cwd=tmp_path)
+
+
+# train.py sending itself SIGTERM as expert iteration starts its AT-th block (argv[1]): a test hook
+# around the real entry point, like test_train's SIGTERM_AT_STEP
+SIGTERM_AT_BLOCK = f"""
+import os, runpy, signal, sys
+sys.path.insert(0, {str(REPO)!r})
+import billiards.exit as exit_
+
+at, play, calls = int(sys.argv.pop(1)), exit_.play_block, []
+
+def signalling(*args, **kwargs):
+    calls.append(1)
+    if len(calls) == at:
+        os.kill(os.getpid(), signal.SIGTERM)
+    return play(*args, **kwargs)
+
+exit_.play_block = signalling
+sys.argv[0] = {TRAIN!r}
+runpy.run_path({TRAIN!r}, run_name="__main__")
+"""
+
+
+@pytest.mark.slow
+def test_an_exit_run_trains_stops_resumes_bit_for_bit_and_exports_a_policy_that_plays_and_proposes(tmp_path):
+    """Three rounds of two blocks: the run writes what every training run writes; SIGTERM in the
+    block that ends round 0 stops it before the round's updates (owed, checkpointed); resumed,
+    it ends with the uninterrupted run's evaluation, networks, optimiser, labelled shots and
+    counters, bit for bit. The exported policy loads as every policy file does, plays alone
+    and proposes for the search."""
+    from billiards.rl.checkpoint import load_checkpoint
+
+    whole, stopped = tmp_path / "whole", tmp_path / "stopped"
+    ok(train(tmp_path, *TINY, f"hydra.run.dir={whole}"))
+    check_finished(whole, 600)
+    summary = json.loads((whole / "summary.json").read_text())
+    assert summary["algo"] == "exit" and summary["updates"] == sum(round(2 * n / 64) for n in (200, 400, 600))
+    rows = [r for r in (json.loads(line) for line in (whole / "eval_history.jsonl").read_text().splitlines())]
+    assert [r["step"] for r in rows] == [200, 400, 600]
+
+    proc = subprocess.run([sys.executable, "-c", SIGTERM_AT_BLOCK, "2", *TINY, f"hydra.run.dir={stopped}", "progress=false"],
+                          cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 128 + signal.SIGTERM, proc.stderr[-3000:]
+    ckpt = load_checkpoint(stopped)
+    assert ckpt["counters"]["frames"] == 200 and ckpt["counters"]["owed"] >= 1  # the round's updates are owed
+    assert not (stopped / "eval.json").exists()
+    ok(train(tmp_path, f"resume={stopped}"))
+    assert (stopped / "eval.json").read_bytes() == (whole / "eval.json").read_bytes()
+    a, b = load_checkpoint(whole), load_checkpoint(stopped)
+    for key in ("agent", "agent_extra", "buffer", "counters"):
+        if key == "counters":
+            a[key], b[key] = ({k: v for k, v in c[key].items() if not k.endswith("_seconds")} for c in (a, b))
+        assert same(a[key], b[key]), key
+
+    out = tmp_path / "policies"
+    ok(subprocess.run([sys.executable, "-m", "billiards.rl.policy", "export", str(whole), "--out", str(out)],
+                      cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=900))
+    from billiards.bench.agents import resolve_agent
+    from billiards.bench.tracks import get_track
+    from billiards.rl.policy import policy_file_error
+    from billiards.search.proposers import load_policy_proposer
+
+    path = out / "seed0.pt"
+    assert policy_file_error(path) is None
+    import torch
+
+    payload = torch.load(path, weights_only=True)
+    weight = next(k for k in payload["actor"] if k.endswith("weight"))
+    payload["actor"][weight][0, 0] += 1.0
+    torch.save(payload, tmp_path / "bad.pt")  # one weight changed, the seal kept
+    assert "do not match its sha256" in policy_file_error(tmp_path / "bad.pt")  # checked on load like every model file
+    track = get_track("innings-v1")
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    obs, info = Billiards4BallVectorEnv(4, start="random").reset(seed=5)
+    agent = resolve_agent(str(path), track)
+    shots = agent.act(obs, info["positions"], None)
+    assert shots.shape == (4, 4) and np.isfinite(shots).all()
+    proposer = load_policy_proposer([path])
+    candidates = proposer.propose(info["positions"], 8, np.random.default_rng(0))
+    assert candidates.shape == (4, 8, 4) and np.allclose(candidates[:, 0], shots)  # candidate 0: the policy's own shot
+
+
+def test_the_trainer_alone_refuses_exit_without_its_loop(tmp_path):
+    from hydra import compose, initialize_config_dir
+
+    from billiards.rl.train import train as train_library
+
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base=None):
+        cfg = compose("config", TINY)
+    with pytest.raises(SystemExit, match="algo=exit has no training loop here"):
+        train_library(cfg, tmp_path / "run")
+    assert not (tmp_path / "run").exists()
+
