@@ -337,7 +337,7 @@ def test_each_apps_help_lists_its_own_groups_and_fixed_choices():
         return out.stdout
 
     train, search = help_of("train.py"), help_of("search.py")
-    assert "algo: ppo, ppo_paper, sac, sac_paper, td3, td3_paper" in train and "shaping: " in train
+    assert "algo: exit, ppo, ppo_paper, sac, sac_paper, td3, td3_paper" in train and "shaping: " in train
     assert "env.paradigm: canonical_reset, canonical_continue, random_reset, random_continue" in train
     assert "\nprotocol:" not in train and "\nproposer:" not in train and "schema" not in train.split("== Config")[0]
     assert "proposer: " in search and "protocol: p1, p3" in search and "\nalgo:" not in search.split("== Config")[0]
