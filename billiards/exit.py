@@ -143,4 +143,80 @@ def train_exit(run: Run) -> float:
         return finish(run, bar)
 
 
-__all__ = ["EXIT_SEED", "labeller", "nearest_best", "normalized_target", "play_block", "train_exit"]
+def _history(run_dir) -> list[dict]:
+    import json
+    from pathlib import Path
+
+    return [json.loads(line) for line in (Path(run_dir) / "eval_history.jsonl").read_text().splitlines()]
+
+
+def learning_curve(run_dirs, sac_dirs, out) -> dict:
+    """The figure of expert iteration's learning (``out``, PNG) and its data: per-shot success
+    of the policy alone (each evaluation of ``eval_history.jsonl``) and of the search over it
+    (``metrics.csv``'s ``train_score_pct``: the labelled shots as played), against process
+    CPU hours, beside the evaluations of SAC runs (``sac_dirs``) on the same axis."""
+    import csv
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from billiards.files import display_path
+
+    data = {"exit": [], "sac": []}
+    fig, ax = plt.subplots(figsize=(7.5, 4.2), dpi=120)
+    for i, d in enumerate(run_dirs):
+        alone = [(e["cpu_time"] / 3600, e["eval_success_pct"]) for e in _history(d)]
+        with (Path(d) / "metrics.csv").open(newline="") as f:
+            searched = [(float(r["cpu_time"]) / 3600, float(r["train_score_pct"])) for r in csv.DictReader(f)
+                        if r.get("train_score_pct")]
+        data["exit"].append({"run": display_path(d), "policy_alone": alone, "search_over_policy": searched})
+        ax.plot(*zip(*alone), "o-", color="tab:blue", ms=3, label="expert iteration: the policy alone" if i == 0 else None)
+        ax.plot(*zip(*searched), "s--", color="tab:green", ms=3,
+                label="expert iteration: h2 (400 sims) over the policy" if i == 0 else None)
+    for i, d in enumerate(sac_dirs):
+        curve = [(e["cpu_time"] / 3600, e["eval_success_pct"]) for e in _history(d)]
+        data["sac"].append({"run": display_path(d), "policy_alone": curve})
+        ax.plot(*zip(*curve), "-", color="tab:orange", alpha=0.7, label="SAC aim + features (1 CPU hour)" if i == 0 else None)
+    ax.set_xlabel("process CPU hours")
+    ax.set_ylabel("success per shot (%)")
+    ax.set_ylim(0, 101)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="center right", fontsize=8)
+    ax.set_title("Expert iteration against SAC, exact play (random racks, continue on a miss)", fontsize=9)
+    fig.tight_layout()
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out)
+    plt.close(fig)
+    return data
+
+
+def main(argv=None) -> None:
+    import argparse
+    import json
+    from pathlib import Path
+
+    from billiards.files import atomic_write_text
+
+    parser = argparse.ArgumentParser(prog="python -m billiards.exit", description="Expert iteration's learning curve.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    curve = sub.add_parser("curve", help="the figure of expert-iteration runs beside SAC runs, and its data (.json)")
+    curve.add_argument("runs", nargs="+", type=Path, help="expert-iteration run dirs")
+    curve.add_argument("--sac", nargs="*", type=Path, default=[], help="SAC run dirs (eval_history.jsonl)")
+    curve.add_argument("--out", type=Path, required=True, help="the figure (.png); its data beside it (.json)")
+    args = parser.parse_args(argv)
+    for d in [*args.runs, *args.sac]:
+        if not (d / "eval_history.jsonl").is_file():
+            raise SystemExit(f"Error: {d} holds no eval_history.jsonl (not a training run)")
+    data = learning_curve(args.runs, args.sac, args.out)
+    atomic_write_text(args.out.with_suffix(".json"), json.dumps(data, indent=1) + "\n")
+    print(f"wrote {args.out} and {args.out.with_suffix('.json')}")
+
+
+__all__ = ["EXIT_SEED", "labeller", "learning_curve", "nearest_best", "normalized_target", "play_block", "train_exit"]
+
+
+if __name__ == "__main__":
+    main()

@@ -296,13 +296,22 @@ OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
 # `search_schema` (the root), schema/{search,protocol,proposer}/<option>, schema/physics, the
 # resolvers; the proposer options themselves are stored nodes (conf/search/ and conf/protocol/
 # hold the other groups' options as YAML)
+# proposer=exit: the policy of expert iteration (docs/expert_iteration.md), trained by the search
+# itself (results/exit/README.md)
+EXIT_PROPOSER = PolicyProposerConfig(
+    name="exit", checkpoints=["results/policies/exit/seed0.pt"],
+    command="python train.py algo=exit env=aim_features budget=exit seed=0 threads=1 && "
+            "python -m billiards.rl.policy export <the run dir> --out results/policies/exit")
+
+
 def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConfig]:
     """The ``proposer=`` options: ``geometric``, ``forgiving`` (geometric, narrowed for noise:
     :data:`FORGIVING`), ``ranked`` (geometric draws ranked by a learned shot ranker,
-    :class:`RankedProposerConfig`), the shipped ensembles by name, and ``policy``
+    :class:`RankedProposerConfig`), the shipped ensembles by name, ``exit`` (the expert-iteration
+    policy, :data:`EXIT_PROPOSER`) and ``policy``
     (``proposer=policy proposer.checkpoints=[a.pt,b.pt,...]``: an ensemble of your own)."""
     return {"geometric": GeometricProposerConfig(), "forgiving": GeometricProposerConfig(**FORGIVING),
-            **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS},
+            **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS}, "exit": EXIT_PROPOSER,
             "policy": PolicyProposerConfig(name="policy", checkpoints=[]), "ranked": RankedProposerConfig()}
 
 
