@@ -214,6 +214,119 @@ def checksum(out: Path) -> str:
     return h.hexdigest()
 
 
+# The offline baseline: TorchRL's IQL (implicit Q-learning) on a dataset read with
+# minari.load_dataset into a TorchRL replay buffer (TorchRL 0.14.1's MinariExperienceReplay reads
+# these datasets' layout but not their values: docs/datasets.md), scored on the benchmark track of
+# the dataset's noise.
+IQL_TRACK = {"none": "innings-v1", "fastfiz": "p1-fastfiz-v1"}
+IQL_SETTINGS = {"batch_size": 256, "lr": 3e-4, "gamma": 0.9, "tau": 0.005, "expectile": 0.7, "temperature": 3.0,
+                "hidden_sizes": [256, 256]}
+
+
+def normalized_actions(actions: np.ndarray) -> np.ndarray:
+    """The datasets' raw shots (theta within one turn either way, p, a, b) as the normalised box
+    [-1, 1]^4 of the gymnasium env (theta taken into [0, 2 pi) first), kept 0.001 inside it (where
+    a squashed Gaussian's log-likelihood is finite)."""
+    from billiards import domain
+
+    raw = np.array(actions, dtype=np.float64)
+    raw[..., 0] = np.mod(raw[..., 0], 2 * math.pi)
+    edge = 1.0 - 1e-3
+    return np.clip(domain.normalize_action(raw), -edge, edge).astype(np.float32)
+
+
+def transitions(directory: Path):
+    """Every transition of the Minari dataset built in ``directory``, read with
+    ``minari.load_dataset``, as one TensorDict: observation, action (normalised), next
+    observation, reward, done and terminated."""
+    import minari
+    import torch
+    from tensordict import TensorDict
+
+    manifest = _manifest(directory)
+    root = (directory / "minari").resolve()
+    if not (root / manifest["dataset_id"]).exists():
+        raise SystemExit(f"Error: {directory}: no Minari dataset yet; run python -m billiards.offline build {directory}")
+    os.environ["MINARI_DATASETS_PATH"] = str(root)
+    parts = {k: [] for k in ("obs", "next", "action", "reward", "terminated", "truncated")}
+    for ep in minari.load_dataset(manifest["dataset_id"]).iterate_episodes():
+        parts["obs"].append(ep.observations[:-1])
+        parts["next"].append(ep.observations[1:])
+        parts["action"].append(normalized_actions(ep.actions))
+        parts["reward"].append(ep.rewards)
+        parts["terminated"].append(ep.terminations)
+        parts["truncated"].append(ep.truncations)
+    cat = {k: torch.from_numpy(np.concatenate(v)) for k, v in parts.items()}
+    n = cat["obs"].shape[0]
+    flag = lambda x: x.bool().reshape(n, 1)
+    return TensorDict({"observation": cat["obs"].float(), "action": cat["action"],
+                       "next": {"observation": cat["next"].float(), "reward": cat["reward"].float().reshape(n, 1),
+                                "terminated": flag(cat["terminated"]),
+                                "done": flag(cat["terminated"]) | flag(cat["truncated"])}}, batch_size=[n])
+
+
+def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress: bool = True) -> dict:
+    """IQL (TorchRL's ``IQLLoss``, :data:`IQL_SETTINGS`) for ``updates`` gradient steps on the
+    dataset built in ``directory`` (:func:`transitions`), then its deterministic policy scored on
+    the dataset noise's track (:data:`IQL_TRACK`) by the benchmark (``out/scorecard``); writes
+    ``out/iql.json`` (settings, CPU seconds, the scorecard's figures) and returns it."""
+    import time
+
+    import torch
+    from tensordict.nn import NormalParamExtractor, TensorDictModule
+    from torchrl.data import Bounded, LazyTensorStorage, ReplayBuffer
+    from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
+    from torchrl.objectives import IQLLoss, SoftUpdate, ValueEstimators
+
+    from billiards.bench import evaluate
+    from billiards.rl.agents import mlp
+
+    manifest, cfg = _manifest(directory), IQL_SETTINGS
+    torch.manual_seed(seed)
+    data = transitions(directory)
+    rb = ReplayBuffer(storage=LazyTensorStorage(data.shape[0]), batch_size=cfg["batch_size"])
+    rb.extend(data)
+    dim, ones = int(data["observation"].shape[-1]), torch.ones(4)
+    actor = ProbabilisticActor(
+        TensorDictModule(torch.nn.Sequential(mlp(dim, 8, cfg["hidden_sizes"]), NormalParamExtractor()),
+                         in_keys=["observation"], out_keys=["loc", "scale"]),
+        in_keys=["loc", "scale"], out_keys=["action"], spec=Bounded(-ones, ones, shape=(4,)),
+        distribution_class=TanhNormal, distribution_kwargs={"low": -ones, "high": ones})
+    q = ValueOperator(mlp(dim + 4, 1, cfg["hidden_sizes"]), in_keys=["observation", "action"])
+    v = ValueOperator(mlp(dim, 1, cfg["hidden_sizes"]), in_keys=["observation"])
+    loss = IQLLoss(actor, q, v, expectile=cfg["expectile"], temperature=cfg["temperature"])
+    loss.make_value_estimator(ValueEstimators.TD0, gamma=cfg["gamma"])
+    target = SoftUpdate(loss, tau=cfg["tau"])
+    optimizer = torch.optim.Adam(loss.parameters(), lr=cfg["lr"])
+    start, cpu = time.perf_counter(), time.process_time()
+    for i in range(updates):
+        losses = loss(rb.sample())
+        total = losses["loss_actor"] + losses["loss_qvalue"] + losses["loss_value"]
+        optimizer.zero_grad()
+        total.backward()
+        optimizer.step()
+        target.step()
+        if progress and (i + 1) % max(1, updates // 10) == 0:
+            shown = ", ".join(f"{k} {float(losses[f'loss_{k}'].detach()):.3f}" for k in ("actor", "qvalue", "value"))
+            print(f"iql {i + 1}/{updates}: {shown}", file=sys.stderr, flush=True)
+    train_cpu = time.process_time() - cpu
+    net = actor.module[0].module
+
+    def act(obs):
+        with torch.no_grad():
+            return torch.tanh(net(torch.as_tensor(obs, dtype=torch.float32))[0]).numpy()
+
+    track = IQL_TRACK[manifest["noise"]]
+    card = evaluate(act, track, out=out / "scorecard", progress=False,
+                    command=f"python -m billiards.offline iql {directory} --updates {updates} --seed {seed} --out {out}")
+    record = {"dataset_id": manifest["dataset_id"], "updates": updates, "seed": seed, "settings": cfg,
+              "train_cpu_seconds": round(train_cpu, 1), "train_wall_seconds": round(time.perf_counter() - start, 1),
+              "track": track, **{k: card[k] for k in ("success_per_shot", "points_per_inning", "foul_per_shot", "ms_per_decision")}}
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out / "iql.json", (json.dumps(record, indent=2) + "\n").encode())
+    return record
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m billiards.offline", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -227,7 +340,16 @@ def main(argv=None) -> int:
     b = sub.add_parser("build", help="write the Minari dataset of a generated folder and print its size and checksum")
     b.add_argument("out", type=Path)
     b.add_argument("--root", type=Path, default=None, help="Minari's datasets folder (default OUT/minari)")
+    q = sub.add_parser("iql", help="train TorchRL's IQL on a built dataset and score it on its noise's track")
+    q.add_argument("dataset_dir", type=Path, metavar="DIR", help="the dataset's folder (built)")
+    q.add_argument("--updates", type=int, default=20_000)
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--out", type=Path, required=True, help="where iql.json and the scorecard go")
     args = parser.parse_args(argv)
+    if args.command == "iql":
+        rec = train_iql(args.dataset_dir, args.updates, args.out, args.seed)
+        print(json.dumps({k: rec[k] for k in ("dataset_id", "updates", "train_cpu_seconds", "track", "success_per_shot")}))
+        return 0
     if args.command == "generate":
         generate(args.dataset, args.noise, args.shots, args.out, args.agent, progress=not args.no_progress)
         return 0

@@ -122,3 +122,24 @@ def test_the_datasets_seeds_are_far_from_every_tracks():
     for track in TRACKS.values():
         seeds = track.seeds()
         assert max(seeds) < offline.DATASET_SEED - 100_000 or min(seeds) > offline.DATASET_SEED + 10**6, track.name
+
+
+def test_the_iql_baseline_reads_the_recorded_transitions_trains_and_is_scored(sample, tmp_path):
+    """The offline baseline's replay rows are the dataset's transitions (read with
+    minari.load_dataset), and a few IQL updates give a policy the benchmark scores."""
+    import minari
+
+    data = offline.transitions(sample)
+    episodes = list(minari.load_dataset(offline.dataset_id("nearest", "none")).iterate_episodes())
+    assert data.shape[0] == offline.BLOCK * offline.SHOTS
+    first = episodes[0]
+    np.testing.assert_array_equal(data["observation"][: offline.SHOTS].numpy(), first.observations[:-1])
+    np.testing.assert_array_equal(data["next", "observation"][: offline.SHOTS].numpy(), first.observations[1:])
+    np.testing.assert_array_equal(data["next", "reward"][: offline.SHOTS, 0].numpy(), first.rewards)
+    np.testing.assert_array_equal(data["action"][: offline.SHOTS].numpy(), offline.normalized_actions(first.actions))
+    assert data["next", "done"][offline.SHOTS - 1].item() and not data["next", "done"][0].item()
+    record = offline.train_iql(sample, 20, tmp_path / "iql", progress=False)
+    assert record["track"] == "innings-v1" and record["updates"] == 20
+    assert 0.0 <= record["success_per_shot"]["mean"] <= 1.0 and record["success_per_shot"]["n_shots"] == 1000
+    assert json.loads((tmp_path / "iql" / "iql.json").read_text()) == record
+    assert (tmp_path / "iql" / "scorecard" / "scorecard.json").is_file()
