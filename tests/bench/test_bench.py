@@ -358,6 +358,8 @@ def committed_seeds() -> list[tuple[int, int]]:
         for path in sorted(top.rglob("*")):
             if path.suffix not in (".json", ".jsonl", ".yaml") or bench_dir in path.parents or not path.is_file():
                 continue
+            if (path.parent / "scorecard.json").is_file():  # a benchmark evaluation elsewhere (an offline baseline's)
+                continue
             text = path.read_text()
             if "seed" not in text:
                 continue
