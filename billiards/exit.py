@@ -38,7 +38,7 @@ from billiards import domain
 from billiards.physics import PhysicsParams
 from billiards.physics.config import params_from_config
 from billiards.rl.config import EXIT_SHOTS
-from billiards.rl.train import Run, StopRequests, finish, gradient_updates, periodic, session
+from billiards.rl.train import Run, StopRequests, after_updates, finish, gradient_updates, session
 from billiards.search.lookahead import h2_values
 from billiards.search.proposers import GeometricProposer, PolicyProposer
 from billiards.search.settings import H2Config
@@ -86,9 +86,9 @@ def labeller(run: Run, round_index: int, params: PhysicsParams):
                           name="exit", R=params.ball_radius)
 
 
-def play_block(run: Run, block: int, proposer, search: H2Config, params: PhysicsParams) -> tuple[TensorDict, int]:
+def play_block(run: Run, block: int, proposer, search: H2Config, params: PhysicsParams) -> tuple[TensorDict, int, int]:
     """Block ``block`` of the run (``algo.innings`` innings of :data:`EXIT_SHOTS` shots): every
-    table's observation and label, and how many of the played shots scored."""
+    table's observation and label, and how many of the played shots scored and how many fouled."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
     cfg, a = run.cfg, run.cfg.algo
@@ -96,17 +96,18 @@ def play_block(run: Run, block: int, proposer, search: H2Config, params: Physics
                                   normalize_actions=False)
     _, info = env.reset(seed=EXIT_SEED + 10_000_000 * int(cfg.seed) + block * a.innings)
     rng = np.random.default_rng([int(cfg.seed), block])
-    positions, observations, targets, scored = info["positions"], [], [], 0
+    positions, observations, targets, scored, fouls = info["positions"], [], [], 0, 0
     for _ in range(EXIT_SHOTS):
         raw, x, _ = nearest_best(positions, proposer, search, rng, params)
         observations.append(domain.observation(positions, bool(cfg.env.extra_features)))
         targets.append(x.astype(np.float32))
         _, _, _, _, info = env.step(raw)
         scored += int(info["score"].sum())
+        fouls += int(info["foul"].sum())
         positions = info["positions"]
     data = TensorDict({"observation": torch.from_numpy(np.concatenate(observations)),
                        "target": torch.from_numpy(np.concatenate(targets))}, batch_size=[a.innings * EXIT_SHOTS])
-    return data.to(run.device), scored
+    return data.to(run.device), scored, fouls
 
 
 def train_exit(run: Run) -> float:
@@ -118,28 +119,22 @@ def train_exit(run: Run) -> float:
     search = H2Config(budget=a.search_budget, k1=a.k1, m1=a.m1).settings()
     block_shots = a.innings * EXIT_SHOTS
     with session(run) as bar, StopRequests() as stop:
+        spent = False
         if state.owed >= 1:  # stopped amid a round's updates: the rest first, as the uninterrupted run made them
-            gradient_updates(run, stop, state.take_updates(0.0))
-            stop.stop_if_requested(run)
-        while not run.budget_spent():
+            spent = after_updates(run, bar, stop, gradient_updates(run, stop, state.take_updates(0.0)), 0)
+        while not (spent or run.budget_spent()):
             round_index = state.frames // a.shots_per_round
-            data, scored = play_block(run, state.frames // block_shots, labeller(run, round_index, params), search, params)
+            data, scored, fouls = play_block(run, state.frames // block_shots, labeller(run, round_index, params), search,
+                                             params)
             rb.extend(data)
             state.frames += block_shots
-            run.window.frames += block_shots
-            run.window.score += scored
-            run.window.reward += scored
-            bar.update(block_shots)
+            run.window.add_shots(block_shots, reward=scored, score=scored, foul=fouls)
+            complete = True
             if state.frames % a.shots_per_round == 0 or run.budget_spent():  # the round's end: learn
                 log.info("round %d: the search scored %.2f %% of the block's shots; %d labelled shots kept",
                          round_index, 100.0 * scored / block_shots, len(rb))
-                count = state.take_updates(a.epochs * len(rb) / a.batch_size)
-                if not gradient_updates(run, stop, count):
-                    stop.stop_if_requested(run)
-            periodic(run, bar)
-            stop.stop_if_requested(run)
-            if run.cpu_spent():
-                break
+                complete = gradient_updates(run, stop, state.take_updates(a.epochs * len(rb) / a.batch_size))
+            spent = after_updates(run, bar, stop, complete, block_shots)
         return finish(run, bar)
 
 

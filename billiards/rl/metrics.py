@@ -179,10 +179,16 @@ class Window:
     def add(self, data) -> None:
         """Adds a collected batch (its ``("next", "reward" / "score" / "foul")``)."""
         nxt = data.get("next")
-        self.frames += data.numel()
-        self.reward += float(nxt.get("reward").sum())
-        self.score += float(nxt.get("score").sum())
-        self.foul += float(nxt.get("foul").sum())
+        self.add_shots(data.numel(), reward=float(nxt.get("reward").sum()), score=float(nxt.get("score").sum()),
+                       foul=float(nxt.get("foul").sum()))
+
+    def add_shots(self, frames: int, *, reward: float, score: float, foul: float) -> None:
+        """Adds ``frames`` shots with these sums of reward, score and fouls (a loop without a
+        collector: expert iteration's searched shots)."""
+        self.frames += frames
+        self.reward += reward
+        self.score += score
+        self.foul += foul
 
     def ups(self, n_updates: int) -> float:
         return (n_updates - self.updates0) / max(time.perf_counter() - self.t0, 1e-9)

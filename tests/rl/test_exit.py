@@ -109,6 +109,9 @@ def test_an_exit_run_trains_stops_resumes_bit_for_bit_and_exports_a_policy_that_
     assert not (stopped / "eval.json").exists()
     ok(train(tmp_path, f"resume={stopped}"))
     assert (stopped / "eval.json").read_bytes() == (whole / "eval.json").read_bytes()
+    untimed = lambda d: [{k: v for k, v in json.loads(line).items() if not k.endswith("_time")}
+                         for line in (d / "eval_history.jsonl").read_text().splitlines()]
+    assert untimed(stopped) == untimed(whole)  # every evaluation due, at its step, the one at the stop too
     a, b = load_checkpoint(whole), load_checkpoint(stopped)
     for key in ("agent", "agent_extra", "buffer", "counters"):
         if key == "counters":
