@@ -458,7 +458,6 @@ class PPOAgent(_OneOptimizer):
         return out.detach()
 
 
-
 class ExItAgent(_OneOptimizer):
     """The policy of expert iteration (:mod:`billiards.exit`): the tanh-Gaussian actor of SAC and
     PPO (so its exported files play, propose and evaluate like theirs), trained by maximum

@@ -323,15 +323,13 @@ class RunState:
 
 
 def _most_owed(config: Any) -> float:
-    """The most gradient updates a checkpoint may owe: one batch's (utd x the batch's frames; a
-    run stopped amid a batch's updates owes the rest; expert iteration: one round's), plus the
-    fraction carried over."""
+    """The most gradient updates a checkpoint may owe: what its algorithm's schema says a run
+    stopped amid its updates may owe (:meth:`~billiards.rl.config.AlgoConfig.most_owed`: one
+    collector batch's off-policy, one round's for expert iteration), plus the fraction carried over."""
     try:
         algo, env = config["algo"], config["env"]
-        if algo.get("name") == "exit":  # a round's passes over the labelled shots kept
-            return float(algo["epochs"]) * int(algo["buffer_size"]) / int(algo["batch_size"]) + 1.0
-        batch = max(int(algo.get("frames_per_batch") or 0), int(env.get("num_envs") or 1))
-        return float(algo.get("utd", 0.0)) * batch + 1.0
+        schema = ALGO_SCHEMAS.get(algo.get("name"))
+        return (0.0 if schema is None else schema.most_owed(algo, env)) + 1.0
     except (KeyError, TypeError, ValueError, AttributeError, OverflowError):
         return 1.0
 

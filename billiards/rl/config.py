@@ -123,6 +123,12 @@ class AlgoConfig:
     KEEPS_REPLAY: ClassVar[bool] = False  # a replay buffer, held in the checkpoints
 
     @classmethod
+    def most_owed(cls, algo, env) -> float:
+        """The most gradient updates a run stopped amid its updates may owe (``algo``, ``env``: a
+        checkpoint's plain config nodes; what a checkpoint's counters are checked against): none."""
+        return 0.0
+
+    @classmethod
     def errors(cls, a) -> list[str]:
         return [*_need(0 < len(a.hidden_sizes) <= MAX_LAYERS and all(h > 0 for h in a.hidden_sizes),
                        f"algo.hidden_sizes must be a non-empty list of at most {MAX_LAYERS} positive widths, "
@@ -154,6 +160,11 @@ class OffPolicyConfig(AlgoConfig):
         "buffer_size": (10**7, "replay rows, allocated at the first batch"),
         "frames_per_batch": (2**20, "frames per collector batch"),
     }
+
+    @classmethod
+    def most_owed(cls, algo, env) -> float:
+        """One collector batch's updates: utd x the batch's frames."""
+        return float(algo.get("utd", 0.0)) * max(int(algo.get("frames_per_batch") or 0), int(env.get("num_envs") or 1))
 
     @classmethod
     def errors(cls, a) -> list[str]:
@@ -275,6 +286,11 @@ class ExItConfig(AlgoConfig):
         "search_budget": (10**6, "simulations per labelled shot"),
         "k1": (10**6, "candidates per shot"), "m1": (10**6, "expanded candidates per shot"),
     }
+
+    @classmethod
+    def most_owed(cls, algo, env) -> float:
+        """One round's updates: epochs passes over the labelled shots kept."""
+        return float(algo["epochs"]) * int(algo["buffer_size"]) / int(algo["batch_size"])
 
     @classmethod
     def errors(cls, a) -> list[str]:
