@@ -32,6 +32,7 @@ def pytest_configure(config):
 
         warm_up(log=lambda message: None)
 
+
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED_BASE = REPO / "results" / "policies" / "base" / "seed0.pt"
 
@@ -114,3 +115,91 @@ def refusal(app: str, *overrides: str, cwd: Path | None = None) -> str:
         except SystemExit as err:
             return str(err.code)
     raise AssertionError(f"{app} accepts {' '.join(overrides)}")
+
+
+def app_here(script: Path | str, *args: str, cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess:
+    """``python <script> <args>`` (``python -m <script> <args>`` for a module's name) run in this
+    process, as the command line would run it: the entry point's own ``__main__`` block (its
+    command-line guard, then Hydra: composition, the validating callback, the run directory and
+    its records, logging), with ``cwd`` as the working directory and ``env`` set in
+    ``os.environ`` for the run. Returns what ``subprocess.run``
+    would: the exit status (0, or the code the app exits with; 1 for an exception, as Hydra
+    reports one) and everything written to stdout and stderr.
+
+    For the tests where the process is not the point (a run, a resume, a refusal): it saves the
+    4-6 s a fresh interpreter spends importing torch, TorchRL and Hydra. What a process holds is
+    put back afterwards (working directory, environment, argv, logging, torch's and numba's
+    thread counts, torch's global generator, signal handlers, Hydra's global state and the
+    composition guard the entry point puts on Hydra's config loader); a signal,
+    a kill, a multirun's launcher and a fresh import stay the subprocess tests'."""
+    import contextlib
+    import io
+    import logging
+    import os
+    import runpy
+    import signal
+    import sys
+    import warnings
+
+    import numba
+    import torch
+    from hydra._internal.config_loader_impl import ConfigLoaderImpl
+    from hydra.core.global_hydra import GlobalHydra
+
+    module = str(script) if not str(script).endswith(".py") else None  # python -m <module>
+    script = Path(script)
+    if module is None and not script.is_absolute():
+        script = REPO / script
+    out, err = io.StringIO(), io.StringIO()
+    root = logging.getLogger()
+    saved_logging = (list(root.handlers), root.level, dict(logging.root.manager.loggerDict))
+    saved = (os.getcwd(), dict(os.environ), list(sys.argv), torch.get_num_threads(), numba.get_num_threads(),
+             torch.get_rng_state(), {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)},
+             ConfigLoaderImpl.load_configuration)  # the entry point's guard wraps Hydra's loader (app_config)
+    code: int = 0
+    GlobalHydra.instance().clear()
+    try:
+        os.chdir(cwd)
+        os.environ.update(env or {})
+        sys.argv = [str(script), *args]
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                if module is not None:
+                    with warnings.catch_warnings():  # the module was imported before: runpy runs it afresh as __main__
+                        warnings.filterwarnings("ignore", "'.*' found in sys.modules", RuntimeWarning)
+                        runpy.run_module(module, run_name="__main__", alter_sys=True)
+                else:
+                    runpy.run_path(str(script), run_name="__main__")
+            except SystemExit as stop:  # what the interpreter makes of sys.exit(x)
+                if stop.code is None:
+                    code = 0
+                elif isinstance(stop.code, int):
+                    code = stop.code
+                else:
+                    print(stop.code, file=sys.stderr)
+                    code = 1
+    finally:
+        GlobalHydra.instance().clear()
+        cwd_was, environ, argv, torch_threads, numba_threads, rng, handlers, load_configuration = saved
+        ConfigLoaderImpl.load_configuration = load_configuration
+        os.chdir(cwd_was)
+        os.environ.clear()
+        os.environ.update(environ)
+        sys.argv = argv
+        torch.set_num_threads(torch_threads)
+        numba.set_num_threads(numba_threads)
+        torch.set_rng_state(rng)
+        for num, handler in handlers.items():
+            signal.signal(num, handler)
+        for handler in root.handlers:  # what Hydra's logging opened (the run's .log file)
+            if handler not in saved_logging[0]:
+                handler.close()
+        root.handlers[:] = saved_logging[0]
+        root.setLevel(saved_logging[1])
+        for name, logger in logging.root.manager.loggerDict.items():
+            if isinstance(logger, logging.Logger) and name not in saved_logging[2]:
+                logger.handlers.clear()
+            elif isinstance(logger, logging.Logger):
+                logger.disabled = False
+    command = ["-m", module] if module is not None else [str(script)]
+    return subprocess.CompletedProcess([sys.executable, *command, *args], code, out.getvalue(), err.getvalue())

@@ -130,9 +130,10 @@ def test_a_bad_match_config_fails_at_once_and_writes_nothing(tmp_path, args, mes
 @pytest.mark.slow
 def test_the_match_app_plays_a_league_resumes_it_with_its_own_settings_and_draws_a_match(tmp_path):
     run = tmp_path / "run"
-    base = [sys.executable, str(REPO / "match.py"), "progress=false"]
-    first = subprocess.run([*base, "players=[greedy,random]", "matches=1", "target=1", f"hydra.run.dir={run}"], cwd=tmp_path,
-                           capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    first = app_here("match.py", "progress=false", "players=[greedy,random]", "matches=1", "target=1", f"hydra.run.dir={run}",
+                     cwd=tmp_path)
     assert first.returncode == 0, first.stderr[-2000:]
     league = json.loads((run / "league.json").read_text())
     assert league["command"].endswith(f"players=[greedy,random] matches=1 target=1 hydra.run.dir={run}")
@@ -140,8 +141,7 @@ def test_the_match_app_plays_a_league_resumes_it_with_its_own_settings_and_draws
     assert (run / "match.gif").read_bytes()[:6] == b"GIF89a"
     lines = (run / MATCHES_FILE).read_text().splitlines()
     (run / MATCHES_FILE).write_text(lines[0] + "\n")  # the second match lost
-    again = subprocess.run([*base, f"resume={run}", "target=5", "picture=false"], cwd=tmp_path, capture_output=True, text=True,
-                           timeout=900)
+    again = app_here("match.py", "progress=false", f"resume={run}", "target=5", "picture=false", cwd=tmp_path)
     assert again.returncode == 0, again.stderr[-2000:]
     resumed = json.loads((run / "league.json").read_text())
     assert resumed["target"] == 1 and resumed["command"] == league["command"]  # the league's own settings

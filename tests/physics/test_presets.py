@@ -222,11 +222,11 @@ def test_physics_reaches_the_envs_the_verifier_and_the_rm_data(tmp_path):
 
 @pytest.mark.slow
 def test_search_app_plays_the_chosen_table(tmp_path):
-    proc = subprocess.run(
-        [sys.executable, "search.py", "physics=international", "protocol=p1", "protocol.n_innings=2", "protocol.shots=2",
-         "search.budget=40", "search.k1=20", "search.m1=2", "progress=false", "picture=false", f"hydra.run.dir={tmp_path}"],
-        cwd=REPO, capture_output=True, text=True, timeout=900,
-    )
+    from conftest import app_here
+
+    proc = app_here("search.py", "physics=international", "protocol=p1", "protocol.n_innings=2", "protocol.shots=2",
+                    "search.budget=40", "search.k1=20", "search.m1=2", "progress=false", "picture=false",
+                    f"hydra.run.dir={tmp_path}", cwd=REPO)
     assert proc.returncode == 0, proc.stderr[-3000:]
     results = json.loads((tmp_path / "results.json").read_text())
     assert results["physics"] == "international" and results["config"]["physics"]["preset"] == "international"

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -147,12 +145,11 @@ def test_training_with_rm_shaping_evaluates_the_true_score(tmp_path):
     torch.manual_seed(0)
     model_path = save_model(tmp_path / "rm.pt", RewardModel(hidden=(8,)))
     run_dir = tmp_path / "run"
-    proc = subprocess.run(
-        [sys.executable, str(REPO / "train.py"), "shaping=rm", f"shaping.rm_model={model_path}", "shaping.rm=2.0",
-         "budget=smoke", "budget.total_steps=1024", "budget.eval_every=0", "budget.checkpoint_every=0",
-         f"hydra.run.dir={run_dir}", "progress=false"],
-        cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=900,
-    )
+    from conftest import app_here
+
+    proc = app_here("train.py", "shaping=rm", f"shaping.rm_model={model_path}", "shaping.rm=2.0", "budget=smoke",
+                    "budget.total_steps=1024", "budget.eval_every=0", "budget.checkpoint_every=0", f"hydra.run.dir={run_dir}",
+                    "progress=false", cwd=tmp_path, env=ENV)
     assert proc.returncode == 0, proc.stderr[-4000:]
     # training rewards carry the bonus (every shot gets 2 * V_rm > 0) ...
     import csv

@@ -119,8 +119,9 @@ def test_an_exit_run_trains_stops_resumes_bit_for_bit_and_exports_a_policy_that_
         assert same(a[key], b[key]), key
 
     out = tmp_path / "policies"
-    ok(subprocess.run([sys.executable, "-m", "billiards.rl.policy", "export", str(whole), "--out", str(out)],
-                      cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=900))
+    from conftest import app_here
+
+    ok(app_here("billiards.rl.policy", "export", str(whole), "--out", str(out), cwd=tmp_path, env=ENV))
     from billiards.bench.agents import resolve_agent
     from billiards.bench.tracks import get_track
     from billiards.rl.policy import policy_file_error

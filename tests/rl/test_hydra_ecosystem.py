@@ -59,8 +59,14 @@ def compose_cfg(*overrides: str, hydra: bool = False):
 
 
 def train(cwd: Path, *overrides: str, timeout: float = 900) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, TRAIN, *overrides], cwd=cwd, env=ENV, capture_output=True, text=True,
-                          timeout=timeout)
+    """``python train.py <overrides>`` in ``cwd``: a multirun (its launcher's and sweeper's
+    processes) in a process, a single run in this one (conftest.app_here)."""
+    if "-m" in overrides:
+        return subprocess.run([sys.executable, TRAIN, *overrides], cwd=cwd, env=ENV, capture_output=True, text=True,
+                              timeout=timeout)
+    from conftest import app_here
+
+    return app_here(TRAIN, *overrides, cwd=cwd, env=ENV)
 
 
 def ok(proc: subprocess.CompletedProcess) -> subprocess.CompletedProcess:

@@ -10,9 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -27,13 +24,11 @@ def test_sac_on_aim_features_beats_the_random_policy(tmp_path):
     from billiards.evaluation import EvalResult, evaluate
 
     run_dir = tmp_path / "run"
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "WANDB_MODE": "offline", "HYDRA_FULL_ERROR": "0"}
-    proc = subprocess.run(
-        [sys.executable, str(REPO / "train.py"), "algo=sac", "env=aim_features", "budget=smoke",
-         f"budget.total_steps={FRAMES}", "budget.eval_every=0", "budget.checkpoint_every=0",
-         "budget.final_eval_innings=100", "seed=0", "threads=1", "progress=false", f"hydra.run.dir={run_dir}"],
-        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600,
-    )
+    from conftest import app_here
+
+    proc = app_here("train.py", "algo=sac", "env=aim_features", "budget=smoke", f"budget.total_steps={FRAMES}",
+                    "budget.eval_every=0", "budget.checkpoint_every=0", "budget.final_eval_innings=100", "seed=0", "threads=1",
+                    "progress=false", f"hydra.run.dir={run_dir}", cwd=tmp_path, env={"WANDB_MODE": "offline"})
     assert proc.returncode == 0, proc.stderr[-5000:]
     sac = EvalResult.from_json(run_dir / "eval.json")
     summary = json.loads((run_dir / "summary.json").read_text())

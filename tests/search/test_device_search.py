@@ -49,11 +49,10 @@ def test_a_gpu_proposer_needs_the_torch_implementation_and_a_gpu():
 
 
 def _search(tmp_path, *overrides: str, timeout: float = 900):
-    import subprocess
-    import sys
+    """``python search.py <overrides>`` in ``tmp_path``, in this process (conftest.app_here)."""
+    from conftest import app_here
 
-    return subprocess.run([sys.executable, str(ROOT / "search.py"), *overrides], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=timeout)
+    return app_here("search.py", *overrides, cwd=tmp_path)
 
 
 @pytest.mark.slow

@@ -138,19 +138,18 @@ def test_fit_learns_to_rank_a_learnable_target():
 @pytest.mark.slow
 def test_training_command_writes_a_ranker_the_search_app_plays(tmp_path):
     out = tmp_path / "r.pt"
-    proc = subprocess.run([sys.executable, "-m", "billiards.search.ranker", "--out", str(out), "--racks", "40",
-                           "--candidates", "50", "--test-racks", "10", "--epochs", "1", "--hidden", "16"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    proc = app_here("billiards.search.ranker", "--out", str(out), "--racks", "40", "--candidates", "50", "--test-racks", "10",
+                    "--epochs", "1", "--hidden", "16", cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     ranker = ShotRanker.load(out)
     assert ranker.meta["noise_preset"] == "fastfiz" and ranker.params == K
     assert ranker.meta["command"].startswith("python -m billiards.search.ranker --out")
     assert set(ranker.meta["held_out"]) >= {"best_of_top_ranked", "best_of_first_drawn"}
-    proc = subprocess.run([sys.executable, str(ROOT / "search.py"), "noise=fastfiz", "proposer=ranked",
-                           f"proposer.ranker={out}", "proposer.pool=200", "protocol=p1", "protocol.n_innings=2",
-                           "protocol.shots=3", "search.budget=60", "search.k1=40", "search.wave=20", "threads=1",
-                           "progress=false", "picture=false", f"hydra.run.dir={tmp_path / 'run'}"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    proc = app_here("search.py", "noise=fastfiz", "proposer=ranked", f"proposer.ranker={out}", "proposer.pool=200", "protocol=p1",
+                    "protocol.n_innings=2", "protocol.shots=3", "search.budget=60", "search.k1=40", "search.wave=20", "threads=1",
+                    "progress=false", "picture=false", f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     import json
 

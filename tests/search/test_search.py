@@ -258,8 +258,13 @@ def test_search_collector_plays_exactly_the_verified_shot(search, proposer, base
 
 
 def run_search(*args, cwd=ROOT):
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "search.py", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
+    """``python search.py <args>`` in ``cwd``, in this process (conftest.app_here); a multirun in a process."""
+    if "-m" in args:
+        env = dict(os.environ, PYTHONPATH=str(ROOT))
+        return subprocess.run([sys.executable, "search.py", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    return app_here("search.py", *args, cwd=cwd)
 
 
 @pytest.mark.slow
@@ -323,9 +328,9 @@ def test_policy_proposer_from_a_training_run(tmp_path):
     from billiards.search.proposers import load_policy_proposer
 
     run = tmp_path / "run"
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, "train.py", "budget=smoke", "env=aim_features", "progress=false",
-                           f"hydra.run.dir={run}"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    proc = app_here("train.py", "budget=smoke", "env=aim_features", "progress=false", f"hydra.run.dir={run}", cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:]
     prop = load_policy_proposer([run], name="smoke")
     assert prop.constrain_aim and prop.extra_features
