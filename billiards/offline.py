@@ -67,34 +67,33 @@ def track_for(noise: str):
 
 
 def play_block(agent, track, first: int, n: int) -> dict[str, np.ndarray]:
-    """Innings ``first .. first + n - 1``: observations (n, T+1, D), actions (n, T, 4), rewards,
-    terminations, truncations (n, T) and the env's info keys :data:`INFO` (n, T+1, ...; the
-    entry before the first shot holds the rack and zeros)."""
-    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+    """Innings ``first .. first + n - 1``, played by the benchmark's own loop
+    (:func:`billiards.bench.run.play_innings`): observations (n, T+1, D), actions (n, T, 4),
+    rewards, terminations, truncations (n, T) and the env's info keys :data:`INFO` (n, T+1, ...;
+    the entry before the first shot holds the rack and zeros)."""
+    from billiards.bench.run import play_innings
 
-    env = Billiards4BallVectorEnv(n, start="random", on_miss="continue", max_shots=track.shots, physics=track.physics,
-                                  noise=track.noise, normalize_actions=False)
-    obs, info = env.reset(seed=track.seed + first)
-    agent.reset(track.seed + first)
-    out = {"observations": [obs], "actions": [], "rewards": [], "terminations": [], "truncations": []}
-    rack = info["positions"]
+    out = {"observations": [], "actions": [], "rewards": [], "terminations": [], "truncations": []}
     infos = {k: [] for k in INFO}
-    for t in range(track.shots):
-        raw = np.asarray(agent.act(obs, info["positions"].copy(), None), dtype=np.float64)
-        obs, reward, term, trunc, info = env.step(raw)
+    racks = []
+
+    def record(t, before, obs, raw, step):
+        next_obs, reward, term, trunc, info = step
         if t < track.shots - 1 and (term.any() or trunc.any()):
             raise RuntimeError("an inning ended before its last shot: the protocol continues on a miss")
-        out["observations"].append(obs)
-        out["actions"].append(raw)
-        out["rewards"].append(reward)
-        out["terminations"].append(term)
-        out["truncations"].append(trunc)
+        if t == 0:
+            out["observations"].append(obs)
+            racks.append(before)
+        for key, value in zip(("observations", "actions", "rewards", "terminations", "truncations"),
+                              (next_obs, np.asarray(raw, dtype=np.float64), reward, term, trunc)):
+            out[key].append(value)
         for k in INFO:
             infos[k].append(info[k])
-    env.close()
+
+    play_innings(agent, track, first, n, on_step=record)
     arrays = {k: np.stack(v, axis=1) for k, v in out.items()}
     for k, v in infos.items():  # row 0, before the first shot: the rack, zeros for the rest
-        arrays[f"info/{k}"] = np.stack([rack if k == "positions" else np.zeros_like(v[0]), *v], axis=1)
+        arrays[f"info/{k}"] = np.stack([racks[0] if k == "positions" else np.zeros_like(v[0]), *v], axis=1)
     return arrays
 
 

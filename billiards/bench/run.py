@@ -71,12 +71,15 @@ def _levels(env) -> np.ndarray | None:
     return None if env._levels is None else env._levels.copy()
 
 
-def play_innings(agent: Agent, track: Track, first: int, n: int, on_shot=None) -> dict:
+def play_innings(agent: Agent, track: Track, first: int, n: int, on_shot=None, on_step=None) -> dict:
     """Innings ``first .. first + n - 1`` of an innings or P1 track, side by side: inning i's
     rack and noise from seed ``track.seed + i`` (each inning depends only on its seed and the
     agent). ``on_shot(row, shot, before, info, level)`` after every shot of every inning (a replay
     records them): the inning's row in the block, the shot's index, its table, the env's info
-    rows and the level it played at."""
+    rows and the level it played at. ``on_step(shot, before, obs, raw, step)`` after every step
+    of the whole block (a dataset records them): the tables and observations before the shot,
+    the raw shots played and the env's ``step`` return (observation, reward, terminated,
+    truncated, info)."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
     env = Billiards4BallVectorEnv(n, start="random", on_miss="continue", max_shots=track.shots, physics=track.physics,
@@ -90,7 +93,10 @@ def play_innings(agent: Agent, track: Track, first: int, n: int, on_shot=None) -
     for t in range(track.shots):
         levels = _levels(env)
         raw = clock.act(obs, tables.copy(), levels if track.tells_level else None)
-        obs, _, _, _, info = env.step(raw)
+        step = env.step(raw)
+        if on_step is not None:
+            on_step(t, tables, obs, raw, step)
+        obs, _, _, _, info = step
         score[:, t], foul[:, t] = info["score"], info["foul"]
         if on_shot is not None:
             for i in range(n):
