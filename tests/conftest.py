@@ -128,10 +128,12 @@ def app_here(script: Path | str, *args: str, cwd: Path, env: dict | None = None)
 
     For the tests where the process is not the point (a run, a resume, a refusal): it saves the
     4-6 s a fresh interpreter spends importing torch, TorchRL and Hydra. What a process holds is
-    put back afterwards (working directory, environment, argv, logging, torch's and numba's
-    thread counts, torch's global generator, signal handlers, Hydra's global state and the
-    composition guard the entry point puts on Hydra's config loader); a signal,
-    a kill, a multirun's launcher and a fresh import stay the subprocess tests'."""
+    put back afterwards (working directory, environment, argv, every logger's handlers, level
+    and state, torch's and numba's thread counts, torch's global generator, signal handlers,
+    Hydra's global state and the composition guard the entry point puts on Hydra's config
+    loader). A multirun (its launcher's processes) and wandb (a service process of its own) get
+    a process here, as a user's would; a signal, a kill and a fresh import stay the subprocess
+    tests'."""
     import contextlib
     import io
     import logging
@@ -150,9 +152,13 @@ def app_here(script: Path | str, *args: str, cwd: Path, env: dict | None = None)
     script = Path(script)
     if module is None and not script.is_absolute():
         script = REPO / script
+    command = ["-m", module] if module is not None else [str(script)]
+    if {"-m", "--multirun", "logger=wandb"} & set(args):
+        return subprocess.run([sys.executable, *command, *args], cwd=cwd, capture_output=True, text=True, timeout=900,
+                              env={**os.environ, "PYTHONPATH": str(REPO), **(env or {})})
     out, err = io.StringIO(), io.StringIO()
-    root = logging.getLogger()
-    saved_logging = (list(root.handlers), root.level, dict(logging.root.manager.loggerDict))
+    loggers = [logging.getLogger(), *(x for x in logging.root.manager.loggerDict.values() if isinstance(x, logging.Logger))]
+    saved_logging = {logger: (list(logger.handlers), logger.level, logger.disabled, logger.propagate) for logger in loggers}
     saved = (os.getcwd(), dict(os.environ), list(sys.argv), torch.get_num_threads(), numba.get_num_threads(),
              torch.get_rng_state(), {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)},
              ConfigLoaderImpl.load_configuration)  # the entry point's guard wraps Hydra's loader (app_config)
@@ -191,15 +197,14 @@ def app_here(script: Path | str, *args: str, cwd: Path, env: dict | None = None)
         torch.set_rng_state(rng)
         for num, handler in handlers.items():
             signal.signal(num, handler)
-        for handler in root.handlers:  # what Hydra's logging opened (the run's .log file)
-            if handler not in saved_logging[0]:
-                handler.close()
-        root.handlers[:] = saved_logging[0]
-        root.setLevel(saved_logging[1])
-        for name, logger in logging.root.manager.loggerDict.items():
-            if isinstance(logger, logging.Logger) and name not in saved_logging[2]:
-                logger.handlers.clear()
-            elif isinstance(logger, logging.Logger):
-                logger.disabled = False
-    command = ["-m", module] if module is not None else [str(script)]
+        kept = {h for handlers, *_ in saved_logging.values() for h in handlers}
+        for logger in [logging.getLogger(), *logging.root.manager.loggerDict.values()]:
+            if not isinstance(logger, logging.Logger):
+                continue
+            for handler in logger.handlers:  # what Hydra's logging opened (the run's .log file)
+                if handler not in kept:
+                    handler.close()
+            handlers, level, disabled, propagate = saved_logging.get(logger, ([], logging.NOTSET, False, True))
+            logger.handlers[:], logger.disabled, logger.propagate = handlers, disabled, propagate
+            logger.setLevel(level)
     return subprocess.CompletedProcess([sys.executable, *command, *args], code, out.getvalue(), err.getvalue())

@@ -14,7 +14,6 @@ import importlib.util
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -59,11 +58,8 @@ def compose_cfg(*overrides: str, hydra: bool = False):
 
 
 def train(cwd: Path, *overrides: str, timeout: float = 900) -> subprocess.CompletedProcess:
-    """``python train.py <overrides>`` in ``cwd``: a multirun (its launcher's and sweeper's
-    processes) in a process, a single run in this one (conftest.app_here)."""
-    if "-m" in overrides:
-        return subprocess.run([sys.executable, TRAIN, *overrides], cwd=cwd, env=ENV, capture_output=True, text=True,
-                              timeout=timeout)
+    """``python train.py <overrides>`` in ``cwd`` (conftest.app_here: in this process, a multirun
+    in a process of its own)."""
     from conftest import app_here
 
     return app_here(TRAIN, *overrides, cwd=cwd, env=ENV)

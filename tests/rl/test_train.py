@@ -38,12 +38,8 @@ ENV = {
 
 
 def train(tmp_path: Path, *overrides: str, timeout: float = 900) -> subprocess.CompletedProcess:
-    """``python train.py <overrides> progress=false`` in ``tmp_path``: in this process (the entry
-    point as the command line runs it, see conftest.app_here), except a multirun (its launcher's
-    processes) and wandb (a service process of its own), which get a process as a user's would."""
-    if "-m" in overrides or "logger=wandb" in overrides:
-        return subprocess.run([sys.executable, TRAIN, *overrides, "progress=false"],
-                              cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=timeout)
+    """``python train.py <overrides> progress=false`` in ``tmp_path`` (conftest.app_here: in this
+    process, a multirun or wandb in a process of its own)."""
     from conftest import app_here
 
     return app_here(TRAIN, *overrides, "progress=false", cwd=tmp_path, env=ENV)

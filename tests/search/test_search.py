@@ -2,9 +2,6 @@
 
 import json
 import re
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -258,10 +255,7 @@ def test_search_collector_plays_exactly_the_verified_shot(search, proposer, base
 
 
 def run_search(*args, cwd=ROOT):
-    """``python search.py <args>`` in ``cwd``, in this process (conftest.app_here); a multirun in a process."""
-    if "-m" in args:
-        env = dict(os.environ, PYTHONPATH=str(ROOT))
-        return subprocess.run([sys.executable, "search.py", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
+    """``python search.py <args>`` in ``cwd`` (conftest.app_here: in this process, a multirun in a process of its own)."""
     from conftest import app_here
 
     return app_here("search.py", *args, cwd=cwd)
