@@ -166,7 +166,14 @@ def app_here(script: Path | str, *args: str, cwd: Path, env: dict | None = None)
     GlobalHydra.instance().clear()
     try:
         os.chdir(cwd)
-        os.environ.update(env or {})
+        env = dict(env or {})
+        # numba reads NUMBA_NUM_THREADS again at every compilation and refuses a value other than
+        # the one its pool started with: the process's pool keeps its size, the run gets the
+        # thread count it asked for through numba.set_num_threads
+        numba_wanted = env.pop("NUMBA_NUM_THREADS", None)
+        os.environ.update(env)
+        if numba_wanted is not None:
+            numba.set_num_threads(min(int(numba_wanted), numba.config.NUMBA_NUM_THREADS))
         sys.argv = [str(script), *args]
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             try:
