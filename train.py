@@ -15,6 +15,7 @@ from omegaconf import DictConfig
 
 from billiards.app_config import guard_command_line
 import billiards.rl.config  # noqa: F401  (registers the schema and resolvers before Hydra composes)
+import billiards.search.config  # noqa: F401  (registers the check of expert iteration's labelling search)
 
 
 class JobFailed(RuntimeError):

@@ -12,7 +12,15 @@ The proposer is the geometric one in round 0 and the policy itself from round 1 
 (:class:`~billiards.search.proposers.PolicyProposer`: its deterministic shot, then draws from
 its distribution): the label is the search's improvement of the policy's own shot, the nearest
 one that does best, which keeps the targets one function of the table where plain imitation of
-the search's choice averages over its many equally good shots. After the round's last block,
+the search's choice averages over its many equally good shots.
+
+Under execution noise (``noise=fastfiz`` or ``fastfiz_x5``) the labeller is what ``search.py``
+plays under that noise (:func:`noisy_search`: the position-aware robust search with its table
+value, ``algo.search_budget`` simulations), its proposer in round 0 the preset's shot ranker;
+the label is the search's chosen shot (:func:`noisy_labels`), played with the noise. With
+``algo.policy_share`` < 1 the policy proposes that share of the candidates from round 1 on and
+round 0's proposer the rest (:class:`~billiards.search.proposers.MixedProposer`), so the
+labeller never loses the candidates it started from. After the round's last block,
 ``algo.epochs`` passes of maximum likelihood (:class:`~billiards.rl.agents.ExItAgent`) over the
 last ``algo.buffer_size`` labelled shots, continuing from the round before.
 
@@ -37,10 +45,11 @@ from tensordict import TensorDict
 from billiards import domain
 from billiards.physics import PhysicsParams
 from billiards.physics.config import params_from_config
+from billiards.physics.noise import noise_from_config
 from billiards.rl.config import EXIT_SHOTS
 from billiards.rl.train import Run, StopRequests, after_updates, finish, gradient_updates, session
 from billiards.search.lookahead import h2_values
-from billiards.search.proposers import GeometricProposer, PolicyProposer
+from billiards.search.proposers import GeometricProposer, MixedProposer, PolicyProposer
 from billiards.search.settings import H2Config
 
 log = logging.getLogger("billiards.exit")
@@ -78,27 +87,60 @@ def nearest_best(positions: np.ndarray, proposer, cfg: H2Config, rng: np.random.
     return v.candidates[rows[:, 0], pick], x[rows[:, 0], pick], v.n_sims
 
 
-def labeller(run: Run, round_index: int, params: PhysicsParams):
-    """The proposer of round ``round_index``: the geometric one in round 0, then the policy."""
+def labeller(run: Run, round_index: int, params: PhysicsParams, first=None):
+    """The proposer of round ``round_index``: ``first`` in round 0 (default: the geometric
+    proposer), then the policy (built anew: the batched proposer copies the weights), with
+    ``algo.policy_share`` < 1 sharing the candidates with ``first`` (the policy's first)."""
+    first = first if first is not None else GeometricProposer(R=params.ball_radius)
     if round_index == 0:
-        return GeometricProposer(R=params.ball_radius)
-    return PolicyProposer([run.agent.policy], constrain_aim=True, extra_features=bool(run.cfg.env.extra_features),
-                          name="exit", R=params.ball_radius)
+        return first
+    policy = PolicyProposer([run.agent.policy], constrain_aim=True, extra_features=bool(run.cfg.env.extra_features),
+                            name="exit", R=params.ball_radius)
+    share = float(run.cfg.algo.policy_share)
+    return policy if share >= 1.0 else MixedProposer(policy, first, share, name="exit")
 
 
-def play_block(run: Run, block: int, proposer, search: H2Config, params: PhysicsParams) -> tuple[TensorDict, int, int]:
+def noisy_search(run: Run, params: PhysicsParams, noise):
+    """The labeller under execution noise: what ``python search.py noise=<the run's preset>
+    search.budget=<algo.search_budget>`` plays (the position-aware robust search, its value and
+    settings: docs/search.md), over the policy from round 1 on; round 0's proposer is that
+    default's own (the preset's shot ranker). Returns ``(actor, round 0's proposer)``."""
+    from billiards.search.config import labelling_search
+    from billiards.search.run import make_actor, make_proposer
+
+    scfg = labelling_search(run.cfg)
+    first = make_proposer(scfg.proposer, params)
+    return make_actor(scfg, first, params, noise=noise), first
+
+
+def noisy_labels(positions: np.ndarray, actor, proposer, rng: np.random.Generator, params: PhysicsParams):
+    """The noisy search's labels for tables (S, 4, 2): its chosen shot (the best by the
+    statistic over noisy replays, no nearest-best choice: the replays rarely tie). Returns
+    ``(raw shots (S, 4), targets (S, 4), simulations)``."""
+    actor.proposer, actor.rng = proposer, rng
+    result = actor.search(positions)
+    return result.actions, normalized_target(positions, result.actions, params.ball_radius), result.n_sims
+
+
+def play_block(run: Run, block: int, proposer, search, params: PhysicsParams, noise=None) -> tuple[TensorDict, int, int]:
     """Block ``block`` of the run (``algo.innings`` innings of :data:`EXIT_SHOTS` shots): every
-    table's observation and label, and how many of the played shots scored and how many fouled."""
+    table's observation and label, and how many of the played shots scored and how many fouled.
+    ``search``: the exact lookahead's settings (:class:`H2Config`, labels by :func:`nearest_best`)
+    or, under execution ``noise`` (a NoiseModel the shots are played with), the noisy search's
+    actor (:func:`noisy_search`, labels by :func:`noisy_labels`)."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
     cfg, a = run.cfg, run.cfg.algo
     env = Billiards4BallVectorEnv(a.innings, start="random", on_miss="continue", max_shots=EXIT_SHOTS, physics=params,
-                                  normalize_actions=False)
+                                  noise=noise, normalize_actions=False)
     _, info = env.reset(seed=EXIT_SEED + 10_000_000 * int(cfg.seed) + block * a.innings)
     rng = np.random.default_rng([int(cfg.seed), block])
     positions, observations, targets, scored, fouls = info["positions"], [], [], 0, 0
     for _ in range(EXIT_SHOTS):
-        raw, x, _ = nearest_best(positions, proposer, search, rng, params)
+        if isinstance(search, H2Config):
+            raw, x, _ = nearest_best(positions, proposer, search, rng, params)
+        else:
+            raw, x, _ = noisy_labels(positions, search, proposer, rng, params)
         observations.append(domain.observation(positions, bool(cfg.env.extra_features)))
         targets.append(x.astype(np.float32))
         _, _, _, _, info = env.step(raw)
@@ -115,17 +157,23 @@ def train_exit(run: Run) -> float:
     inning of the policy alone."""
     cfg, rb, state = run.cfg, run.rb, run.state
     a = cfg.algo
-    params = params_from_config(cfg.physics)
-    search = H2Config(budget=a.search_budget, k1=a.k1, m1=a.m1).settings()
+    params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
+    if noise.is_exact:
+        search, first = H2Config(budget=a.search_budget, k1=a.k1, m1=a.m1).settings(), None
+    else:
+        search, first = noisy_search(run, params, noise)
     block_shots = a.innings * EXIT_SHOTS
     with session(run) as bar, StopRequests() as stop:
         spent = False
         if state.owed >= 1:  # stopped amid a round's updates: the rest first, as the uninterrupted run made them
             spent = after_updates(run, bar, stop, gradient_updates(run, stop, state.take_updates(0.0)), 0)
+        proposers: dict[int, object] = {}  # the round's proposer, built at its first block (the weights of that round)
         while not (spent or run.budget_spent()):
             round_index = state.frames // a.shots_per_round
-            data, scored, fouls = play_block(run, state.frames // block_shots, labeller(run, round_index, params), search,
-                                             params)
+            if round_index not in proposers:
+                proposers = {round_index: labeller(run, round_index, params, first)}
+            data, scored, fouls = play_block(run, state.frames // block_shots, proposers[round_index], search, params,
+                                             None if noise.is_exact else noise)
             rb.extend(data)
             state.frames += block_shots
             run.window.add_shots(block_shots, reward=scored, score=scored, foul=fouls)

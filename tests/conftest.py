@@ -72,8 +72,11 @@ def international_policy(tmp_path) -> Path:
     return save_tagged(tmp_path / "made_on_international.pt", state)
 
 
-APP_CONFIGS = {"train.py": ("config", "billiards.rl.config"), "search.py": ("search", "billiards.search.config"),
-               "match.py": ("match", "billiards.league.config"), "evaluate.py": ("evaluate", "billiards.bench.config")}
+# each app's config name and the modules its entry point imports before Hydra composes (they
+# register its schemas and checks)
+APP_CONFIGS = {"train.py": ("config", ("billiards.rl.config", "billiards.search.config")),
+               "search.py": ("search", ("billiards.search.config",)), "match.py": ("match", ("billiards.league.config",)),
+               "evaluate.py": ("evaluate", ("billiards.bench.config",))}
 
 
 def refusal(app: str, *overrides: str, cwd: Path | None = None) -> str:
@@ -93,12 +96,13 @@ def refusal(app: str, *overrides: str, cwd: Path | None = None) -> str:
 
     from billiards.app_config import override_errors
 
-    config_name, module = APP_CONFIGS[app]
+    config_name, modules = APP_CONFIGS[app]
     assert "-m" not in overrides and "--multirun" not in overrides, "a multirun is the subprocess tests'"
     errors = override_errors(list(overrides))
     if errors:
         return "Error: " + "\n".join(errors)
-    importlib.import_module(module)
+    for module in modules:
+        importlib.import_module(module)
     here = os.getcwd()
     with contextlib.ExitStack() as stack:
         if cwd is not None:

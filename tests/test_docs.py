@@ -17,7 +17,7 @@ from conftest import APP_CONFIGS
 
 REPO = Path(__file__).resolve().parents[1]
 PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
-APPS = APP_CONFIGS  # entry point -> (its config, the module that registers its schema)
+APPS = APP_CONFIGS  # entry point -> (its config, the modules that register its schema and checks)
 PLACEHOLDER = re.compile(r"<[^>]*>|\.\.\.|\bRUN_DIR\b|\bDIR\b|\bFILE\b|\$\{?[A-Z]")
 
 
@@ -176,7 +176,8 @@ def test_every_app_command_composes_and_validates(argv, refused, monkeypatch):
     if any(a.startswith("hydra/sweeper=optuna") for a in args):
         pytest.importorskip("hydra_plugins.hydra_optuna_sweeper")
     assert not override_errors(args), override_errors(args)
-    importlib.import_module(APPS[app][1])  # registers the app's schema, as its entry point does
+    for module in APPS[app][1]:  # register the app's schema and checks, as its entry point does
+        importlib.import_module(module)
     monkeypatch.chdir(REPO)
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
         cfg = compose(APPS[app][0], overrides=args, return_hydra_config=True)

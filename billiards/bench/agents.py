@@ -406,12 +406,9 @@ def _sb3(spec: str):
 
 def _search(spec: str, track) -> Agent:
     """``search:<search>[/<proposer>]``: composed through search.py's own config, for the track."""
-    from hydra import compose, initialize_config_dir
-    from hydra.core.global_hydra import GlobalHydra
     from omegaconf import OmegaConf
 
     import billiards.search.config as search_config
-    from billiards.files import ROOT
     from billiards.physics.config import params_from_config
     from billiards.search.run import make_actor, make_proposer
 
@@ -428,21 +425,9 @@ def _search(spec: str, track) -> Agent:
         overrides.insert(2, f"search={search}")
     if proposer:
         overrides.append(f"proposer={proposer}")
-    running = GlobalHydra.instance().hydra  # inside a Hydra app (evaluate.py): its state is put back after
-    GlobalHydra.instance().clear()
     try:
-        with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-            cfg = compose("search", overrides=overrides)
-    except Exception as err:
-        raise AgentError(f"agent {spec!r}: {err}") from None
-    finally:
-        GlobalHydra.instance().clear()
-        if running is not None:
-            GlobalHydra.instance().initialize(running)
-    cfg = search_config.typed(cfg)
-    try:
-        search_config.validate(cfg)
-    except ValueError as err:
+        cfg = search_config.compose_search(overrides)
+    except search_config.SearchConfigError as err:
         raise AgentError(f"agent {spec!r}: {err}") from None
     params = params_from_config(cfg.physics)
     actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)

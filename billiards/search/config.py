@@ -421,6 +421,67 @@ def saved_config(run_dir: str | Path) -> DictConfig:
     return typed(upgrade(saved))
 
 
+def compose_search(overrides: list[str]) -> DictConfig:
+    """What ``python search.py <overrides>`` composes (Hydra's compose API over ``conf/``),
+    typed and validated (:class:`SearchConfigError` naming what is wrong): for a caller that
+    plays search.py's searches without its app (a benchmark agent, expert iteration's noisy
+    labeller). Inside a running Hydra app its global state is put back afterwards."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from billiards.files import ROOT
+
+    running = GlobalHydra.instance().hydra
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+            cfg = compose("search", overrides=list(overrides))
+    except Exception as err:
+        raise SearchConfigError(str(err)) from None
+    finally:
+        GlobalHydra.instance().clear()
+        if running is not None:
+            GlobalHydra.instance().initialize(running)
+    cfg = typed(cfg)
+    validate(cfg)
+    return cfg
+
+
+def labelling_search(train_cfg) -> DictConfig:
+    """The search expert iteration labels with under a training config's execution noise
+    (``python train.py algo=exit noise=<preset>``, :mod:`billiards.exit`): what ``python search.py
+    noise=<preset> physics=<preset> search.budget=<algo.search_budget>`` composes."""
+    return compose_search([f"noise={train_cfg.noise.preset}", f"physics={train_cfg.physics.preset}",
+                           f"search.budget={train_cfg.algo.search_budget}"])
+
+
+def labelling_search_errors(train_cfg) -> list[str]:
+    """The problems of :func:`labelling_search` for a training config under execution noise
+    (none under exact play, where the labeller is h2 over ``algo``'s own knobs)."""
+    from billiards.physics.noise import noise_from_config
+
+    if noise_from_config(train_cfg.noise).is_exact:
+        return []
+    try:
+        labelling_search(train_cfg)
+    except SearchConfigError as err:
+        what = str(err).replace("invalid search config:\n  - ", "").replace("\n  - ", "; ")
+        return [f"algo=exit under noise={train_cfg.noise.preset} labels with search.py's search for it at "
+                f"algo.search_budget={train_cfg.algo.search_budget} simulations: {what}"]
+    return []
+
+
+def _register_labelling_check() -> None:
+    """train.py's validation checks expert iteration's labelling search with the rest of the
+    config (billiards.rl does not import this module; this module registers the check)."""
+    import billiards.rl.config as train_config
+
+    train_config.ALGO_CHECKS["exit"] = labelling_search_errors
+
+
+_register_labelling_check()
+
+
 # ----------------------------------------------------------------------------- validation
 
 

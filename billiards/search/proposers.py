@@ -383,6 +383,22 @@ class PolicyProposer:
         return out
 
 
+class MixedProposer:
+    """Two proposers sharing the candidates: of ``k``, the first ``ceil(share * k)`` are
+    ``first``'s (its mode is candidate 0), the rest ``second``'s, each drawn from the caller's
+    generator in that order. ``share`` in [0, 1]; 1 is ``first`` alone."""
+
+    def __init__(self, first, second, share: float, name: str = "mixed"):
+        if not 0.0 <= share <= 1.0:
+            raise ValueError(f"MixedProposer share must lie in [0, 1], got {share!r}")
+        self.first, self.second, self.share, self.name = first, second, float(share), name
+
+    def propose(self, positions: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+        n = math.ceil(self.share * k)
+        parts = [p.propose(positions, m, rng) for p, m in ((self.first, n), (self.second, k - n)) if m]
+        return np.concatenate(parts, axis=1)
+
+
 def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | None = None,
                          device: torch.device | str | None = None) -> PolicyProposer:
     """A :class:`PolicyProposer` over the policies of several runs (e.g. the three seeds of one
@@ -411,4 +427,4 @@ def load_policy_proposer(paths, name: str = "policy", params: PhysicsParams | No
                           R=params.ball_radius, device=device)
 
 
-__all__ = ["EnsembleHeads", "GeometricProposer", "PolicyProposer", "Proposer", "load_policy_proposer"]
+__all__ = ["EnsembleHeads", "GeometricProposer", "MixedProposer", "PolicyProposer", "Proposer", "load_policy_proposer"]

@@ -51,9 +51,73 @@ def test_the_label_is_the_best_valued_candidate_nearest_the_proposers_own_shot()
         assert np.allclose(again[:, 1:], raw[:, 1:], atol=1e-12)
 
 
+def test_under_noise_the_label_is_the_default_noisy_searchs_own_choice():
+    """The noisy labeller is search.py's default search for the noise (the position-aware robust
+    search and the preset's shot ranker) at the run's budget; a label is that search's chosen
+    shot for the same generator, as the policy's normalised action; a mixed proposer gives the
+    policy's share of the candidates first, the rest from round 0's proposer."""
+    from types import SimpleNamespace
+
+    from omegaconf import OmegaConf
+
+    from billiards import domain
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+    from billiards.exit import noisy_labels, noisy_search
+    from billiards.physics import DEFAULT_PARAMS
+    from billiards.physics.noise import get_noise
+    from billiards.search.proposers import GeometricProposer, MixedProposer
+    from billiards.search.robust import robust_search
+
+    cfg = OmegaConf.create({"noise": {"preset": "fastfiz"}, "physics": {"preset": "korean_medium"},
+                            "algo": {"search_budget": 330}})
+    noise = get_noise("fastfiz")
+    actor, first = noisy_search(SimpleNamespace(cfg=cfg), DEFAULT_PARAMS, noise)
+    assert actor.cfg.kind == "robust" and actor.cfg.budget == 330 and actor.cfg.position > 0 and actor.value is not None
+    assert type(first).__name__ == "RankedProposer" and actor.noise == noise
+    _, info = Billiards4BallVectorEnv(12, start="random").reset(seed=5)
+    positions = info["positions"]
+    mixed = MixedProposer(GeometricProposer(), first, 0.5)
+    raw, target, sims = noisy_labels(positions, actor, mixed, np.random.default_rng(9), DEFAULT_PARAMS)
+    own = robust_search(positions, mixed, actor.cfg, np.random.default_rng(9), DEFAULT_PARAMS, noise, value=actor.value)
+    assert np.array_equal(raw, own.actions) and sims == own.n_sims == 12 * 330
+    again = domain.raw_action(target, positions, constrain_aim=True, normalized=True)
+    assert np.allclose(np.mod(again[:, 0] - raw[:, 0] + np.pi, 2 * np.pi) - np.pi, 0.0, atol=1e-12)
+    assert np.allclose(again[:, 1:], raw[:, 1:], atol=1e-12)
+    # the mixture: ceil(share * k) of the first proposer's candidates (its mode first), then the second's
+    a, b = GeometricProposer(), GeometricProposer(power_low=0.1, power_high=0.2)
+    rng, check = np.random.default_rng(1), np.random.default_rng(1)
+    got = MixedProposer(a, b, 0.3).propose(positions, 10, rng)
+    assert np.array_equal(got, np.concatenate([a.propose(positions, 3, check), b.propose(positions, 7, check)], axis=1))
+    assert np.array_equal(MixedProposer(a, b, 1.0).propose(positions, 4, np.random.default_rng(2)),
+                          a.propose(positions, 4, np.random.default_rng(2)))
+    with pytest.raises(ValueError, match="share must lie in"):
+        MixedProposer(a, b, 1.5)
+
+
+@pytest.mark.slow
+def test_an_exit_run_under_noise_labels_with_the_noisy_search_and_plays_its_shots_with_noise(tmp_path):
+    """algo=exit noise=fastfiz on a tiny budget: two rounds, the second over a policy sharing the
+    candidates with the shot ranker; the run records its noise and evaluates under it."""
+    run = tmp_path / "noisy"
+    ok(train(tmp_path, "algo=exit", "env=aim_features", "noise=fastfiz", "algo.innings=10", "algo.shots_per_round=100",
+             "algo.search_budget=320", "algo.batch_size=32", "algo.epochs=1", "algo.policy_share=0.5", "budget=smoke",
+             "budget.total_steps=200", "budget.eval_every=100", "budget.checkpoint_every=100", "budget.log_every=100",
+             "budget.eval_innings=5", "budget.final_eval_innings=5", f"hydra.run.dir={run}"))
+    check_finished(run, 200, innings=5)
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["algo"] == "exit" and summary["noise"] == "fastfiz" and summary["updates"] == round(100 / 32) + round(200 / 32)
+    assert json.loads((run / "eval.json").read_text())["noise"] == "fastfiz"  # the policy evaluated under the run's noise
+    rounds = [line for line in (run / "train.log").read_text().splitlines() if "the search scored" in line]
+    assert len(rounds) == 2
+
+
 @pytest.mark.parametrize("overrides, message", [
     (("algo=exit",), "algo=exit learns aim-constrained shots: it needs env.constrain_aim=true"),
-    (("algo=exit", "env=aim_features", "noise=fastfiz"), "algo=exit labels with the exact depth-2 search"),
+    (("algo=exit", "env=aim_features", "noise=variable"), "algo=exit under variable noise is not built"),
+    (("algo=exit", "env=aim_features", "algo.policy_share=0"), "algo.policy_share must lie in (0, 1], got 0.0"),
+    (("algo=exit", "env=aim_features", "noise=fastfiz", "algo.search_budget=300"),
+     "algo=exit under noise=fastfiz labels with search.py's search for it at algo.search_budget=300 simulations: "
+     "search (robust): schedule=halving leaves 0 simulations"),
     (("algo=exit", "env=aim_features", "algo.k1=395"), "algo.search_budget - algo.k1 (400 - 395) must be a multiple"),
     (("algo=exit", "env=aim_features", "algo.innings=300"), "must be whole blocks of algo.innings x 10 shots (3000)"),
 ])
