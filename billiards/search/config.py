@@ -228,6 +228,31 @@ class PolicyProposerConfig:
         return load_policy_proposer(self.paths(), name=self.name, params=params, device=device)
 
 
+@dataclass
+class MixedProposerConfig:
+    """A policy and a shot ranker sharing the candidates
+    (:class:`~billiards.search.proposers.MixedProposer`): of each draw of k, the first
+    ``ceil(share * k)`` from ``policy`` (its own shot first), the rest from ``ranked`` -- the
+    proposer expert iteration labels with under noise (``algo.policy_share``,
+    docs/expert_iteration.md). ``proposer=mixed proposer.policy.checkpoints=[a.pt]``."""
+
+    kind: str = "mixed"
+    name: str = "mixed"
+    policy: PolicyProposerConfig = dataclasses.field(default_factory=lambda: PolicyProposerConfig(name="policy", checkpoints=[]))
+    ranked: RankedProposerConfig = dataclasses.field(default_factory=RankedProposerConfig)
+    share: float = 0.5
+
+    def errors(self) -> list[str]:
+        errs = [] if 0.0 <= self.share <= 1.0 else [f"proposer.share must lie in [0, 1], got {self.share}"]
+        return errs + self.policy.errors() + self.ranked.errors()
+
+    def build(self, params, device=None):
+        """The mixture: the policy's networks on ``device``, the ranker on the CPU."""
+        from .proposers import MixedProposer
+
+        return MixedProposer(self.policy.build(params, device=device), self.ranked.build(params), self.share, name=self.name)
+
+
 # The ensembles the repository ships (results/policies/<name>/seed{0,1,2}.pt, ~0.3 MB each): the
 # three seeds of a Table 5 variant of the reproduction (issue #21), by the shaping each was trained
 # with (the paper's constants, conf/shaping/<shaping>.yaml): SAC with the project's CPU settings
@@ -290,7 +315,7 @@ OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
     "search": ("kind", {"h2": H2Config, "puct": PUCTConfig, "robust": RobustConfig}),
     "protocol": ("name", {"p1": P1Config, "p3": P3Config}),
     "proposer": ("kind", {"geometric": GeometricProposerConfig, "policy": PolicyProposerConfig,
-                          "ranked": RankedProposerConfig}),
+                          "ranked": RankedProposerConfig, "mixed": MixedProposerConfig}),
 }
 
 # `search_schema` (the root), schema/{search,protocol,proposer}/<option>, schema/physics, the
@@ -308,11 +333,13 @@ def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConf
     """The ``proposer=`` options: ``geometric``, ``forgiving`` (geometric, narrowed for noise:
     :data:`FORGIVING`), ``ranked`` (geometric draws ranked by a learned shot ranker,
     :class:`RankedProposerConfig`), the shipped ensembles by name, ``exit`` (the expert-iteration
-    policy, :data:`EXIT_PROPOSER`) and ``policy``
-    (``proposer=policy proposer.checkpoints=[a.pt,b.pt,...]``: an ensemble of your own)."""
+    policy, :data:`EXIT_PROPOSER`), ``policy``
+    (``proposer=policy proposer.checkpoints=[a.pt,b.pt,...]``: an ensemble of your own) and
+    ``mixed`` (a policy and a shot ranker sharing the candidates, :class:`MixedProposerConfig`)."""
     return {"geometric": GeometricProposerConfig(), "forgiving": GeometricProposerConfig(**FORGIVING),
             **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS}, "exit": EXIT_PROPOSER,
-            "policy": PolicyProposerConfig(name="policy", checkpoints=[]), "ranked": RankedProposerConfig()}
+            "policy": PolicyProposerConfig(name="policy", checkpoints=[]), "ranked": RankedProposerConfig(),
+            "mixed": MixedProposerConfig()}
 
 
 # ``proposer=for_noise_<preset>``: the proposer ``conf/search.yaml`` picks under each execution-noise

@@ -89,7 +89,7 @@ def test_option_groups_list_only_real_options():
                                        "puct", "robust"]
     assert group_options("protocol") == ["p1", "p3", "p3_paper"]
     assert group_options("proposer") == ["base", "both", "exit", "for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none",
-                                         "for_noise_variable", "forgiving", "gentle", "geometric", "near_miss", "policy", "ranked"]
+                                         "for_noise_variable", "forgiving", "gentle", "geometric", "mixed", "near_miss", "policy", "ranked"]
     assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none", "variable"]
     assert group_options("algo") == ["exit", "ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
     assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name
@@ -166,6 +166,37 @@ def test_geometric_proposer_and_a_missing_checkpoint():
     mine = compose_search("proposer=policy", "proposer.checkpoints=[results/policies/gentle/seed1.pt]", "proposer.name=mine")
     search_config.validate(mine)
     assert OmegaConf.get_type(mine.proposer) is search_config.PolicyProposerConfig and mine.proposer.command is None
+
+
+def test_a_mixed_proposer_shares_the_candidates_between_a_policy_and_a_ranker():
+    """proposer=mixed: its policy and ranker nodes are the policy and ranked options' own
+    schemas (checked alike), the share lies in [0, 1], and it builds the mixture the config
+    describes: the policy's ceil(share * k) candidates first, then the ranker's."""
+    import numpy as np
+
+    from billiards.physics import DEFAULT_PARAMS
+    from billiards.search.run import make_proposer
+
+    with pytest.raises(search_config.SearchConfigError, match="proposer 'policy' is a policy ensemble but lists no checkpoints"):
+        search_config.validate(compose_search("noise=fastfiz", "proposer=mixed"))
+    policy = "proposer.policy.checkpoints=[results/policies/exit/seed0.pt]"
+    with pytest.raises(search_config.SearchConfigError, match=r"proposer.share must lie in \[0, 1\], got 1.5"):
+        search_config.validate(compose_search("noise=fastfiz", "proposer=mixed", policy, "proposer.share=1.5"))
+    with pytest.raises(search_config.SearchConfigError, match="proposer 'ranked': no ranker file at nowhere.pt"):
+        search_config.validate(compose_search("noise=fastfiz", "proposer=mixed", policy, "proposer.ranked.ranker=nowhere.pt"))
+    with pytest.raises(Exception, match="c_puct"):
+        compose_search("noise=fastfiz", "proposer=mixed", "proposer.c_puct=1")
+    cfg = compose_search("noise=fastfiz", "proposer=mixed", policy, "proposer.share=0.25", "proposer.ranked.pool=100")
+    search_config.validate(cfg)
+    mixed = make_proposer(cfg.proposer, DEFAULT_PARAMS)
+    from billiards.envs.gym_vector import Billiards4BallVectorEnv
+
+    positions = Billiards4BallVectorEnv(3, start="random").reset(seed=2)[1]["positions"]
+    got = mixed.propose(positions, 8, np.random.default_rng(4))
+    check = np.random.default_rng(4)
+    want = np.concatenate([mixed.first.propose(positions, 2, check), mixed.second.propose(positions, 6, check)], axis=1)
+    assert got.shape == (3, 8, 4) and np.array_equal(got, want)
+    assert mixed.first.name == "policy" and mixed.second.pool == 100 and mixed.share == 0.25
 
 
 # ----------------------------------------------------------------------------- saved configs
