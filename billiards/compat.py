@@ -38,6 +38,10 @@ The kinds and their steps:
   option has its own closed schema), then the training configs' ``physics``, ``noise`` and
   ``noise.scale`` steps.
 
+* league records (a league's ``league.json``; :func:`upgrade_league_players`): each player's
+  node held every kind's keys (:data:`LEGACY_PLAYER_KEYS`, one schema for every kind); today
+  each kind has its own closed schema, and the other kinds' keys are dropped.
+
 * training checkpoints (format 2; :data:`CHECKPOINT`, :func:`upgrade_checkpoint`; version 1
   from the first that carries :data:`SCHEMA_KEY`). Format 1, before the checksum, was a plain
   ``torch.save`` pickle holding numpy objects: it is refused, since loading it would need the
@@ -100,6 +104,10 @@ LEGACY_UNION_KEYS = {
     "protocol": ("n_innings", "shots", "seeds", "cap"),
     "proposer": ("checkpoints", "command", "power_low", "power_high", "u_low", "u_high", "spin_low", "spin_high"),
 }
+# A league player's keys when every kind shared one schema: a league.json of then holds them all
+# for every player (today each kind has its own closed schema, billiards.league.agents.PLAYERS)
+LEGACY_PLAYER_KEYS = ("search", "proposer", "search_budget", "k", "replays", "opp_k", "opp_replays", "foul_penalty",
+                      "leave_weight", "threshold", "overrides", "policy")
 # The noise node as it was when the node was added, before noise.scale and variable noise
 _FIRST_NOISE_NODE = {"preset": "none", "aim_deg": None, "speed": None, "tip_mm": None}
 
@@ -253,6 +261,16 @@ def upgrade_search_config(saved: dict, own_keys: Callable[[str, dict], set]) -> 
     return SEARCH_CONFIG.upgrade(out)
 
 
+
+
+def upgrade_league_players(agents: Any, own_keys: Callable[[str], set]) -> Any:
+    """A league.json's ``agents`` (name -> player node) in today's form: the keys of the one
+    player schema every kind shared that the player's own kind does not take are dropped
+    (``own_keys(kind)``: the keys of that kind's schema; they never changed how it played)."""
+    if not isinstance(agents, dict):
+        return agents
+    return {name: {k: v for k, v in node.items() if k in own_keys(node.get("kind", "search")) or k not in LEGACY_PLAYER_KEYS}
+            if isinstance(node, dict) else node for name, node in agents.items()}
 
 
 def upgrade_config_nodes(saved: Any) -> Any:

@@ -178,12 +178,12 @@ pytest.importorskip("pettingzoo")
 
 
 def random_league():
-    from billiards.league.agents import AgentConfig, make_agent
+    from billiards.league.agents import RandomPlayer, make_agent
     from billiards.physics import DEFAULT_PARAMS
     from billiards.physics.noise import get_noise
 
     noise = get_noise("fastfiz_x5")
-    players = {n: make_agent(AgentConfig(kind="random"), noise, DEFAULT_PARAMS) for n in ("r1", "r2")}
+    players = {n: make_agent(RandomPlayer(), noise, DEFAULT_PARAMS) for n in ("r1", "r2")}
     return players, dict(noise=noise, target=1, max_innings=4)
 
 

@@ -447,12 +447,15 @@ def league_players() -> dict:
 
 def league_player(name: str, noise, params):
     """The league player ``name`` for a match or a track (``noise`` a NoiseModel)."""
-    from billiards.league.agents import AgentConfig, make_agent
+    from billiards.league.agents import make_agent, player_config
 
     players = league_players()
     if name not in players:
         raise AgentError(f"no league player {name!r}; players of conf/match.yaml: {', '.join(players)}")
-    cfg = AgentConfig(**players[name])
+    try:
+        cfg = player_config(players[name], name)
+    except ValueError as err:
+        raise AgentError(str(err)) from None
     errors = cfg.errors(name)
     if errors:
         raise AgentError("; ".join(errors))

@@ -93,8 +93,8 @@ def run(cfg, out_dir) -> dict:
     from billiards.physics.noise import noise_from_config, noise_record
     from billiards.provenance import git_commit
 
-    from .agents import make_agent
-    from .config import agent_config, validate
+    from .agents import make_agent, player_config
+    from .config import validate
     from .play import animate_match, play_match, run_league
 
     if cfg.resume == RESUME_AUTO:  # this job's own directory: the league an earlier attempt started there, or a new one
@@ -108,7 +108,7 @@ def run(cfg, out_dir) -> dict:
     set_threads(cfg.threads)
     out_dir = Path(cfg.resume or out_dir)
     params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
-    agents = {name: agent_config(cfg.agents[name], name) for name in cfg.players}
+    agents = {name: player_config(cfg.agents[name], name) for name in cfg.players}
     players = {name: make_agent(agents[name], noise, params) for name in cfg.players}
     # the league's command: this one, or, continuing a league, the one that started it
     if started_overrides is not None:

@@ -2,7 +2,7 @@
 
 A player sees the table from its own point of view (its cue ball in slot 0, as the simulator's
 shooter: :func:`billiards.envs.sagu.shooter_view`) and returns the normalised action the env
-takes. Three kinds:
+takes. Four kinds, one schema each (:data:`PLAYERS`):
 
 * ``random``: uniform actions;
 * ``policy``: a trained single-player policy (``policy``: a training run dir, its checkpoint or an
@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import ClassVar, Optional
+from typing import ClassVar, Optional, Union
 
 import numpy as np
 
@@ -34,88 +34,101 @@ from billiards.envs.sagu import SWAP
 from billiards.physics import PhysicsParams, simulate_batch
 from billiards.physics.noise import NoiseModel
 
-KINDS = ("random", "search", "safety", "policy")
+@dataclass
+class RandomPlayer:
+    """``kind: random``: uniform actions."""
+
+    kind: str = "random"
+
+    def errors(self, name: str) -> list[str]:
+        """What is wrong with the player's knobs (its files: :meth:`file_errors`)."""
+        return []
+
+    def file_errors(self, name: str, noise: NoiseModel | None) -> list[str]:
+        """The player's files loaded and checked, before a league writes anything."""
+        return []
+
+    def build(self, noise: NoiseModel, params: PhysicsParams):
+        return RandomAgent()
 
 
 @dataclass
-class AgentConfig:
-    """One player. ``search`` and ``proposer``: options of ``search.py`` (``conf/search/``, the
-    ``proposer=`` names; ``proposer: for_noise``: the one ``search.py`` plays under the match's
-    noise preset, e.g. the shot ranker trained for it); ``search_budget``: simulations per
-    decision of that search; ``overrides``: further knobs of the search option (e.g. a table
-    value's position and leave weights, ``{position: 1, leave: 1, value: results/values/value.pt}``);
-    the safety knobs (``kind=safety``) as in the module docstring."""
+class PolicyPlayer:
+    """``kind: policy``: a trained single-player policy (``policy``: its file or run dir)."""
+
+    kind: str = "policy"
+    policy: Optional[str] = None
+
+    def errors(self, name: str) -> list[str]:
+        from billiards.files import repo_path
+
+        if not self.policy or not repo_path(self.policy).exists():
+            return [f"agents.{name}.policy: no trained policy at {self.policy!r} (a run dir or an exported policy file)"]
+        return []
+
+    def file_errors(self, name: str, noise: NoiseModel | None) -> list[str]:
+        from billiards.files import repo_path
+        from billiards.rl.policy import policy_file_error
+
+        err = policy_file_error(repo_path(self.policy))
+        return [f"agents.{name}.policy: {err}"] if err else []
+
+    def build(self, noise: NoiseModel, params: PhysicsParams):
+        return PolicyAgent(self.policy, params)
+
+
+@dataclass
+class SearchPlayer:
+    """``kind: search`` (*greedy*): ``search`` and ``proposer`` are options of ``search.py``
+    (``conf/search/``, the ``proposer=`` names; ``proposer: for_noise``: the one ``search.py``
+    plays under the match's noise preset, e.g. the shot ranker trained for it);
+    ``search_budget``: simulations per decision; ``overrides``: further knobs of the search
+    option (e.g. a table value's weights, ``{position: 1, leave: 1, value: results/values/value.pt}``)."""
 
     kind: str = "search"
     search: str = "robust"
     proposer: str = "ranked"
     search_budget: int = 400
-    k: int = 32
-    replays: int = 12
-    opp_k: int = 32
-    opp_replays: int = 2
-    foul_penalty: float = 1.0
-    leave_weight: float = 1.0  # how much the opponent's chance from a leave costs (0: greedy over the candidates)
-    # play the search's shot when its own statistic (its chance to score less the foul penalty's
-    # share) is at least this; weigh the leaves only below it (None: always weigh them)
-    threshold: Optional[float] = None
     overrides: dict = field(default_factory=dict)  # further knobs of the search option, by name
-    policy: Optional[str] = None  # kind=policy: the trained policy's file or run dir
 
     # the upper bounds of a player's numbers (docs/reliability.md); search_budget: the search's own
-    UPPER: ClassVar[dict] = {"search_budget": (10**5, "simulations per decision"),
-                             **{key: (10_000, "candidates or replays per decision") for key in ("k", "replays", "opp_k",
-                                                                                                 "opp_replays")},
-                             **{key: (100.0, "points; a score is worth 1") for key in ("foul_penalty", "leave_weight")}}
+    UPPER: ClassVar[dict] = {"search_budget": (10**5, "simulations per decision")}
 
     def errors(self, name: str) -> list[str]:
-        """What is wrong with the player's knobs (its files: :meth:`file_errors`)."""
-        errs = [] if self.kind in KINDS else [f"agents.{name}.kind must be one of {', '.join(KINDS)}, got {self.kind!r}"]
-        if self.kind == "policy":
-            from billiards.files import repo_path
-
-            if not self.policy or not repo_path(self.policy).exists():
-                errs.append(f"agents.{name}.policy: no trained policy at {self.policy!r} (a run dir or an exported policy file)")
-        for key in ("search_budget", "k", "replays", "opp_k", "opp_replays"):
-            if getattr(self, key) < 1:
-                errs.append(f"agents.{name}.{key} must be >= 1, got {getattr(self, key)}")
-        for key in ("foul_penalty", "leave_weight"):
-            if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0):
-                errs.append(f"agents.{name}.{key} must be >= 0, got {getattr(self, key)}")
-        if self.threshold is not None and not 0.0 <= self.threshold <= 1.0:
-            errs.append(f"agents.{name}.threshold must be null or lie in [0, 1] (the search's own rating of its shot), "
-                        f"got {self.threshold!r}")
         from billiards.app_config import upper_bound_errors
 
-        errs += upper_bound_errors(self, f"agents.{name}.", self.UPPER)
-        if self.kind in ("search", "safety") and not errs:
+        errs = [f"agents.{name}.search_budget must be >= 1, got {self.search_budget}"] if self.search_budget < 1 else []
+        errs += self.own_errors(name) + upper_bound_errors(self, f"agents.{name}.", self.UPPER)
+        if not errs:
             errs += [f"agents.{name}: {e}" for e in self.search_option_errors()]
         return errs
 
-    def file_errors(self, name: str, noise: NoiseModel | None) -> list[str]:
-        """The player's files loaded and checked (before a league writes anything): a policy's
-        file or run dir; its proposer's ranker or policies (``for_noise``: the proposer of the
-        match's ``noise`` preset; None: not known yet). Its table value: :meth:`errors`."""
-        if self.kind == "policy":
-            from billiards.files import repo_path
-            from billiards.rl.policy import policy_file_error
+    def own_errors(self, name: str) -> list[str]:
+        """The knobs a subclass adds (none here)."""
+        return []
 
-            err = policy_file_error(repo_path(self.policy))
-            return [f"agents.{name}.policy: {err}"] if err else []
-        if self.kind not in ("search", "safety"):
-            return []
+    def proposer_config(self, noise: NoiseModel | None):
+        """The proposer option this player plays (``for_noise``: the one of the match's noise
+        preset); ValueError under a noise that is no preset, None where the noise is not known."""
         from billiards.search.config import NOISE_DEFAULT_PROPOSERS, proposer_options
 
         if self.proposer != "for_noise":
-            proposer = proposer_options()[self.proposer]
-        elif noise is None:
-            return []
-        elif (preset := noise.describe()) not in NOISE_DEFAULT_PROPOSERS:
-            return [f"agents.{name}: proposer: for_noise needs a noise preset ({', '.join(NOISE_DEFAULT_PROPOSERS)}); "
-                    f"this match plays {preset}"]
-        else:
-            proposer = NOISE_DEFAULT_PROPOSERS[preset]
-        return [f"agents.{name}: {e}" for e in proposer.errors()]
+            return proposer_options()[self.proposer]
+        if noise is None:
+            return None
+        if (preset := noise.describe()) not in NOISE_DEFAULT_PROPOSERS:
+            raise ValueError(f"proposer: for_noise needs a noise preset ({', '.join(NOISE_DEFAULT_PROPOSERS)}); "
+                             f"this match plays {preset}")
+        return NOISE_DEFAULT_PROPOSERS[preset]
+
+    def file_errors(self, name: str, noise: NoiseModel | None) -> list[str]:
+        """Its proposer's ranker or policies (``noise`` None: not known yet). Its table value:
+        :meth:`errors`."""
+        try:
+            proposer = self.proposer_config(noise)
+        except ValueError as err:
+            return [f"agents.{name}: {err}"]
+        return [] if proposer is None else [f"agents.{name}: {e}" for e in proposer.errors()]
 
     def search_option(self):
         """The search option (``search.py``'s schema) this player plays."""
@@ -135,6 +148,80 @@ class AgentConfig:
         except TypeError as err:
             return [f"overrides: {err}"]
         return option.errors()
+
+    def build(self, noise: NoiseModel, params: PhysicsParams):
+        proposer = self.proposer_config(noise).build(params)
+        return SearchAgent(self.search_option().actor(proposer, 0, params, noise=noise))
+
+
+@dataclass
+class SafetyPlayer(SearchPlayer):
+    """``kind: safety`` (*safety-aware*): the search player's search, then the safety knobs of
+    the module docstring (``k``, ``replays``, ``opp_k``, ``opp_replays``, ``foul_penalty``,
+    ``leave_weight``, ``threshold``)."""
+
+    kind: str = "safety"
+    k: int = 32
+    replays: int = 12
+    opp_k: int = 32
+    opp_replays: int = 2
+    foul_penalty: float = 1.0
+    leave_weight: float = 1.0  # how much the opponent's chance from a leave costs (0: greedy over the candidates)
+    # play the search's shot when its own statistic (its chance to score less the foul penalty's
+    # share) is at least this; weigh the leaves only below it (None: always weigh them)
+    threshold: Optional[float] = None
+
+    UPPER: ClassVar[dict] = {**SearchPlayer.UPPER,
+                             **{key: (10_000, "candidates or replays per decision") for key in ("k", "replays", "opp_k",
+                                                                                                 "opp_replays")},
+                             **{key: (100.0, "points; a score is worth 1") for key in ("foul_penalty", "leave_weight")}}
+
+    def own_errors(self, name: str) -> list[str]:
+        errs = [f"agents.{name}.{key} must be >= 1, got {getattr(self, key)}"
+                for key in ("k", "replays", "opp_k", "opp_replays") if getattr(self, key) < 1]
+        errs += [f"agents.{name}.{key} must be >= 0, got {getattr(self, key)}"
+                 for key in ("foul_penalty", "leave_weight") if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0)]
+        if self.threshold is not None and not 0.0 <= self.threshold <= 1.0:
+            errs.append(f"agents.{name}.threshold must be null or lie in [0, 1] (the search's own rating of its shot), "
+                        f"got {self.threshold!r}")
+        return errs
+
+    def build(self, noise: NoiseModel, params: PhysicsParams):
+        from billiards.search.config import proposer_options
+
+        proposer = self.proposer_config(noise).build(params)
+        actor = self.search_option().actor(proposer, 0, params, noise=noise)
+        return SafetyAgent(actor, proposer, proposer_options()["geometric"].build(params), self, noise, params)
+
+
+# kind -> the player's schema: the one list of player kinds
+PLAYERS: dict[str, type] = {"random": RandomPlayer, "search": SearchPlayer, "safety": SafetyPlayer, "policy": PolicyPlayer}
+KINDS = tuple(PLAYERS)
+PlayerConfig = Union[RandomPlayer, PolicyPlayer, SearchPlayer, SafetyPlayer]
+
+
+def player_config(node, name: str = "?") -> PlayerConfig:
+    """A player's schema object from its config node (a mapping; ``kind`` picks the schema,
+    default ``search``; the schema's defaults filled in); ValueError naming ``agents.<name>``
+    for an unknown kind, a key its kind does not take or a value of the wrong type."""
+    import dataclasses
+
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    if isinstance(node, tuple(PLAYERS.values())):
+        return node
+    kind = node.get("kind", "search") if hasattr(node, "get") else None
+    if kind not in PLAYERS:
+        raise ValueError(f"agents.{name}.kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    schema = PLAYERS[kind]
+    try:
+        return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(schema), node))
+    except OmegaConfBaseException as err:
+        keys = ", ".join(f.name for f in dataclasses.fields(schema))
+        key = getattr(err, "full_key", None)
+        where = f"agents.{name}" + (f".{key}" if key else "")
+        raise ValueError(f"{where}: {str(err).splitlines()[0]} (a {kind} player's keys: {keys})") from None
 
 
 def to_env_action(raw: np.ndarray) -> np.ndarray:
@@ -217,7 +304,7 @@ def _score_rates(tables: np.ndarray, actions: np.ndarray, replays: int, noise: N
 class SafetyAgent:
     """The safety-aware player (see the module docstring)."""
 
-    def __init__(self, actor, proposer, opponent_proposer, cfg: AgentConfig, noise: NoiseModel, params: PhysicsParams):
+    def __init__(self, actor, proposer, opponent_proposer, cfg: SafetyPlayer, noise: NoiseModel, params: PhysicsParams):
         self.actor, self.proposer, self.opponent = actor, proposer, opponent_proposer
         self.cfg, self.noise, self.params = cfg, noise, params
         self.rng = np.random.default_rng(0)
@@ -256,27 +343,11 @@ class SafetyAgent:
         return to_env_action(cands[int(np.argmax(value))])
 
 
-def make_agent(cfg: AgentConfig, noise: NoiseModel, params: PhysicsParams):
-    """The player ``cfg`` describes, for the execution noise and table of the match."""
-    if cfg.kind == "random":
-        return RandomAgent()
-    if cfg.kind == "policy":
-        return PolicyAgent(cfg.policy, params)
-    from billiards.search.config import NOISE_DEFAULT_PROPOSERS, proposer_options
-
-    if cfg.proposer == "for_noise":
-        preset = noise.describe()
-        if preset not in NOISE_DEFAULT_PROPOSERS:
-            raise ValueError(f"proposer: for_noise needs a noise preset ({', '.join(NOISE_DEFAULT_PROPOSERS)}); "
-                             f"this match plays {preset}")
-        proposer = NOISE_DEFAULT_PROPOSERS[preset].build(params)
-    else:
-        proposer = proposer_options()[cfg.proposer].build(params)
-    actor = cfg.search_option().actor(proposer, 0, params, noise=noise)
-    if cfg.kind == "search":
-        return SearchAgent(actor)
-    opponent = proposer_options()["geometric"].build(params)
-    return SafetyAgent(actor, proposer, opponent, cfg, noise, params)
+def make_agent(cfg: PlayerConfig, noise: NoiseModel, params: PhysicsParams):
+    """The player ``cfg`` describes (a player schema, or its config node), for the execution
+    noise and table of the match."""
+    return player_config(cfg).build(noise, params)
 
 
-__all__ = ["AgentConfig", "KINDS", "PolicyAgent", "RandomAgent", "SafetyAgent", "SearchAgent", "make_agent", "to_env_action"]
+__all__ = ["KINDS", "PLAYERS", "PlayerConfig", "PolicyAgent", "PolicyPlayer", "RandomPlayer", "SafetyPlayer", "SearchPlayer",
+           "player_config", "RandomAgent", "SafetyAgent", "SearchAgent", "make_agent", "to_env_action"]

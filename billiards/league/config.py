@@ -4,19 +4,17 @@ writes anything (:class:`ValidateMatchConfig`)."""
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, List
 
-from omegaconf import MISSING, DictConfig, OmegaConf
-from omegaconf.errors import OmegaConfBaseException
+from omegaconf import MISSING, DictConfig
 
 from billiards.app_config import AppConfig, ValidatingCallback, numeric_bound_errors, register_app, resolved_config, upper_bound_errors
 from billiards.device import threads_error
 from billiards.physics.config import physics_errors
 from billiards.physics.noise import noise_errors
 
-from .agents import AgentConfig
+from .agents import player_config
 
 
 @dataclass
@@ -24,7 +22,8 @@ class MatchAppConfig(AppConfig):
     """match.py's root schema: the shared keys (:class:`~billiards.app_config.AppConfig`; a
     resumed league plays only its missing matches, with its own settings) and the league's own."""
 
-    # every player the app knows, by name: each an AgentConfig, checked by errors() (the map is
+    # every player the app knows, by name: each a player schema by its kind (agents.PLAYERS),
+    # checked by errors() (the map is
     # untyped so that a player can be added on the command line: +agents.mine={kind: search, ...};
     # OmegaConf cannot merge a dict into a map of structured values)
     agents: Dict[str, Any] = field(default_factory=dict)
@@ -37,7 +36,7 @@ class MatchAppConfig(AppConfig):
     threads: int = 1
     picture: bool = True  # match.gif: the league's first match replayed shot by shot
 
-    # the upper bounds of the league's numbers (docs/reliability.md; the players': AgentConfig.UPPER)
+    # the upper bounds of the league's numbers (docs/reliability.md; the players': their schemas' UPPER)
     UPPER: ClassVar[dict] = {"target": (10_000, "points"), "max_innings": (10**5, "innings of a match"),
                              "matches": (10**5, "matches per ordered pair"),
                              "foul_penalty": (100.0, "points; a score is worth 1")}
@@ -70,7 +69,7 @@ def errors(cfg: DictConfig) -> list[str]:
             errs.append(err)
     for name, agent in cfg.agents.items():
         try:
-            agent = agent_config(agent, name)
+            agent = player_config(agent, name)
             own = agent.errors(name)
         except ValueError as err:
             errs.append(str(err))
@@ -107,18 +106,4 @@ class ValidateMatchConfig(ValidatingCallback):
     validate = staticmethod(validate)
 
 
-def agent_config(node, name: str = "?") -> AgentConfig:
-    """A player's :class:`AgentConfig` from its config node (the schema's defaults filled in);
-    ValueError naming ``agents.<name>`` for an unknown key or a value of the wrong type."""
-    if isinstance(node, AgentConfig):
-        return node
-    try:
-        return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(AgentConfig), node))
-    except OmegaConfBaseException as err:
-        keys = ", ".join(f.name for f in dataclasses.fields(AgentConfig))
-        key = getattr(err, "full_key", None)
-        where = f"agents.{name}" + (f".{key}" if key else "")
-        raise ValueError(f"{where}: {str(err).splitlines()[0]} (a player's keys: {keys})") from None
-
-
-__all__ = ["MatchAppConfig", "MatchConfigError", "ValidateMatchConfig", "agent_config", "errors", "validate"]
+__all__ = ["MatchAppConfig", "MatchConfigError", "ValidateMatchConfig", "errors", "validate"]

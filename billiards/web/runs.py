@@ -35,6 +35,7 @@ checked).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import threading
@@ -530,13 +531,15 @@ def replay_league_match(league: dict, rec: dict) -> dict:
     (as :func:`billiards.league.play.play_match` plays it): ``shots`` and whether the replay
     gave the recorded scores (``reproduced``)."""
     from billiards.envs.sagu import AGENTS, SaguEnv, shooter_view
-    from billiards.league.agents import AgentConfig, make_agent
+    from billiards.league.agents import PLAYERS, make_agent
     from billiards.physics import get_params
 
     try:
         params = get_params(league.get("physics", "korean_medium"))
         noise = _league_noise(league)
-        players = {side: make_agent(AgentConfig(**league["agents"][name]), noise, params)
+        agents = compat.upgrade_league_players(league["agents"], lambda kind: {f.name for f in dataclasses.fields(PLAYERS[kind])}
+                                               if kind in PLAYERS else set())
+        players = {side: make_agent(agents[name], noise, params)
                    for side, name in zip(AGENTS, (rec["a"], rec["b"]))}
     except (KeyError, TypeError, ValueError) as err:
         raise LedgerError(f"cannot rebuild this league's players from its league.json: {type(err).__name__}: {err}") from None

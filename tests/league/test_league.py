@@ -13,14 +13,14 @@ import pytest
 
 pytest.importorskip("pettingzoo")
 
-from billiards.league.agents import AgentConfig, SafetyAgent, make_agent, to_env_action  # noqa: E402
+from billiards.league.agents import PolicyPlayer, RandomPlayer, SafetyAgent, SafetyPlayer, SearchPlayer, make_agent, to_env_action  # noqa: E402
 from billiards.league.play import MATCHES_FILE, elo, play_match, run_league, wilson  # noqa: E402
 from billiards.physics import DEFAULT_PARAMS  # noqa: E402
 from billiards.physics.noise import get_noise  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 X5 = get_noise("fastfiz_x5")
-CHEAP = AgentConfig(kind="search", search="h2", proposer="geometric", search_budget=60, overrides={"k1": 40, "m1": 2})
+CHEAP = SearchPlayer(search="h2", proposer="geometric", search_budget=60, overrides={"k1": 40, "m1": 2})
 
 
 def test_elo_and_the_interval():
@@ -43,7 +43,7 @@ def test_an_action_of_a_search_is_the_envs_action():
 
 
 def test_a_match_replays_from_its_seed():
-    a, b = make_agent(CHEAP, X5, DEFAULT_PARAMS), make_agent(AgentConfig(kind="random"), X5, DEFAULT_PARAMS)
+    a, b = make_agent(CHEAP, X5, DEFAULT_PARAMS), make_agent(RandomPlayer(), X5, DEFAULT_PARAMS)
     first = play_match(a, b, seed=5, noise=X5, target=2)
     again = play_match(a, b, seed=5, noise=X5, target=2)
     strip = lambda r: {k: v for k, v in r.items() if k != "cpu_s"}  # noqa: E731
@@ -52,7 +52,7 @@ def test_a_match_replays_from_its_seed():
 
 
 def test_a_league_resumes_and_plays_only_what_is_missing(tmp_path):
-    players = {"cheap": make_agent(CHEAP, X5, DEFAULT_PARAMS), "random": make_agent(AgentConfig(kind="random"), X5, DEFAULT_PARAMS)}
+    players = {"cheap": make_agent(CHEAP, X5, DEFAULT_PARAMS), "random": make_agent(RandomPlayer(), X5, DEFAULT_PARAMS)}
     game = dict(noise=X5, target=1, max_innings=30)
     league = run_league(players, out_dir=tmp_path / "a", matches=3, seed=0, noise_name="fastfiz_x5", record={"x": 1},
                         progress=False, **game)
@@ -72,8 +72,8 @@ def test_a_league_resumes_and_plays_only_what_is_missing(tmp_path):
 
 
 def test_the_safety_player_values_the_searchs_shot_and_its_candidates():
-    agent = make_agent(AgentConfig(kind="safety", search="h2", proposer="geometric", search_budget=60, k=8, replays=2,
-                                   opp_k=4, opp_replays=1, overrides={"k1": 40, "m1": 2}), X5, DEFAULT_PARAMS)
+    agent = make_agent(SafetyPlayer(search="h2", proposer="geometric", search_budget=60, k=8, replays=2,
+                                    opp_k=4, opp_replays=1, overrides={"k1": 40, "m1": 2}), X5, DEFAULT_PARAMS)
     assert isinstance(agent, SafetyAgent)
     agent.reseed(0)
     from billiards.envs._common import initial_racks
@@ -86,7 +86,7 @@ def test_the_safety_player_values_the_searchs_shot_and_its_candidates():
     assert np.array_equal(agent.values(view)[1], value)  # the same draws from the same seed
     # above its threshold the safety player plays the search's own shot
     greedy = make_agent(CHEAP, X5, DEFAULT_PARAMS)
-    sure = make_agent(AgentConfig(kind="safety", search="h2", proposer="geometric", search_budget=60, threshold=-1.0,
+    sure = make_agent(SafetyPlayer(search="h2", proposer="geometric", search_budget=60, threshold=-1.0,
                                   overrides={"k1": 40, "m1": 2}), X5, DEFAULT_PARAMS)
     greedy.reseed(3)
     sure.reseed(3)
@@ -96,11 +96,11 @@ def test_the_safety_player_values_the_searchs_shot_and_its_candidates():
 def test_a_trained_policy_plays_a_match():
     """Table 5's base policy (seed 0) as a player: it beats a random player to 2 points from the
     opening rack under fastfiz_x5 (either colour), and a missing policy file is named."""
-    policy = make_agent(AgentConfig(kind="policy", policy="results/policies/base/seed0.pt"), X5, DEFAULT_PARAMS)
-    rand = make_agent(AgentConfig(kind="random"), X5, DEFAULT_PARAMS)
+    policy = make_agent(PolicyPlayer(policy="results/policies/base/seed0.pt"), X5, DEFAULT_PARAMS)
+    rand = make_agent(RandomPlayer(), X5, DEFAULT_PARAMS)
     assert play_match(policy, rand, seed=1, noise=X5, target=2)["winner"] == "white"
     assert play_match(rand, policy, seed=2, noise=X5, target=2, first="yellow")["winner"] == "yellow"
-    assert "agents.p.policy: no trained policy at 'nowhere.pt'" in AgentConfig(kind="policy", policy="nowhere.pt").errors("p")[0]
+    assert "agents.p.policy: no trained policy at 'nowhere.pt'" in PolicyPlayer(policy="nowhere.pt").errors("p")[0]
 
 
 MATCH_BAD = [
@@ -173,18 +173,44 @@ def test_the_match_config_checks_the_noise_cap_and_each_players_search_before_an
 def test_a_player_can_be_added_on_the_command_line_and_a_bad_one_is_named():
     from hydra import compose, initialize_config_dir
 
-    from billiards.league.agents import AgentConfig
-    from billiards.league.config import agent_config, errors
+    from billiards.league.agents import player_config
+    from billiards.league.config import errors
 
     mine = "+agents.mine={kind: search, proposer: for_noise, overrides: {position: 4.0, value: results/values/run1.pt}}"
     with initialize_config_dir(str(REPO / "conf"), version_base=None):
         cfg = compose("match", overrides=[mine, "players=[greedy,mine]"])
-        bad = compose("match", overrides=["+agents.b1={kind: search, k: many}", "+agents.b2={nope: 1}"])
+        bad = compose("match", overrides=["+agents.b1={kind: safety, k: many}", "+agents.b2={nope: 1}",
+                                          "+agents.b3={kind: search, threshold: 0.5}", "+agents.b4={kind: random, policy: a.pt}"])
     assert errors(cfg) == []
-    added = agent_config(cfg.agents.mine, "mine")
-    assert added == AgentConfig(kind="search", proposer="for_noise",
-                                overrides={"position": 4.0, "value": "results/values/run1.pt"})  # defaults filled in
-    assert agent_config(cfg.agents.greedy, "greedy") == AgentConfig(kind="search", search="robust", proposer="ranked")
+    added = player_config(cfg.agents.mine, "mine")
+    assert added == SearchPlayer(proposer="for_noise", overrides={"position": 4.0, "value": "results/values/run1.pt"})  # defaults filled in
+    assert player_config(cfg.agents.greedy, "greedy") == SearchPlayer(search="robust", proposer="ranked")
+    assert player_config(cfg.agents.safety_t, "safety_t") == SafetyPlayer(threshold=0.5)
     errs = errors(bad)
     assert any(e.startswith("agents.b1.k: ") and "many" in e for e in errs), errs
-    assert any(e.startswith("agents.b2") and "nope" in e and "a player's keys" in e for e in errs), errs
+    assert any(e.startswith("agents.b2") and "nope" in e and "a search player's keys" in e for e in errs), errs
+    # one schema per kind: a knob of another kind is refused, naming the kind's own keys
+    assert any(e.startswith("agents.b3") and "threshold" in e and "a search player's keys: kind, search, proposer" in e
+               for e in errs), errs
+    assert any(e.startswith("agents.b4") and "policy" in e and "a random player's keys: kind" in e for e in errs), errs
+
+
+def test_a_league_record_of_the_one_schema_for_every_kind_loads_its_players():
+    """Every committed league.json (players saved with every kind's keys) gives each player its
+    own kind's schema through compat, the same knobs it played with."""
+    import dataclasses
+
+    from billiards import compat
+    from billiards.league.agents import PLAYERS, player_config
+
+    own = lambda kind: {f.name for f in dataclasses.fields(PLAYERS[kind])}  # noqa: E731
+    records = sorted((REPO / "results" / "sagu").glob("*/league.json"))
+    assert records
+    for path in records:
+        saved = json.loads(path.read_text())["agents"]
+        for name, node in compat.upgrade_league_players(saved, own).items():
+            player = player_config(node, name)
+            played = dataclasses.asdict(player)
+            assert {k: played[k] for k in own(player.kind) if k in saved[name]} == {k: saved[name][k] for k in own(player.kind)
+                                                                                     if k in saved[name]}
+            assert set(saved[name]) - own(player.kind) <= set(compat.LEGACY_PLAYER_KEYS)
