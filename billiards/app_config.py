@@ -120,9 +120,15 @@ def _help_groups(*groups: str) -> str:
 
 
 def _list_help_groups(loader, groups: tuple[str, ...]) -> str:
+    from hydra.core.object_type import ObjectType
+
+    # the loader's own repository (its search path: the project allows no other): the loader's
+    # get_group_options deep-copies it, ConfigStore's schemas included, at every call
+    repo = loader.repository
+
     def options(group: str) -> list[str]:
-        own = list(loader.get_group_options(group))
-        subs = [f"{sub}/{o}" for sub in sorted(loader.list_groups(group)) for o in options(f"{group}/{sub}")]
+        own = list(repo.get_group_options(group, ObjectType.CONFIG))
+        subs = [f"{sub}/{o}" for sub in sorted(repo.get_group_options(group, ObjectType.GROUP)) for o in options(f"{group}/{sub}")]
         return own + subs
 
     lines = []
@@ -1075,16 +1081,19 @@ def _hydra_option_pairs(loader) -> tuple[set, set]:
     cached = loader.__dict__.get("_billiards_hydra_options")
     if cached is not None:
         return cached
+    from hydra.core.object_type import ObjectType
+
     pairs: set = set()
     interpolations: set = set()
+    repo = loader.repository  # not the loader's get_group_options: it deep-copies the repository at every call
 
     def groups(parent: str):
-        for name in loader.list_groups(parent):
+        for name in repo.get_group_options(parent, ObjectType.GROUP):
             yield f"{parent}/{name}"
             yield from groups(f"{parent}/{name}")
 
     for group in groups("hydra"):
-        for option in loader.get_group_options(group):
+        for option in repo.get_group_options(group, ObjectType.CONFIG):
             try:
                 loaded = loader.repository.load_config(f"{group}/{option}")
             except Exception:  # an option that does not load cannot be chosen either
