@@ -208,7 +208,14 @@ def learning_curve(run_dirs, sac_dirs, out) -> dict:
 
     from billiards.files import display_path
 
+    from omegaconf import OmegaConf
+
     data = {"exit": [], "sac": []}
+    first = OmegaConf.load(Path(run_dirs[0]) / "config.yaml")  # the runs' noise and labeller, named in the figure
+    preset, budget = str(first.noise.preset), int(first.algo.search_budget)
+    searcher = (f"h2 ({budget} sims) over the policy" if preset == "none" else
+                f"the position-aware robust search ({budget} sims) over the policy"
+                + (" and the shot ranker" if float(first.algo.get("policy_share", 1.0)) < 1.0 else ""))
     fig, ax = plt.subplots(figsize=(7.5, 4.2), dpi=120)
     for i, d in enumerate(run_dirs):
         alone = [(e["cpu_time"] / 3600, e["eval_success_pct"]) for e in _history(d)]
@@ -218,7 +225,7 @@ def learning_curve(run_dirs, sac_dirs, out) -> dict:
         data["exit"].append({"run": display_path(d), "policy_alone": alone, "search_over_policy": searched})
         ax.plot(*zip(*alone), "o-", color="tab:blue", ms=3, label="expert iteration: the policy alone" if i == 0 else None)
         ax.plot(*zip(*searched), "s--", color="tab:green", ms=3,
-                label="expert iteration: h2 (400 sims) over the policy" if i == 0 else None)
+                label=f"expert iteration: {searcher}" if i == 0 else None)
     for i, d in enumerate(sac_dirs):
         curve = [(e["cpu_time"] / 3600, e["eval_success_pct"]) for e in _history(d)]
         data["sac"].append({"run": display_path(d), "policy_alone": curve})
@@ -228,7 +235,8 @@ def learning_curve(run_dirs, sac_dirs, out) -> dict:
     ax.set_ylim(0, 101)
     ax.grid(alpha=0.3)
     ax.legend(loc="center right", fontsize=8)
-    ax.set_title("Expert iteration against SAC, exact play (random racks, continue on a miss)", fontsize=9)
+    play = "exact play" if preset == "none" else f"{preset} execution noise"
+    ax.set_title(f"Expert iteration{' against SAC' if sac_dirs else ''}, {play} (random racks, continue on a miss)", fontsize=9)
     fig.tight_layout()
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)

@@ -329,15 +329,28 @@ EXIT_PROPOSER = PolicyProposerConfig(
             "python -m billiards.rl.policy export <the run dir> --out results/policies/exit")
 
 
+# proposer=exit_x5: the expert-iteration policy labelled by the position-aware robust search
+# under fastfiz_x5 (docs/expert_iteration.md, results/exit/README.md); proposer=exit_x5_mixed: it
+# and the fastfiz_x5 shot ranker sharing the candidates, as that run labelled with them
+EXIT_X5_PROPOSER = PolicyProposerConfig(
+    name="exit_x5", checkpoints=["results/policies/exit_x5/seed0.pt"],
+    command="python train.py algo=exit env=aim_features budget=exit noise=fastfiz_x5 algo.policy_share=0.5 "
+            "algo.shots_per_round=10000 budget.total_steps=200000 budget.eval_every=10000 budget.checkpoint_every=10000 "
+            "budget.log_every=10000 seed=0 threads=1 && "
+            "python -m billiards.rl.policy export <the run dir> --out results/policies/exit_x5")
+
+
 def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConfig]:
     """The ``proposer=`` options: ``geometric``, ``forgiving`` (geometric, narrowed for noise:
     :data:`FORGIVING`), ``ranked`` (geometric draws ranked by a learned shot ranker,
     :class:`RankedProposerConfig`), the shipped ensembles by name, ``exit`` (the expert-iteration
-    policy, :data:`EXIT_PROPOSER`), ``policy``
+    policy, :data:`EXIT_PROPOSER`), ``exit_x5`` and ``exit_x5_mixed`` (the one trained under
+    fastfiz_x5, alone and sharing the candidates with that noise's shot ranker), ``policy``
     (``proposer=policy proposer.checkpoints=[a.pt,b.pt,...]``: an ensemble of your own) and
     ``mixed`` (a policy and a shot ranker sharing the candidates, :class:`MixedProposerConfig`)."""
     return {"geometric": GeometricProposerConfig(), "forgiving": GeometricProposerConfig(**FORGIVING),
-            **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS}, "exit": EXIT_PROPOSER,
+            **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS}, "exit": EXIT_PROPOSER, "exit_x5": EXIT_X5_PROPOSER,
+            "exit_x5_mixed": MixedProposerConfig(name="exit_x5_mixed", policy=EXIT_X5_PROPOSER, ranked=_RANKED_X5, share=0.5),
             "policy": PolicyProposerConfig(name="policy", checkpoints=[]), "ranked": RankedProposerConfig(),
             "mixed": MixedProposerConfig()}
 

@@ -88,8 +88,9 @@ def test_option_groups_list_only_real_options():
     assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "for_noise_variable", "h2",
                                        "puct", "robust"]
     assert group_options("protocol") == ["p1", "p3", "p3_paper"]
-    assert group_options("proposer") == ["base", "both", "exit", "for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none",
-                                         "for_noise_variable", "forgiving", "gentle", "geometric", "mixed", "near_miss", "policy", "ranked"]
+    assert group_options("proposer") == ["base", "both", "exit", "exit_x5", "exit_x5_mixed", "for_noise_fastfiz",
+                                         "for_noise_fastfiz_x5", "for_noise_none", "for_noise_variable", "forgiving", "gentle",
+                                         "geometric", "mixed", "near_miss", "policy", "ranked"]
     assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none", "variable"]
     assert group_options("algo") == ["exit", "ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
     assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name
