@@ -200,6 +200,13 @@ KINDS = tuple(PLAYERS)
 PlayerConfig = Union[RandomPlayer, PolicyPlayer, SearchPlayer, SafetyPlayer]
 
 
+def player_keys(kind: str) -> set[str]:
+    """The keys a player of ``kind`` takes (none for a kind that is not one)."""
+    import dataclasses
+
+    return {f.name for f in dataclasses.fields(PLAYERS[kind])} if kind in PLAYERS else set()
+
+
 def player_config(node, name: str = "?") -> PlayerConfig:
     """A player's schema object from its config node (a mapping; ``kind`` picks the schema,
     default ``search``; the schema's defaults filled in); ValueError naming ``agents.<name>``
@@ -350,4 +357,4 @@ def make_agent(cfg: PlayerConfig, noise: NoiseModel, params: PhysicsParams):
 
 
 __all__ = ["KINDS", "PLAYERS", "PlayerConfig", "PolicyAgent", "PolicyPlayer", "RandomPlayer", "SafetyPlayer", "SearchPlayer",
-           "player_config", "RandomAgent", "SafetyAgent", "SearchAgent", "make_agent", "to_env_action"]
+           "player_config", "player_keys", "RandomAgent", "SafetyAgent", "SearchAgent", "make_agent", "to_env_action"]

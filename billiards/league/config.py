@@ -23,9 +23,8 @@ class MatchAppConfig(AppConfig):
     resumed league plays only its missing matches, with its own settings) and the league's own."""
 
     # every player the app knows, by name: each a player schema by its kind (agents.PLAYERS),
-    # checked by errors() (the map is
-    # untyped so that a player can be added on the command line: +agents.mine={kind: search, ...};
-    # OmegaConf cannot merge a dict into a map of structured values)
+    # checked by errors() (the map is untyped so that a player can be added on the command line:
+    # +agents.mine={kind: search, ...}; OmegaConf cannot merge a dict into a map of structured values)
     agents: Dict[str, Any] = field(default_factory=dict)
     players: List[str] = MISSING  # who plays the league (names of agents)
     target: int = 10  # points to win a match

@@ -35,7 +35,6 @@ checked).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import threading
@@ -531,14 +530,13 @@ def replay_league_match(league: dict, rec: dict) -> dict:
     (as :func:`billiards.league.play.play_match` plays it): ``shots`` and whether the replay
     gave the recorded scores (``reproduced``)."""
     from billiards.envs.sagu import AGENTS, SaguEnv, shooter_view
-    from billiards.league.agents import PLAYERS, make_agent
+    from billiards.league.agents import make_agent, player_keys
     from billiards.physics import get_params
 
     try:
         params = get_params(league.get("physics", "korean_medium"))
         noise = _league_noise(league)
-        agents = compat.upgrade_league_players(league["agents"], lambda kind: {f.name for f in dataclasses.fields(PLAYERS[kind])}
-                                               if kind in PLAYERS else set())
+        agents = compat.upgrade_league_players(league["agents"], player_keys)
         players = {side: make_agent(agents[name], noise, params)
                    for side, name in zip(AGENTS, (rec["a"], rec["b"]))}
     except (KeyError, TypeError, ValueError) as err:
