@@ -1095,7 +1095,7 @@ def _hydra_option_pairs(loader) -> tuple[set, set]:
     for group in groups("hydra"):
         for option in repo.get_group_options(group, ObjectType.CONFIG):
             try:
-                loaded = loader.repository.load_config(f"{group}/{option}")
+                loaded = repo.load_config(f"{group}/{option}")
             except Exception:  # an option that does not load cannot be chosen either
                 continue
             if loaded is None or not OmegaConf.is_config(loaded.config):

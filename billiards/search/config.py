@@ -379,7 +379,12 @@ for _preset, _node in NOISE_DEFAULT_PROPOSERS.items():
 
 
 class SearchConfigError(ValueError):
-    """An invalid search configuration; the message names the key and what is allowed."""
+    """An invalid search configuration; the message names the key and what is allowed,
+    ``problems`` lists each problem on its own."""
+
+    def __init__(self, message: str, problems: list[str] | None = None):
+        super().__init__(message)
+        self.problems = list(problems) if problems is not None else [message]
 
 
 def option_schema(group: str, node) -> type:
@@ -505,9 +510,8 @@ def labelling_search_errors(train_cfg) -> list[str]:
     try:
         labelling_search(train_cfg)
     except SearchConfigError as err:
-        what = str(err).replace("invalid search config:\n  - ", "").replace("\n  - ", "; ")
         return [f"algo=exit under noise={train_cfg.noise.preset} labels with search.py's search for it at "
-                f"algo.search_budget={train_cfg.algo.search_budget} simulations: {what}"]
+                f"algo.search_budget={train_cfg.algo.search_budget} simulations: {'; '.join(err.problems)}"]
     return []
 
 
@@ -577,7 +581,7 @@ def validate(cfg) -> None:
     """Raise :class:`SearchConfigError` listing every problem of a search config."""
     errs = errors(cfg)
     if errs:
-        raise SearchConfigError("invalid search config:\n  - " + "\n  - ".join(errs))
+        raise SearchConfigError("invalid search config:\n  - " + "\n  - ".join(errs), errs)
 
 
 class ValidateSearchConfig(ValidatingCallback):
