@@ -43,7 +43,7 @@ import torch
 from tensordict import TensorDict
 
 from billiards import domain
-from billiards.physics import PhysicsParams
+from billiards.physics import PhysicsParams, simulate_batch
 from billiards.physics.config import params_from_config
 from billiards.physics.noise import noise_from_config
 from billiards.rl.config import EXIT_SHOTS
@@ -85,6 +85,28 @@ def nearest_best(positions: np.ndarray, proposer, cfg: H2Config, rng: np.random.
     distance = np.where(value >= value.max(axis=1, keepdims=True), distance, np.inf)
     pick = pool[rows[:, 0], np.argmin(distance, axis=1)]
     return v.candidates[rows[:, 0], pick], x[rows[:, 0], pick], v.n_sims
+
+
+def centred(positions: np.ndarray, raw: np.ndarray, x: np.ndarray, probes: int, scale: float, rng: np.random.Generator,
+            params: PhysicsParams) -> tuple[np.ndarray, np.ndarray, int]:
+    """Labels ``x`` (S, 4) in the normalised aim-constrained action (the raw shots ``raw``) on
+    tables (S, 4, 2) moved to the centre of the region of good shots around them: ``probes``
+    draws of x + ``scale`` * N(0, 1) (clipped to the box) are played; the label becomes the mean of itself and the probes that
+    score without a foul, where the label itself does and that mean does too, and stays
+    otherwise. A label at the edge of a narrow region is the least forgiving target a policy can
+    imitate; the centre keeps the shot the search chose and tolerates the policy's error
+    (results/exit/README.md). Returns ``(raw shots (S, 4), labels (S, 4), simulations)``."""
+    S, R = x.shape[0], params.ball_radius
+    inside = np.clip(x, -1.0, 1.0)
+    trial = np.concatenate([inside[:, None], np.clip(inside[:, None] + scale * rng.standard_normal((S, probes, 4)), -1.0, 1.0)], 1)
+    shots = domain.raw_action(trial, positions[:, None], R, constrain_aim=True, normalized=True)
+    res = simulate_batch(np.repeat(positions, probes + 1, axis=0), shots.reshape(-1, 4), params)
+    good = ((res.score > 0) & ~res.foul).reshape(S, probes + 1)
+    centre = (trial * good[..., None]).sum(1) / np.maximum(good.sum(1), 1)[:, None]
+    moved = domain.raw_action(centre, positions, R, constrain_aim=True, normalized=True)
+    check = simulate_batch(positions, moved, params)
+    keep = (good[:, 0] & (check.score > 0) & ~check.foul)[:, None]
+    return np.where(keep, moved, raw), np.where(keep, centre, x), S * (probes + 2)
 
 
 def labeller(run: Run, round_index: int, params: PhysicsParams, first=None):
@@ -139,6 +161,8 @@ def play_block(run: Run, block: int, proposer, search, params: PhysicsParams, no
     for _ in range(EXIT_SHOTS):
         if isinstance(search, H2Config):
             raw, x, _ = nearest_best(positions, proposer, search, rng, params)
+            if a.centre_probes:
+                raw, x, _ = centred(positions, raw, x, int(a.centre_probes), float(a.centre_scale), rng, params)
         else:
             raw, x, _ = noisy_labels(positions, search, proposer, rng, params)
         observations.append(domain.observation(positions, bool(cfg.env.extra_features)))

@@ -262,7 +262,10 @@ class ExItConfig(AlgoConfig):
     expanded) over the current policy as its proposer (the geometric proposer in round 0), each
     label the best-valued candidate nearest the proposer's own shot; under execution noise by
     search.py's default search for that noise at ``search_budget`` (``k1``, ``m1``: h2's only),
-    its chosen shot the label. From round 1 on the policy proposes ``policy_share`` of the
+    its chosen shot the label. With ``centre_probes`` > 0 (exact play) each label moves to the
+    mean of itself and those of ``centre_probes`` Gaussian probes around it (``centre_scale``, in
+    the normalised action) that score without a foul, where that mean scores too (the centre of
+    the region of good shots; the label stays otherwise). From round 1 on the policy proposes ``policy_share`` of the
     candidates (its shot first), round 0's proposer the rest; after each round,
     ``epochs`` passes (``batch_size`` rows per update) of maximum likelihood on the last
     ``buffer_size`` labelled shots. ``innings``: innings played side by side in one block."""
@@ -278,6 +281,8 @@ class ExItConfig(AlgoConfig):
     k1: int = 200
     m1: int = 10
     policy_share: float = 1.0
+    centre_probes: int = 0
+    centre_scale: float = 0.02
 
     KEEPS_REPLAY: ClassVar[bool] = True
     UPPER: ClassVar[dict] = {
@@ -289,6 +294,7 @@ class ExItConfig(AlgoConfig):
         "innings": (65_536, "innings played side by side"),
         "search_budget": (10**6, "simulations per labelled shot"),
         "k1": (10**6, "candidates per shot"), "m1": (10**6, "expanded candidates per shot"),
+        "centre_probes": (10**4, "probes per label"), "centre_scale": (1.0, "the probes' standard deviation"),
     }
 
     @classmethod
@@ -306,6 +312,7 @@ class ExItConfig(AlgoConfig):
                        f"algo.search_budget - algo.k1 ({a.search_budget} - {a.k1}) must be a multiple of algo.m1 ({a.m1}) "
                        f"(0 without expansion), with algo.m1 <= algo.k1"),
                 *_need(0.0 < a.policy_share <= 1.0, f"algo.policy_share must lie in (0, 1], got {a.policy_share}"),
+                *_positive("algo.centre_probes", a.centre_probes, strict=False), *_positive("algo.centre_scale", a.centre_scale),
                 *_need(a.innings > 0 and a.shots_per_round % (a.innings * EXIT_SHOTS) == 0,
                        f"algo.shots_per_round ({a.shots_per_round}) must be whole blocks of algo.innings x {EXIT_SHOTS} "
                        f"shots ({a.innings * EXIT_SHOTS})")]
@@ -583,9 +590,13 @@ def _errors(cfg: DictConfig) -> list[str]:
         if not noise_errors(cfg.noise):
             from billiards.physics.noise import noise_from_config
 
-            errs += _need(not noise_from_config(cfg.noise).is_variable,
+            noise = noise_from_config(cfg.noise)
+            errs += _need(not noise.is_variable,
                           "algo=exit under variable noise is not built: its policy does not see the shot's noise level "
                           "(noise=none, fastfiz or fastfiz_x5)")
+            errs += _need(noise.is_exact or not a.centre_probes,
+                          "algo.centre_probes centres exact play's labels: under noise the label is the noisy "
+                          "search's choice (set algo.centre_probes=0)")
     if a.name in ALGO_CHECKS and not errs:
         errs += ALGO_CHECKS[a.name](cfg)
     if cfg.curriculum.name != "none" and a.name not in OFF_POLICY:
