@@ -119,22 +119,25 @@ def _help_groups(*groups: str) -> str:
     return cache[groups]
 
 
-def _list_help_groups(loader, groups: tuple[str, ...]) -> str:
+def _group_options(loader, group: str):
+    """Every option of ``group`` and of its subgroups, depth first (a group's own options, then
+    its subgroups in order), as ``(its group, its name)``. From the loader's own repository (its
+    search path: the project allows no other): the loader's ``get_group_options`` deep-copies
+    that repository, ConfigStore's schemas included, at every call."""
     from hydra.core.object_type import ObjectType
 
-    # the loader's own repository (its search path: the project allows no other): the loader's
-    # get_group_options deep-copies it, ConfigStore's schemas included, at every call
     repo = loader.repository
+    for option in repo.get_group_options(group, ObjectType.CONFIG):
+        yield group, option
+    for sub in sorted(repo.get_group_options(group, ObjectType.GROUP)):
+        yield from _group_options(loader, f"{group}/{sub}")
 
-    def options(group: str) -> list[str]:
-        own = list(repo.get_group_options(group, ObjectType.CONFIG))
-        subs = [f"{sub}/{o}" for sub in sorted(repo.get_group_options(group, ObjectType.GROUP)) for o in options(f"{group}/{sub}")]
-        return own + subs
 
+def _list_help_groups(loader, groups: tuple[str, ...]) -> str:
     lines = []
     for token in groups:
         group, _, app = token.partition("@")
-        found = options(group)
+        found = [f"{where}/{option}"[len(group) + 1:] for where, option in _group_options(loader, group)]
         if app:
             from billiards.tables import paper_tables
 
@@ -1081,30 +1084,22 @@ def _hydra_option_pairs(loader) -> tuple[set, set]:
     cached = loader.__dict__.get("_billiards_hydra_options")
     if cached is not None:
         return cached
-    from hydra.core.object_type import ObjectType
-
     pairs: set = set()
     interpolations: set = set()
-    repo = loader.repository  # not the loader's get_group_options: it deep-copies the repository at every call
-
-    def groups(parent: str):
-        for name in repo.get_group_options(parent, ObjectType.GROUP):
-            yield f"{parent}/{name}"
-            yield from groups(f"{parent}/{name}")
-
-    for group in groups("hydra"):
-        for option in repo.get_group_options(group, ObjectType.CONFIG):
-            try:
-                loaded = repo.load_config(f"{group}/{option}")
-            except Exception:  # an option that does not load cannot be chosen either
-                continue
-            if loaded is None or not OmegaConf.is_config(loaded.config):
-                continue
-            package = ((loaded.header or {}).get("package") or "_group_").replace("_group_", group.replace("/", "."))
-            prefix = () if package == "_global_" else tuple(package.split("."))
-            found, interps, _ = _scan(loaded.config, prefix, resolve=False)
-            pairs |= found
-            interpolations |= interps
+    for group, option in _group_options(loader, "hydra"):
+        if group == "hydra":  # hydra/config, Hydra's own node: not an option of a hydra/... group
+            continue
+        try:
+            loaded = loader.repository.load_config(f"{group}/{option}")
+        except Exception:  # an option that does not load cannot be chosen either
+            continue
+        if loaded is None or not OmegaConf.is_config(loaded.config):
+            continue
+        package = ((loaded.header or {}).get("package") or "_group_").replace("_group_", group.replace("/", "."))
+        prefix = () if package == "_global_" else tuple(package.split("."))
+        found, interps, _ = _scan(loaded.config, prefix, resolve=False)
+        pairs |= found
+        interpolations |= interps
     loader.__dict__["_billiards_hydra_options"] = (pairs, interpolations)
     return pairs, interpolations
 
