@@ -13,6 +13,8 @@ which is what the repository ships for the search proposers (``results/policies/
 from __future__ import annotations
 
 import argparse
+import functools
+import hashlib
 import json
 from pathlib import Path
 
@@ -81,11 +83,30 @@ def policy_file_error(path) -> str | None:
     be played, or None: the file loaded and checked now (its seal, then its content), e.g. by an
     app's validation before any directory is written."""
     path = Path(path)
+    if path.is_file() and path.name != CHECKPOINT_FILE:
+        try:
+            digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        except OSError:
+            digest = None  # unreadable: the loader says so
+        if digest is not None:
+            return _exported_file_error(str(path), digest)
     try:
         if path.is_file() and path.name != CHECKPOINT_FILE:
             _load_policy(path)
         else:
             load_checkpoint(path.parent if path.name == CHECKPOINT_FILE else path)
+    except CheckpointError as err:
+        return str(err)
+    return None
+
+
+@functools.lru_cache(maxsize=64)
+def _exported_file_error(path: str, digest: str) -> str | None:
+    """:func:`policy_file_error` of the exported policy file at ``path`` whose bytes have the
+    SHA-256 ``digest``: the same bytes at the same path give the same answer, so a config naming
+    one file in many places (a search's proposers, a league's players) builds its agent once."""
+    try:
+        _load_policy(Path(path))
     except CheckpointError as err:
         return str(err)
     return None

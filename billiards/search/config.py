@@ -37,6 +37,7 @@ before the per-option schemas (one union node per group).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, List, Optional
@@ -406,6 +407,23 @@ def _extra_keys(node, schema: type, prefix: str) -> list[str]:
     return [f"{prefix}{k}" for k in node.keys() if k not in own]
 
 
+@functools.lru_cache(maxsize=None)
+def _structured(schema: type) -> DictConfig:
+    """``OmegaConf.structured(schema)``, made once (it is slow): callers merge into it, and
+    ``OmegaConf.merge`` copies its first config, so the node is never changed."""
+    return OmegaConf.structured(schema)
+
+
+@functools.lru_cache(maxsize=None)
+def _schema_node(options: tuple) -> DictConfig:
+    """The app's schema node with the option schemas ``options`` (one per group of
+    :data:`OPTIONS`, in order) at their groups, made once per combination (as :func:`_structured`)."""
+    schema = OmegaConf.structured(SearchAppConfig)
+    for group, option_type in zip(OPTIONS, options):
+        schema[group] = _structured(option_type)
+    return schema
+
+
 def option(group: str, node):
     """The node as an instance of its option schema (a typed object with ``settings``,
     ``actor`` or ``build``); a key the option does not take is a :class:`SearchConfigError`."""
@@ -416,7 +434,7 @@ def option(group: str, node):
         raise SearchConfigError(f"{', '.join(extra)}: not a key of {schema.__name__} "
                                 f"({group}={node.get(OPTIONS[group][0])} takes {own})")
     try:
-        return OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(schema), node))
+        return OmegaConf.to_object(OmegaConf.merge(_structured(schema), node))
     except OmegaConfBaseException as err:
         raise SearchConfigError(f"{group} ({schema.__name__}): {err}") from None
 
@@ -426,11 +444,9 @@ def typed(cfg) -> DictConfig:
     option node typed: unknown keys and wrong types fail as while composing, and keys the config
     leaves out take their defaults."""
     cfg = cfg if isinstance(cfg, DictConfig) else OmegaConf.create(cfg)
-    schema = OmegaConf.structured(SearchAppConfig)
-    for group in OPTIONS:
-        schema[group] = OmegaConf.structured(option_schema(group, cfg.get(group)))
+    schema = _schema_node(tuple(option_schema(group, cfg.get(group)) for group in OPTIONS))
     try:
-        return OmegaConf.merge(schema, cfg)
+        return OmegaConf.merge(schema, cfg)  # a copy of the schema node, merged into
     except OmegaConfBaseException as err:
         raise SearchConfigError(str(err)) from None
 
