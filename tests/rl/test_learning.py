@@ -2,8 +2,9 @@
 the random policy by a clear margin within a small budget, both measured with the unified
 evaluation protocol on the same 100 evaluation racks.
 
-The budget (24,576 env frames, defaults otherwise) and the seed were chosen with room to spare:
-docs/training.md ("An agent learns") has what three seeds scored at it, and how long it takes.
+The budget (24,576 env frames, networks of two 64-unit layers, defaults otherwise) and the seed
+were chosen with room to spare: docs/training.md ("An agent learns") has what three seeds scored
+at it, and how long it takes.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ def test_sac_on_aim_features_beats_the_random_policy(tmp_path):
     run_dir = tmp_path / "run"
     from conftest import app_here
 
-    proc = app_here("train.py", "algo=sac", "env=aim_features", "budget=smoke", f"budget.total_steps={FRAMES}",
+    proc = app_here("train.py", "algo=sac", "env=aim_features", "algo.hidden_sizes=[64,64]", "budget=smoke", f"budget.total_steps={FRAMES}",
                     "budget.eval_every=0", "budget.checkpoint_every=0", "budget.final_eval_innings=100", "seed=0", "threads=1",
                     "progress=false", f"hydra.run.dir={run_dir}", cwd=tmp_path, env={"WANDB_MODE": "offline"})
     assert proc.returncode == 0, proc.stderr[-5000:]
