@@ -80,37 +80,56 @@ def mlp(x: np.ndarray, weights, biases) -> np.ndarray:
     return x
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
+class _Ufunc:
+    """A float64 ufunc that numba builds at its first call (``numba.vectorize`` with the
+    signature, ``cache=True``): loading the seven from numba's cache at import would cost every
+    process that imports this module, and each of the apps does, most of a second."""
+
+    def __init__(self, signature: str, py):
+        self.__name__, self.__doc__, self.__wrapped__ = py.__name__, py.__doc__, py
+        self._signature, self._ufunc = signature, None
+
+    def __call__(self, *args, **kwargs):
+        if self._ufunc is None:
+            self._ufunc = numba.vectorize([self._signature], cache=True)(self.__wrapped__)
+        return self._ufunc(*args, **kwargs)
+
+
+def _ufunc(signature: str):
+    return lambda py: _Ufunc(signature, py)
+
+
+@_ufunc("float64(float64)")
 def asin(x):
     return math.asin(x)
 
 
-@numba.vectorize(["float64(float64, float64)"], cache=True)
+@_ufunc("float64(float64, float64)")
 def atan2(y, x):
     return math.atan2(y, x)
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
+@_ufunc("float64(float64)")
 def exp(x):
     return math.exp(x)
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
+@_ufunc("float64(float64)")
 def log1p(x):
     return math.log1p(x)
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
+@_ufunc("float64(float64)")
 def tanh(x):
     return math.tanh(x)
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
+@_ufunc("float64(float64)")
 def sin(x):
     return math.sin(x)
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
+@_ufunc("float64(float64)")
 def cos(x):
     return math.cos(x)
 
