@@ -10,6 +10,8 @@ geometric proposer (the label rule of expert iteration, :func:`billiards.exit.ne
 * **the labels' tolerance**: the per-shot success of the search's shots as labelled, then with
   Gaussian errors of standard deviation sigma added to their normalised aim-constrained action
   (u, 2p - 1, a, b): to every coordinate, and to u (the aim inside the nearest red's window) alone;
+  with ``--centre-probes P`` the labels are first centred as ``algo.centre_probes=P`` centres them
+  (:func:`billiards.exit.centred`, ``--centre-scale``; the same tables);
 * **the policy's precision**: on the same tables, the policy's own shot (its deterministic
   action), its success, and its distance to the label the search gives it as proposer (the
   best-valued candidate nearest its shot): per coordinate, the median and 90th percentile.
@@ -51,6 +53,8 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--policy", default="results/policies/exit/seed0.pt")
     parser.add_argument("--innings", type=int, default=200)
+    parser.add_argument("--centre-probes", type=int, default=0, help="centre the labels first (billiards.exit.centred)")
+    parser.add_argument("--centre-scale", type=float, default=0.02)
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
 
@@ -58,13 +62,19 @@ def main(argv=None) -> None:
     env = Billiards4BallVectorEnv(args.innings, start="random", on_miss="continue", max_shots=10, normalize_actions=False)
     _, info = env.reset(seed=SEED)
     rng = np.random.default_rng(SEED)
-    tables, labels = [], []
+    tables, labels, raws = [], [], []
     for _ in range(10):
         raw, x, _ = nearest_best(info["positions"], GeometricProposer(), search, rng, params)
         tables.append(info["positions"])
         labels.append(x)
+        raws.append(raw)
         _, _, _, _, info = env.step(raw)
     tables, labels = np.concatenate(tables), np.concatenate(labels)
+    if args.centre_probes:
+        from billiards.exit import centred
+
+        _, labels, _ = centred(tables, np.concatenate(raws), labels, args.centre_probes, args.centre_scale,
+                               np.random.default_rng(SEED + 3), params)
 
     def success(x: np.ndarray) -> float:
         shots = domain.raw_action(np.clip(x, -1.0, 1.0), tables, params.ball_radius, constrain_aim=True, normalized=True)
@@ -93,6 +103,7 @@ def main(argv=None) -> None:
               "at_the_label": round(100.0 * float((gap.max(axis=1) == 0).mean()), 2)}
     out = {"commit": git_commit(), "policy_file": args.policy, "tables": int(len(tables)), "seed": SEED,
            "search": {"budget": 400, "k1": 200, "m1": 10}, "tolerance": tolerance, "policy": policy,
+           **({"centre": {"probes": args.centre_probes, "scale": args.centre_scale}} if args.centre_probes else {}),
            "command": "python benchmarks/exit_precision.py " + " ".join(argv if argv is not None else sys.argv[1:])}
     print(f"{len(tables)} tables; the labels score {tolerance['labels']} % per shot")
     for sigma in SIGMAS:
