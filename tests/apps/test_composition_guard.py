@@ -234,3 +234,40 @@ def test_each_app_checks_what_its_options_compose_to(app, tmp_path):
     shown = run_app(app, "--cfg", "hydra", "physics=korean_medium" if app != "evaluate" else "threads=1",
                     "hydra/launcher=joblib", cwd=work, script_dir=tmp_path)
     assert shown.returncode == 0 and "JoblibLauncher" in shown.stdout, shown.stderr[-3000:]
+
+
+def test_a_config_group_is_listed_as_hydra_lists_it_without_copying_the_repository(monkeypatch):
+    """The entry points' loader answers a plain ``get_group_options`` (no primary config, no
+    overrides: what ``--help`` asks for each group) from its own repository: the same answer as
+    Hydra's, for every group and subgroup the apps have, without Hydra's copy per question."""
+    import copy
+
+    from hydra.core.object_type import ObjectType
+
+    hydras = ConfigLoaderImpl.get_group_options
+    while getattr(hydras, "billiards_listed", False):
+        hydras = hydras.__wrapped__
+    monkeypatch.setattr(ConfigLoaderImpl, "get_group_options", app_config._listed(hydras))
+    assert app_config._listed(ConfigLoaderImpl.get_group_options) is ConfigLoaderImpl.get_group_options  # idempotent
+    loader = loader_for(CONF)
+    groups, todo = [], [""]
+    while todo:
+        parent = todo.pop()
+        for sub in hydras(loader, parent, ObjectType.GROUP):
+            todo.append(f"{parent}/{sub}" if parent else sub)
+            groups.append(todo[-1])
+    assert {"algo", "proposer", "hydra/launcher", "variant/table4"} <= set(groups)
+    copies = []
+    deepcopy = copy.deepcopy
+    monkeypatch.setattr(copy, "deepcopy", lambda x, *a, **k: copies.append(type(x).__name__) or deepcopy(x, *a, **k))
+    for group in groups:
+        for kind in (ObjectType.CONFIG, ObjectType.GROUP, ObjectType.CONFIG):
+            assert loader.get_group_options(group, kind) == hydras(loader, group, kind), (group, kind)
+    listed = len(copies)
+    for group in groups:
+        loader.get_group_options(group, ObjectType.CONFIG)
+    assert len(copies) == listed  # the fast answers copy nothing
+    # with overrides or a primary config, Hydra's own answer (its copy: the count above counts)
+    assert loader.get_group_options("algo", ObjectType.CONFIG, "config", ["algo=td3"]) == hydras(loader, "algo", ObjectType.CONFIG)
+    assert len(copies) > listed
+    GlobalHydra.instance().clear()
