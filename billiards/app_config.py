@@ -1173,7 +1173,7 @@ def _guarded(load):
     return load_configuration
 
 
-def _listed(get_group_options):
+def _plain_listing(get_group_options):
     """Hydra's ``ConfigLoaderImpl.get_group_options`` that answers a plain question (no primary
     config, no overrides) from the loader's own repository. Hydra's copies that repository,
     ConfigStore's schemas included, for every question, in case overrides add a search path;
@@ -1197,12 +1197,12 @@ def _listed(get_group_options):
 
 def install_composition_guard() -> None:
     """Check every config Hydra composes in this process before Hydra builds anything from it,
-    and list config groups without copying the config repository (:func:`_listed`); idempotent.
+    and list config groups without copying the config repository (:func:`_plain_listing`); idempotent.
     :func:`guard_command_line` calls it."""
     from hydra._internal.config_loader_impl import ConfigLoaderImpl
 
     ConfigLoaderImpl.load_configuration = _guarded(ConfigLoaderImpl.load_configuration)
-    ConfigLoaderImpl.get_group_options = _listed(ConfigLoaderImpl.get_group_options)
+    ConfigLoaderImpl.get_group_options = _plain_listing(ConfigLoaderImpl.get_group_options)
 
 
 def guard_command_line(argv=None) -> None:

@@ -247,8 +247,8 @@ def test_a_config_group_is_listed_as_hydra_lists_it_without_copying_the_reposito
     hydras = ConfigLoaderImpl.get_group_options
     while getattr(hydras, "billiards_listed", False):
         hydras = hydras.__wrapped__
-    monkeypatch.setattr(ConfigLoaderImpl, "get_group_options", app_config._listed(hydras))
-    assert app_config._listed(ConfigLoaderImpl.get_group_options) is ConfigLoaderImpl.get_group_options  # idempotent
+    monkeypatch.setattr(ConfigLoaderImpl, "get_group_options", app_config._plain_listing(hydras))
+    assert app_config._plain_listing(ConfigLoaderImpl.get_group_options) is ConfigLoaderImpl.get_group_options  # idempotent
     loader = loader_for(CONF)
     groups, todo = [], [""]
     while todo:
