@@ -206,3 +206,18 @@ def test_a_reward_model_loads_without_the_trainer_or_hydra(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "IMPORTED []" in proc.stdout, proc.stdout
+
+
+def test_no_module_gives_one_name_two_top_level_definitions():
+    """A second ``def``/``class`` of a name at a module's top level replaces the first for every
+    caller, including the functions above it that use it (ruff's F811 sees only a redefinition
+    of an unused name): each top-level name of the package and the entry points is defined once."""
+    twice = []
+    for path in sorted([*(REPO / "billiards").rglob("*.py"), *REPO.glob("*.py")]):
+        seen: dict[str, int] = {}
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                if node.name in seen:
+                    twice.append(f"{path.relative_to(REPO)}: {node.name} (lines {seen[node.name]} and {node.lineno})")
+                seen[node.name] = node.lineno
+    assert not twice, twice
