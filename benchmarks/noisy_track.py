@@ -34,15 +34,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 # agent -> search.py overrides (under every noise); "sac" is evaluated separately. The last two
-# play the noise's default proposer (conf/search.yaml: the shot ranker of the noise preset, the
-# fastfiz one under noise=fastfiz noise.scale=m, from a pool of 500): "ranked" with the robust
-# search blind to the leave, "position" the noise's default search (the position-aware one)
+# play the noise preset's shot proposer (proposer=for_noise_<preset>: the shot ranker of the
+# preset, the fastfiz one under noise=fastfiz noise.scale=m, from a pool of 500; SHOT_PROPOSER):
+# "ranked" with the robust search blind to the leave, "position" the noise's default search (the
+# position-aware one)
 AGENTS = {
     "h2": ["proposer=geometric", "search=h2"],
     "robust": ["proposer=geometric", "search=robust"],
     "ranked": ["search=robust"],
     "position": [],
 }
+SHOT_PROPOSER = ("ranked", "position")
 TABLE_NOISES = {"fastfiz": ["noise=fastfiz"], "fastfiz_x5": ["noise=fastfiz_x5"], "variable": ["noise=variable"]}
 P3_SEEDS = 10_000  # P3's chains: seeds P3_SEEDS + seed, ... (apart from every P1 seed and the tuning chains 0-99)
 EXACT_ONLY = ("h2",)  # the searches that plan without noise: the only ones at multiplier 0 (robust refuses exact play)
@@ -71,7 +73,9 @@ def noise_of(noise_over: list[str]):
 
 
 def search_cell(agent: str, noise: str, noise_over: list[str], args, out: Path) -> dict:
-    base = AGENTS[agent] + noise_over + ["threads=1", "progress=false", "picture=false"]
+    preset = next(o.split("=", 1)[1] for o in noise_over if o.startswith("noise="))
+    shot = [f"proposer=for_noise_{preset}"] if agent in SHOT_PROPOSER else []
+    base = AGENTS[agent] + noise_over + shot + ["threads=1", "progress=false", "picture=false"]
     rec = {}
     for proto, extra in (("p1", ["protocol=p1", f"protocol.n_innings={args.innings}", f"protocol.shots={args.shots}",
                                  f"seed={args.seed}"]),

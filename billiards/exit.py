@@ -15,7 +15,7 @@ one that does best, which keeps the targets one function of the table where plai
 the search's choice averages over its many equally good shots.
 
 Under execution noise (``noise=fastfiz`` or ``fastfiz_x5``) the labeller is what ``search.py``
-plays under that noise (:func:`noisy_search`: the position-aware robust search with its table
+plays under that noise over its shot ranker (:func:`noisy_search`: the position-aware robust search with its table
 value, ``algo.search_budget`` simulations), its proposer in round 0 the preset's shot ranker;
 the label is the search's chosen shot (:func:`noisy_labels`), played with the noise. With
 ``algo.policy_share`` < 1 the policy proposes that share of the candidates from round 1 on and
@@ -124,9 +124,9 @@ def labeller(run: Run, round_index: int, params: PhysicsParams, first=None):
 
 def noisy_search(run: Run, params: PhysicsParams, noise):
     """The labeller under execution noise: what ``python search.py noise=<the run's preset>
-    search.budget=<algo.search_budget>`` plays (the position-aware robust search, its value and
-    settings: docs/search.md), over the policy from round 1 on; round 0's proposer is that
-    default's own (the preset's shot ranker). Returns ``(actor, round 0's proposer)``."""
+    search.budget=<algo.search_budget> proposer=for_noise_<preset>`` plays (the position-aware
+    robust search, its value and settings: docs/search.md), over the policy from round 1 on;
+    round 0's proposer is the preset's shot ranker. Returns ``(actor, round 0's proposer)``."""
     from billiards.search.config import labelling_search
     from billiards.search.run import make_actor, make_proposer
 

@@ -21,7 +21,8 @@
 * ``sb3:<algo>:<model.zip>``: a saved Stable-Baselines3 model (``sac``, ``td3``, ``ppo``, ...);
 * a ``.pt`` file or a training run directory of this project (``results/policies/base/seed0.pt``);
 * ``search:<search>[/<proposer>]``: a search of ``search.py`` (``search:h2``, ``search:puct/near_miss``,
-  ``search:default``: what ``search.py`` plays under the track's noise), at the track's budget;
+  ``search:default``: what ``search.py`` plays under the track's noise; ``search:robust/for_noise``:
+  over the shot proposer of the track's noise, ``proposer=for_noise_<preset>``), at the track's budget;
 * ``league:<name>``: a player of ``conf/match.yaml`` by name (``league:greedy``, ``league:safety_r``).
 
 Code is imported only from a spec the person gave or an object they passed; nothing the
@@ -418,13 +419,13 @@ def _search(spec: str, track) -> Agent:
     proposers = list(search_config.proposer_options())
     if search not in (*searches, "default"):
         raise AgentError(f"agent {spec!r}: the search must be default or one of {', '.join(searches)}")
-    if proposer and proposer not in (*proposers, "ranked"):
-        raise AgentError(f"agent {spec!r}: the proposer must be one of {', '.join(proposers)}")
+    if proposer and proposer not in (*proposers, "ranked", "for_noise"):
+        raise AgentError(f"agent {spec!r}: the proposer must be for_noise or one of {', '.join(proposers)}")
     overrides = [f"noise={track.noise}", f"physics={track.physics}", f"search.budget={track.budget}"]
     if search != "default":
         overrides.insert(2, f"search={search}")
-    if proposer:
-        overrides.append(f"proposer={proposer}")
+    if proposer:  # for_noise: the track's noise's shot proposer (search.py's proposer=for_noise_<preset>)
+        overrides.append(f"proposer={proposer}_{track.noise}" if proposer == "for_noise" else f"proposer={proposer}")
     try:
         cfg = search_config.compose_search(overrides)
     except search_config.SearchConfigError as err:

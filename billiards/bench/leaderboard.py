@@ -62,7 +62,7 @@ EARLIER: dict[tuple[str, str], tuple[str, tuple[str, ...], str]] = {
         "p1", ("results/noisy_track/headline/ranked500_fastfiz_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
     ("p3-fastfiz-v1", "robust search over the shot ranker, blind to the leave"): (
         "p3", ("results/noisy_track/headline/ranked500_fastfiz_p3/results.json",), "300 chains, seeds 2000-2299"),
-    ("p1-x5-v1", "position-aware robust search (the default of search.py under noise)"): (
+    ("p1-x5-v1", "position-aware robust search over the shot ranker"): (
         "p1", ("results/noisy_track/headline/position_fastfiz_x5_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
     ("p1-x5-v1", "robust search over the shot ranker, blind to the leave"): (
         "p1", ("results/noisy_track/headline/ranked500_fastfiz_x5_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),

@@ -80,8 +80,9 @@ class PolicyPlayer:
 @dataclass
 class SearchPlayer:
     """``kind: search`` (*greedy*): ``search`` and ``proposer`` are options of ``search.py``
-    (``conf/search/``, the ``proposer=`` names; ``proposer: for_noise``: the one ``search.py``
-    plays under the match's noise preset, e.g. the shot ranker trained for it);
+    (``conf/search/``, the ``proposer=`` names; ``proposer: for_noise``: the match's noise
+    preset's shot proposer, ``search.py``'s ``proposer=for_noise_<preset>``, e.g. the shot ranker
+    trained for it);
     ``search_budget``: simulations per decision; ``overrides``: further knobs of the search
     option (e.g. a table value's weights, ``{position: 1, leave: 1, value: results/values/value.pt}``)."""
 
@@ -108,18 +109,18 @@ class SearchPlayer:
         return []
 
     def proposer_config(self, noise: NoiseModel | None):
-        """The proposer option this player plays (``for_noise``: the one of the match's noise
-        preset); ValueError under a noise that is no preset, None where the noise is not known."""
-        from billiards.search.config import NOISE_DEFAULT_PROPOSERS, proposer_options
+        """The proposer option this player plays (``for_noise``: the shot proposer of the match's
+        noise preset); ValueError under a noise that is no preset, None where the noise is not known."""
+        from billiards.search.config import NOISE_SHOT_PROPOSERS, proposer_options
 
         if self.proposer != "for_noise":
             return proposer_options()[self.proposer]
         if noise is None:
             return None
-        if (preset := noise.describe()) not in NOISE_DEFAULT_PROPOSERS:
-            raise ValueError(f"proposer: for_noise needs a noise preset ({', '.join(NOISE_DEFAULT_PROPOSERS)}); "
+        if (preset := noise.describe()) not in NOISE_SHOT_PROPOSERS:
+            raise ValueError(f"proposer: for_noise needs a noise preset ({', '.join(NOISE_SHOT_PROPOSERS)}); "
                              f"this match plays {preset}")
-        return NOISE_DEFAULT_PROPOSERS[preset]
+        return NOISE_SHOT_PROPOSERS[preset]
 
     def file_errors(self, name: str, noise: NoiseModel | None) -> list[str]:
         """Its proposer's ranker or policies (``noise`` None: not known yet). Its table value:

@@ -356,27 +356,36 @@ def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConf
             "mixed": MixedProposerConfig()}
 
 
-# ``proposer=for_noise_<preset>``: the proposer ``conf/search.yaml`` picks under each execution-noise
-# preset (``proposer: for_noise_${noise}``, beside ``search: for_noise_${noise}``), the strongest
+# ``proposer=for_noise_<preset>``: each execution-noise preset's shot proposer, the strongest
 # measured with the noise-aware search (results/noise/README.md): the geometric draws without
 # noise, the learned shot ranker trained for the preset's noise under it; under variable noise
 # (levels 0-5) the fastfiz_x5 one (docs/noise.md: ahead of the fastfiz ranker and of forgiving);
 # from a pool of 500 draws, not 2,000: the same per-shot success on the tuning racks at a quarter of
-# the ranking's cost (results/noisy_track/README.md)
+# the ranking's cost (results/noisy_track/README.md). A league player's ``proposer: for_noise`` and
+# expert iteration's first round under noise play it.
 _RANKED_X5 = RankedProposerConfig(ranker="results/rankers/fastfiz_x5/ranker.pt", pool=500,
                                   command=RANKER_COMMAND.format(out="results/rankers/fastfiz_x5/ranker.pt", noise="fastfiz_x5"))
-NOISE_DEFAULT_PROPOSERS = {
+NOISE_SHOT_PROPOSERS = {
     "none": GeometricProposerConfig(),
     "fastfiz": RankedProposerConfig(pool=500),
     "fastfiz_x5": _RANKED_X5,
     "variable": _RANKED_X5,
 }
+# ``proposer=default_for_<preset>``: what ``conf/search.yaml`` picks under each preset
+# (``proposer: default_for_${noise}``, beside ``search: for_noise_${noise}``): the shot proposer,
+# except under fastfiz_x5 and variable noise, where the fastfiz_x5 expert-iteration policy and
+# that shot ranker share the candidates (``exit_x5_mixed``), ahead of the ranker alone on the
+# tuning racks (+1.3 and +2.0 points per shot) and on the held-out tracks (results/exit/README.md)
+NOISE_DEFAULT_PROPOSERS = {**NOISE_SHOT_PROPOSERS, "fastfiz_x5": proposer_options()["exit_x5_mixed"],
+                           "variable": proposer_options()["exit_x5_mixed"]}
 
 _store = register_app("search_schema", SearchAppConfig, {group: schemas for group, (_, schemas) in OPTIONS.items()})
 for _name, _node in proposer_options().items():
     _store.store(group="proposer", name=_name, node=_node)
-for _preset, _node in NOISE_DEFAULT_PROPOSERS.items():
+for _preset, _node in NOISE_SHOT_PROPOSERS.items():
     _store.store(group="proposer", name=f"for_noise_{_preset}", node=_node)
+for _preset, _node in NOISE_DEFAULT_PROPOSERS.items():
+    _store.store(group="proposer", name=f"default_for_{_preset}", node=_node)
 
 
 class SearchConfigError(ValueError):
@@ -511,9 +520,12 @@ def compose_search(overrides: list[str]) -> DictConfig:
 def labelling_search(train_cfg) -> DictConfig:
     """The search expert iteration labels with under a training config's execution noise
     (``python train.py algo=exit noise=<preset>``, :mod:`billiards.exit`): what ``python search.py
-    noise=<preset> physics=<preset> search.budget=<algo.search_budget>`` composes."""
-    return compose_search([f"noise={train_cfg.noise.preset}", f"physics={train_cfg.physics.preset}",
-                           f"search.budget={train_cfg.algo.search_budget}"])
+    noise=<preset> physics=<preset> search.budget=<algo.search_budget> proposer=for_noise_<preset>``
+    composes: the default search over the noise's shot proposer (round 0's; the policy joins it
+    from round 1)."""
+    preset = train_cfg.noise.preset
+    return compose_search([f"noise={preset}", f"physics={train_cfg.physics.preset}",
+                           f"search.budget={train_cfg.algo.search_budget}", f"proposer=for_noise_{preset}"])
 
 
 def labelling_search_errors(train_cfg) -> list[str]:

@@ -88,7 +88,9 @@ def test_option_groups_list_only_real_options():
     assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "for_noise_variable", "h2",
                                        "puct", "robust"]
     assert group_options("protocol") == ["p1", "p3", "p3_paper"]
-    assert group_options("proposer") == ["base", "both", "exit", "exit_x5", "exit_x5_mixed", "for_noise_fastfiz",
+    # for_noise_<noise>: each noise's shot proposer; default_for_<noise>: search.py's default proposer
+    assert group_options("proposer") == ["base", "both", "default_for_fastfiz", "default_for_fastfiz_x5", "default_for_none",
+                                         "default_for_variable", "exit", "exit_x5", "exit_x5_mixed", "for_noise_fastfiz",
                                          "for_noise_fastfiz_x5", "for_noise_none", "for_noise_variable", "forgiving", "gentle",
                                          "geometric", "mixed", "near_miss", "policy", "ranked"]
     assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none", "variable"]
@@ -398,18 +400,24 @@ def test_train_refuses_search_apps_preset_at_once(tmp_path):
 def test_under_noise_the_default_is_the_strongest_measured_configuration():
     """``python search.py noise=<preset>`` with no proposer or search named plays the
     position-aware robust search (the shipped table value) over the shot ranker trained for
-    that noise, from a pool of 500; without noise, h2 over geometric draws, as before; either
-    stays one override away."""
+    that noise, from a pool of 500 (under fastfiz_x5 and variable sharing the candidates with
+    the fastfiz_x5 expert-iteration policy); without noise, h2 over geometric draws, as before;
+    either stays one override away, and ``proposer=for_noise_<preset>`` is the shot ranker alone."""
     first, run = "results/values/value.pt", "results/values/run1.pt"  # P(next shot scores); the discounted run
     for noise, (proposer, ranker, pool, search, position, value) in {
             "none": ("geometric", None, None, "h2", None, None),
             "fastfiz": ("ranked", "results/rankers/fastfiz/ranker.pt", 500, "robust", 8.0, run),
-            "fastfiz_x5": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 3.0, first),
-            "variable": ("ranked", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 5.0, first)}.items():
+            "fastfiz_x5": ("mixed", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 3.0, first),
+            "variable": ("mixed", "results/rankers/fastfiz_x5/ranker.pt", 500, "robust", 5.0, first)}.items():
         cfg = compose_search(f"noise={noise}")
-        got = (cfg.proposer.kind, cfg.proposer.get("ranker"), cfg.proposer.get("pool"), cfg.search.kind,
-               cfg.search.get("position"))
+        ranked = cfg.proposer.ranked if proposer == "mixed" else cfg.proposer
+        got = (cfg.proposer.kind, ranked.get("ranker"), ranked.get("pool"), cfg.search.kind, cfg.search.get("position"))
         assert got == (proposer, ranker, pool, search, position), noise
+        if proposer == "mixed":  # the fastfiz_x5 expert-iteration policy proposes half of each wave
+            assert (cfg.proposer.name, cfg.proposer.share) == ("exit_x5_mixed", 0.5)
+            assert list(cfg.proposer.policy.checkpoints) == ["results/policies/exit_x5/seed0.pt"]
+        shot = compose_search(f"noise={noise}", f"proposer=for_noise_{noise}").proposer  # the shot proposer alone
+        assert (shot.kind, shot.get("ranker"), shot.get("pool")) == ({"none": "geometric"}.get(noise, "ranked"), ranker, pool)
         assert cfg.search.get("value") == value
         assert cfg.search.get("target") == {"none": None, "fastfiz": 40}.get(noise, 10)  # the adaptive screen's stop
         search_config.validate(cfg)  # the ranker and value files are there and load

@@ -253,7 +253,8 @@ def small_search_config(*overrides):
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         return compose(config_name="search", overrides=["noise=variable", "search.budget=40", "search.k1=20", "search.wave=10",
-                                                         "proposer.pool=100", "progress=false", "picture=false", *overrides])
+                                                         "proposer=for_noise_variable", "proposer.pool=100", "progress=false",
+                                                         "picture=false", *overrides])
 
 
 @pytest.mark.parametrize("protocol", [["protocol=p1", "protocol.n_innings=2", "protocol.shots=2"],
@@ -271,7 +272,7 @@ def test_search_app_plays_variable_noise_and_records_it(tmp_path, monkeypatch, p
 
     monkeypatch.setattr(actors_mod.RobustActor, "search", recording)
     cfg = small_search_config(*protocol)
-    assert (cfg.search.kind, cfg.proposer.kind) == ("robust", "ranked")  # the defaults under noise=variable
+    assert (cfg.search.kind, cfg.proposer.kind) == ("robust", "ranked")  # the default search over the noise's shot ranker
     search_run.run(cfg, tmp_path)
     results = json.loads((tmp_path / "results.json").read_text())
     assert results["noise"] == "variable" and results["noise_levels"] == [0.0, 5.0] and results["noise_scale"] == 1.0
