@@ -32,7 +32,7 @@ CONFIGS = {
     "ranked_pool2000": ["noise=fastfiz", "search=robust", "proposer=ranked"],  # the default before the value
     "ranked_pool500": ["noise=fastfiz", "search=robust"],
     "default_fastfiz": ["noise=fastfiz"],  # position-aware
-    "default_fastfiz_x5": ["noise=fastfiz_x5"],
+    "default_fastfiz_x5": ["noise=fastfiz_x5", "proposer=for_noise_fastfiz_x5"],  # over the x5 shot ranker, as recorded
 }
 
 
