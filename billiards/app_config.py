@@ -1179,14 +1179,14 @@ def _plain_listing(get_group_options):
     ConfigStore's schemas included, for every question, in case overrides add a search path;
     without overrides there is none to add (and the project allows none), and ``--help`` asks
     one question per config group: 33 copies, most of the 6 s ``python train.py --help`` took."""
+    from hydra.core.object_type import ObjectType
+
     if getattr(get_group_options, "billiards_listed", False):
         return get_group_options
 
     @functools.wraps(get_group_options)
-    def group_options(self, group_name, results_filter=None, config_name=None, overrides=None):
-        from hydra.core.object_type import ObjectType
-
-        results_filter = ObjectType.CONFIG if results_filter is None else results_filter
+    def group_options(self, group_name, results_filter=ObjectType.CONFIG, config_name=None, overrides=None):
+        # results_filter as Hydra's: CONFIG by default, None for configs and groups alike
         if config_name is None and not overrides:
             return self.repository.get_group_options(group_name, results_filter)
         return get_group_options(self, group_name, results_filter, config_name, overrides)

@@ -83,15 +83,16 @@ def policy_file_error(path) -> str | None:
     be played, or None: the file loaded and checked now (its seal, then its content), e.g. by an
     app's validation before any directory is written."""
     path = Path(path)
-    if path.is_file() and path.name != CHECKPOINT_FILE:
+    exported = path.is_file() and path.name != CHECKPOINT_FILE
+    if exported:
         try:
             digest = hashlib.sha256(path.read_bytes()).hexdigest()
         except OSError:
-            digest = None  # unreadable: the loader says so
+            digest = None  # unreadable: the loader below says so
         if digest is not None:
             return _exported_file_error(str(path), digest)
     try:
-        if path.is_file() and path.name != CHECKPOINT_FILE:
+        if exported:
             _load_policy(path)
         else:
             load_checkpoint(path.parent if path.name == CHECKPOINT_FILE else path)

@@ -351,7 +351,7 @@ def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConf
     ``mixed`` (a policy and a shot ranker sharing the candidates, :class:`MixedProposerConfig`)."""
     return {"geometric": GeometricProposerConfig(), "forgiving": GeometricProposerConfig(**FORGIVING),
             **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS}, "exit": EXIT_PROPOSER, "exit_x5": EXIT_X5_PROPOSER,
-            "exit_x5_mixed": MixedProposerConfig(name="exit_x5_mixed", policy=EXIT_X5_PROPOSER, ranked=_RANKED_X5, share=0.5),
+            "exit_x5_mixed": EXIT_X5_MIXED,
             "policy": PolicyProposerConfig(name="policy", checkpoints=[]), "ranked": RankedProposerConfig(),
             "mixed": MixedProposerConfig()}
 
@@ -365,6 +365,7 @@ def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConf
 # expert iteration's first round under noise play it.
 _RANKED_X5 = RankedProposerConfig(ranker="results/rankers/fastfiz_x5/ranker.pt", pool=500,
                                   command=RANKER_COMMAND.format(out="results/rankers/fastfiz_x5/ranker.pt", noise="fastfiz_x5"))
+EXIT_X5_MIXED = MixedProposerConfig(name="exit_x5_mixed", policy=EXIT_X5_PROPOSER, ranked=_RANKED_X5, share=0.5)
 NOISE_SHOT_PROPOSERS = {
     "none": GeometricProposerConfig(),
     "fastfiz": RankedProposerConfig(pool=500),
@@ -376,8 +377,7 @@ NOISE_SHOT_PROPOSERS = {
 # except under fastfiz_x5 and variable noise, where the fastfiz_x5 expert-iteration policy and
 # that shot ranker share the candidates (``exit_x5_mixed``), ahead of the ranker alone on the
 # tuning racks (+1.3 and +2.0 points per shot) and on the held-out tracks (results/exit/README.md)
-NOISE_DEFAULT_PROPOSERS = {**NOISE_SHOT_PROPOSERS, "fastfiz_x5": proposer_options()["exit_x5_mixed"],
-                           "variable": proposer_options()["exit_x5_mixed"]}
+NOISE_DEFAULT_PROPOSERS = {**NOISE_SHOT_PROPOSERS, "fastfiz_x5": EXIT_X5_MIXED, "variable": EXIT_X5_MIXED}
 
 _store = register_app("search_schema", SearchAppConfig, {group: schemas for group, (_, schemas) in OPTIONS.items()})
 for _name, _node in proposer_options().items():

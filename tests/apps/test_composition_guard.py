@@ -261,8 +261,9 @@ def test_a_config_group_is_listed_as_hydra_lists_it_without_copying_the_reposito
     deepcopy = copy.deepcopy
     monkeypatch.setattr(copy, "deepcopy", lambda x, *a, **k: copies.append(type(x).__name__) or deepcopy(x, *a, **k))
     for group in groups:
-        for kind in (ObjectType.CONFIG, ObjectType.GROUP, ObjectType.CONFIG):
+        for kind in (ObjectType.CONFIG, ObjectType.GROUP, None):  # None: configs and groups alike
             assert loader.get_group_options(group, kind) == hydras(loader, group, kind), (group, kind)
+        assert loader.get_group_options(group) == hydras(loader, group), group
     listed = len(copies)
     for group in groups:
         loader.get_group_options(group, ObjectType.CONFIG)
