@@ -10,7 +10,8 @@ candidates, the ``algo.m1`` best expanded) values the proposer's candidates, and
 shot (candidate 0). The labelled shot is played, so the tables are those the search visits.
 The proposer is the geometric one in round 0 and the policy itself from round 1 on
 (:class:`~billiards.search.proposers.PolicyProposer`: its deterministic shot, then draws from
-its distribution): the label is the search's improvement of the policy's own shot, the nearest
+its distribution; from round 0 on where ``algo.init_policy`` names a trained policy to start
+from): the label is the search's improvement of the policy's own shot, the nearest
 one that does best, which keeps the targets one function of the table where plain imitation of
 the search's choice averages over its many equally good shots.
 
@@ -112,9 +113,10 @@ def centred(positions: np.ndarray, raw: np.ndarray, x: np.ndarray, probes: int, 
 def labeller(run: Run, round_index: int, params: PhysicsParams, first=None):
     """The proposer of round ``round_index``: ``first`` in round 0 (default: the geometric
     proposer), then the policy (built anew: the batched proposer copies the weights), with
-    ``algo.policy_share`` < 1 sharing the candidates with ``first`` (the policy's first)."""
+    ``algo.policy_share`` < 1 sharing the candidates with ``first`` (the policy's first). A run
+    with ``algo.init_policy`` starts from a trained policy, which proposes from round 0 on."""
     first = first if first is not None else GeometricProposer(R=params.ball_radius)
-    if round_index == 0:
+    if round_index == 0 and run.cfg.algo.init_policy is None:
         return first
     policy = PolicyProposer([run.agent.policy], constrain_aim=True, extra_features=bool(run.cfg.env.extra_features),
                             name="exit", R=params.ball_radius)
@@ -186,6 +188,11 @@ def train_exit(run: Run) -> float:
         search, first = H2Config(budget=a.search_budget, k1=a.k1, m1=a.m1).settings(), None
     else:
         search, first = noisy_search(run, params, noise)
+    if a.init_policy is not None and state.frames == 0 and run.agent.n_updates == 0:  # a fresh run (a resumed one has its own)
+        from billiards.rl.policy import init_actor_state
+
+        run.agent.actor.load_state_dict(init_actor_state(a.init_policy))
+        log.info("the policy starts from %s", a.init_policy)
     block_shots = a.innings * EXIT_SHOTS
     with session(run) as bar, StopRequests() as stop:
         spent = False

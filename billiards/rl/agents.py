@@ -464,8 +464,11 @@ class ExItAgent(_OneOptimizer):
     likelihood on the search's labelled shots. A replayed row holds ``"observation"`` and
     ``"target"``, the label's normalised action in [-1, 1]^4; the loss is the Gaussian negative
     log-likelihood of ``atanh(target)`` (the label kept :data:`TARGET_EDGE` inside the box), which
-    is the TanhNormal's up to a term that does not depend on the network. ``eval_policy`` and
-    ``explore`` are ``policy``."""
+    is the TanhNormal's up to a term that does not depend on the network. With ``nll_beta`` =
+    beta > 0 each coordinate's term is weighted by its scale to the power 2 beta, the weight held
+    constant (beta-NLL, Seitzer et al. 2022): the plain likelihood lets the network widen its
+    scale where labels are hard to fit and learn the mean there less; beta = 1 gives the mean
+    the squared error's gradient. ``eval_policy`` and ``explore`` are ``policy``."""
 
     metric_names = ("loss_nll", "scale_mean")
     replay_keys = ("observation", "target")
@@ -480,6 +483,7 @@ class ExItAgent(_OneOptimizer):
         self.explore = self.eval_policy = self.policy
         self.to(device)
         self.optimizer = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr)
+        self.nll_beta = float(cfg.get("nll_beta", 0.0))
         self.n_updates = 0
 
     @property
@@ -490,7 +494,10 @@ class ExItAgent(_OneOptimizer):
         loc, scale = self.actor.module[0].module(batch.get("observation"))
         edge = 1.0 - self.TARGET_EDGE
         z = torch.atanh(batch.get("target").clamp(-edge, edge))
-        loss = (torch.log(scale) + 0.5 * ((z - loc) / scale) ** 2).sum(-1).mean()
+        nll = torch.log(scale) + 0.5 * ((z - loc) / scale) ** 2
+        if self.nll_beta:  # beta-NLL: each coordinate's term weighted by its scale^(2 beta), held constant
+            nll = nll * scale.detach() ** (2.0 * self.nll_beta)
+        loss = nll.sum(-1).mean()
         loss.backward()
         self.optimizer.step()
         self.optimizer.zero_grad(set_to_none=True)

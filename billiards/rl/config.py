@@ -268,7 +268,11 @@ class ExItConfig(AlgoConfig):
     the region of good shots; the label stays otherwise). From round 1 on the policy proposes ``policy_share`` of the
     candidates (its shot first), round 0's proposer the rest; after each round,
     ``epochs`` passes (``batch_size`` rows per update) of maximum likelihood on the last
-    ``buffer_size`` labelled shots. ``innings``: innings played side by side in one block."""
+    ``buffer_size`` labelled shots. ``innings``: innings played side by side in one block.
+    ``init_policy``: an exported policy file (:func:`billiards.rl.policy.export_policy`, e.g. a
+    SAC run's) whose actor has this one's shape, table and observation: the policy starts from
+    its weights and proposes from round 0 on (:func:`billiards.rl.policy.init_policy_problem`).
+    ``nll_beta``: the loss's beta (:class:`~billiards.rl.agents.ExItAgent`; 0 = maximum likelihood)."""
 
     name: str = "exit"
     lr: float = 1e-3
@@ -283,6 +287,8 @@ class ExItConfig(AlgoConfig):
     policy_share: float = 1.0
     centre_probes: int = 0
     centre_scale: float = 0.02
+    init_policy: Optional[str] = None  # an exported policy file of the same actor: the start (and proposer from round 0)
+    nll_beta: float = 0.0  # beta-NLL: each label's likelihood term weighted by scale^(2 beta) (0: the plain likelihood)
 
     KEEPS_REPLAY: ClassVar[bool] = True
     UPPER: ClassVar[dict] = {
@@ -313,6 +319,7 @@ class ExItConfig(AlgoConfig):
                        f"(0 without expansion), with algo.m1 <= algo.k1"),
                 *_need(0.0 < a.policy_share <= 1.0, f"algo.policy_share must lie in (0, 1], got {a.policy_share}"),
                 *_positive("algo.centre_probes", a.centre_probes, strict=False), *_positive("algo.centre_scale", a.centre_scale),
+                *_need(0.0 <= a.nll_beta <= 1.0, f"algo.nll_beta must lie in [0, 1], got {a.nll_beta}"),
                 *_need(a.innings > 0 and a.shots_per_round % (a.innings * EXIT_SHOTS) == 0,
                        f"algo.shots_per_round ({a.shots_per_round}) must be whole blocks of algo.innings x {EXIT_SHOTS} "
                        f"shots ({a.innings * EXIT_SHOTS})")]
@@ -597,6 +604,10 @@ def _errors(cfg: DictConfig) -> list[str]:
             errs += _need(noise.is_exact or not a.centre_probes,
                           "algo.centre_probes centres exact play's labels: under noise the label is the noisy "
                           "search's choice (set algo.centre_probes=0)")
+        if a.init_policy is not None and not physics_errors(cfg.physics):
+            from billiards.rl.policy import init_policy_problem
+
+            errs += [f"algo.init_policy: {why}"] if (why := init_policy_problem(a.init_policy, cfg)) else []
     if a.name in ALGO_CHECKS and not errs:
         errs += ALGO_CHECKS[a.name](cfg)
     if cfg.curriculum.name != "none" and a.name not in OFF_POLICY:

@@ -155,6 +155,44 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
     return save_tagged(out, payload)
 
 
+# the algorithms whose actor is the tanh-Gaussian one expert iteration trains (billiards.rl.agents)
+GAUSSIAN_ACTORS = ("sac", "ppo", "exit")
+
+
+def init_policy_problem(path, cfg) -> str | None:
+    """Why the exported policy file at ``path`` cannot be where expert iteration's policy starts
+    (``algo.init_policy`` of the training config ``cfg``), or None: the file checked on load
+    (:func:`policy_file_error`), its actor the tanh-Gaussian one of the same hidden layers, its
+    observation the same (carom features or not; no noise level), on the same table."""
+    from billiards.files import repo_path
+
+    path = repo_path(path)
+    if not path.is_file() or path.name == CHECKPOINT_FILE:
+        return f"{display_path(path)} is not an exported policy file (python -m billiards.rl.policy export <run dir>)"
+    if err := policy_file_error(path):
+        return err
+    _, _, pcfg = _load_policy(path)
+    mine = {"algo": pcfg.algo.name, "hidden_sizes": list(pcfg.algo.hidden_sizes),
+            "extra_features": bool(pcfg.env.get("extra_features", False)), "constrain_aim": bool(pcfg.env.constrain_aim)}
+    wanted = {"algo": f"one of {', '.join(GAUSSIAN_ACTORS)}", "hidden_sizes": list(cfg.algo.hidden_sizes),
+              "extra_features": bool(cfg.env.extra_features), "constrain_aim": True}
+    differ = [f"{key}={mine[key]} (this run: {wanted[key]})" for key in mine
+              if (mine[key] not in GAUSSIAN_ACTORS if key == "algo" else mine[key] != wanted[key])]
+    if reads_level(pcfg):
+        differ.append("it reads each shot's noise level (trained under variable noise)")
+    if policy_physics(pcfg) != params_from_config(cfg.physics):
+        differ.append(f"its table is physics={pcfg.physics.preset}'s (this run: physics={cfg.physics.preset})")
+    return f"{display_path(path)} cannot start this policy: {'; '.join(differ)}" if differ else None
+
+
+def init_actor_state(path) -> dict:
+    """The actor's weights of the exported policy file at ``path`` (checked by
+    :func:`init_policy_problem`), where expert iteration's policy starts."""
+    from billiards.files import repo_path
+
+    return _load_policy(repo_path(path))[0]["actor"]
+
+
 def reads_level(cfg) -> bool:
     """Whether a run's policy reads each shot's noise level as its observation's last entry
     (trained under variable noise, ``noise=variable``)."""

@@ -14,6 +14,7 @@ import pytest
 
 from test_train import ENV, REPO, TRAIN, check_finished, ok, same, train
 
+SAC_POLICY = "results/policies/base/seed0.pt"  # SAC with the aim constraint and the carom features
 TINY = ["algo=exit", "env=aim_features", "algo.innings=10", "algo.shots_per_round=200", "algo.search_budget=60",
         "algo.k1=20", "algo.m1=2", "algo.batch_size=64", "algo.epochs=2", "budget=smoke", "budget.total_steps=600",
         "budget.eval_every=200", "budget.checkpoint_every=200", "budget.log_every=200", "budget.eval_innings=5",
@@ -160,6 +161,13 @@ def test_an_exit_run_under_noise_labels_with_the_noisy_search_and_plays_its_shot
      "search (robust): schedule=halving leaves 0 simulations"),
     (("algo=exit", "env=aim_features", "algo.k1=395"), "algo.search_budget - algo.k1 (400 - 395) must be a multiple"),
     (("algo=exit", "env=aim_features", "algo.innings=300"), "must be whole blocks of algo.innings x 10 shots (3000)"),
+    (("algo=exit", "env=aim_features", "algo.init_policy=results/policies/nowhere.pt"),
+     "algo.init_policy: results/policies/nowhere.pt is not an exported policy file"),
+    (("algo=exit", "env=aim_features", f"algo.init_policy={SAC_POLICY}", "algo.hidden_sizes=[64,64]"),
+     f"algo.init_policy: {SAC_POLICY} cannot start this policy: hidden_sizes=[256, 256] (this run: [64, 64])"),
+    (("algo=exit", "env=aim", f"algo.init_policy={SAC_POLICY}"), "extra_features=True (this run: False)"),
+    (("algo=exit", "env=aim_features", "physics=international", f"algo.init_policy={SAC_POLICY}"),
+     "its table is physics=korean_medium's (this run: physics=international)"),
 ])
 def test_bad_exit_configs_are_refused_with_their_message(tmp_path, overrides, message):
     from conftest import refusal
@@ -263,3 +271,69 @@ def test_the_trainer_alone_refuses_exit_without_its_loop(tmp_path):
         train_library(cfg, tmp_path / "run")
     assert not (tmp_path / "run").exists()
 
+
+
+def test_an_exit_run_can_start_from_a_trained_policy_which_proposes_from_round_0(tmp_path):
+    """algo.init_policy: the policy starts from an exported SAC policy's actor (at a learning
+    rate too small to move it, the run ends with those weights) and that policy, not the
+    geometric proposer, proposes in round 0, so its labels are the search's corrections of
+    the SAC shots: the round-0 search scores as the search over SAC does, above the geometric
+    proposer's at the same budget."""
+    import torch
+
+    from billiards.rl.checkpoint import load_checkpoint
+    from billiards.rl.policy import init_actor_state
+
+    one_round = [*TINY, "budget.total_steps=200", "algo.lr=1e-12"]
+    started, plain = tmp_path / "started", tmp_path / "plain"
+    ok(train(tmp_path, *one_round, f"algo.init_policy={SAC_POLICY}", f"hydra.run.dir={started}"))
+    ok(train(tmp_path, *one_round, f"hydra.run.dir={plain}"))
+    actor = load_checkpoint(started)["agent"]
+    for key, weight in init_actor_state(SAC_POLICY).items():
+        assert torch.allclose(actor[f"actor.{key}"], weight, atol=1e-6), key
+    assert "the policy starts from" in (started / "train.log").read_text()
+
+    def round_0(run) -> float:
+        line = next(x for x in (run / "train.log").read_text().splitlines() if "round 0: the search scored" in x)
+        return float(line.split("scored ")[1].split(" %")[0])
+
+    def eval_pct(run) -> float:
+        return json.loads((run / "eval.json").read_text())["success_per_shot_pct"]
+
+    assert round_0(started) > round_0(plain) + 5.0
+    assert eval_pct(started) > eval_pct(plain) + 20.0  # SAC's ~65 % against an untrained network
+
+
+@pytest.mark.parametrize("beta", [0.0, 0.5, 1.0])
+def test_the_loss_weights_each_label_by_its_scale_to_the_power_two_beta(beta):
+    """algo.nll_beta: the gradient one update takes is the Gaussian likelihood's with each
+    coordinate's term weighted by scale^(2 beta), the weight held constant; at beta = 1 the
+    mean's part of the output layer gets exactly the squared error's gradient."""
+    import torch
+    from omegaconf import OmegaConf
+    from tensordict import TensorDict
+    from torchrl.data import Bounded
+
+    from billiards.rl.agents import make_agent
+    from billiards.rl.config import ALGO_SCHEMAS
+
+    algo = OmegaConf.structured(ALGO_SCHEMAS["exit"])
+    algo.nll_beta, algo.hidden_sizes = beta, [16, 16]
+    torch.manual_seed(0)
+    agent = make_agent(algo, 28, Bounded(torch.tensor([0.0, 0.0, -1.0, -1.0]), torch.tensor([6.283, 1.0, 1.0, 1.0]), shape=(4,)))
+    batch = TensorDict({"observation": torch.randn(64, 28), "target": torch.rand(64, 4) * 1.8 - 0.9}, batch_size=[64])
+    net = agent.actor.module[0].module
+    loc, scale = net(batch["observation"])
+    z = torch.atanh(batch["target"])
+    weight = scale.detach() ** (2 * beta)
+    expected = (weight * (torch.log(scale) + 0.5 * ((z - loc) / scale) ** 2)).sum(-1).mean()
+    expected_grads = torch.autograd.grad(expected, list(net.parameters()), retain_graph=True)
+    squared = torch.autograd.grad((0.5 * (z - loc) ** 2).sum(-1).mean(), net[0][-1].weight)[0][:4]
+
+    taken = []
+    agent.optimizer.step = lambda: taken.append([p.grad.clone() for p in net.parameters()])
+    agent._step(batch)
+    for got, want in zip(taken[0], expected_grads):
+        assert torch.allclose(got, want, rtol=1e-5, atol=1e-7)
+    last = dict(zip([id(p) for p in net.parameters()], taken[0]))[id(net[0][-1].weight)][:4]  # the loc rows
+    assert torch.allclose(last, squared, rtol=1e-5, atol=1e-7) == (beta == 1.0)
