@@ -1,7 +1,8 @@
 """Compile the simulator's kernels before a run starts, and say so.
 
 numba compiles each kernel on its first call (about 30-60 s for the whole simulator on this
-machine) and caches the machine code in ``billiards/physics/__pycache__`` (``cache=True``), so
+machine) and caches the machine code in ``billiards/physics/__pycache__`` (``cache=True``; under
+``$NUMBA_CACHE_DIR`` where that is set), so
 only the first run on a machine, or after the kernels changed, pays it. :func:`warm_up` makes
 that cost visible: entry points call it before their progress bars start, instead of sitting
 at 0 % in silence.
@@ -15,10 +16,20 @@ from typing import Callable
 
 import numpy as np
 
+from . import core
 from .api import PARALLEL_MIN_BATCH, canonical_rack, simulate_batch, simulate_shot
 from .params import DEFAULT_PARAMS, PhysicsParams
 
-CACHE_DIR = Path(__file__).resolve().parent / "__pycache__"
+
+def _numba_cache_dir() -> Path:
+    """Where numba caches the kernels of ``core``: the folder its own cache locator chose (the
+    package's ``__pycache__``, ``$NUMBA_CACHE_DIR/...`` where that is set, or a user-wide folder
+    where the package's is read-only)."""
+    located = getattr(getattr(core.run_batch, "_cache", None), "_cache_path", None)
+    return Path(located) if located else Path(core.__file__).resolve().parent / "__pycache__"
+
+
+CACHE_DIR = _numba_cache_dir()
 SLOW = 3.0  # seconds: a warm-up longer than this compiled something
 
 

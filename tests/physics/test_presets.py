@@ -280,3 +280,16 @@ def test_warm_up_says_when_it_compiles(tmp_path, monkeypatch):
     said.clear()
     warmup.warm_up(log=said.append)  # cached and already loaded: silent
     assert warmup.kernels_cached() and said == []
+
+
+def test_the_warm_up_looks_for_the_kernels_where_numba_caches_them(tmp_path):
+    """Under NUMBA_CACHE_DIR numba caches the kernels there, not in the package: the warm-up
+    looks there too (an empty folder: not compiled yet, so it says it will compile)."""
+    import os
+    import subprocess
+    import sys
+
+    probe = "from billiards.physics import warmup; print(warmup.CACHE_DIR); print(warmup.kernels_cached())"
+    out = subprocess.run([sys.executable, "-c", probe], env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)},
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out[0].startswith(str(tmp_path)) and out[1] == "False"
