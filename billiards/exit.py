@@ -18,7 +18,8 @@ the search's choice averages over its many equally good shots.
 Under execution noise (``noise=fastfiz`` or ``fastfiz_x5``) the labeller is what ``search.py``
 plays under that noise over its shot ranker (:func:`noisy_search`: the position-aware robust search with its table
 value, ``algo.search_budget`` simulations), its proposer in round 0 the preset's shot ranker;
-the label is the search's chosen shot (:func:`noisy_labels`), played with the noise. With
+the label is the search's chosen shot (:func:`noisy_labels`; with ``algo.label_tolerance`` > 0
+the proposer's own shot where the chosen one's statistic beats it by no more), played with the noise. With
 ``algo.policy_share`` < 1 the policy proposes that share of the candidates from round 1 on and
 round 0's proposer the rest (:class:`~billiards.search.proposers.MixedProposer`), so the
 labeller never loses the candidates it started from. After the round's last block,
@@ -137,13 +138,19 @@ def noisy_search(run: Run, params: PhysicsParams, noise):
     return make_actor(scfg, first, params, noise=noise), first
 
 
-def noisy_labels(positions: np.ndarray, actor, proposer, rng: np.random.Generator, params: PhysicsParams):
+def noisy_labels(positions: np.ndarray, actor, proposer, rng: np.random.Generator, params: PhysicsParams,
+                 tolerance: float = 0.0):
     """The noisy search's labels for tables (S, 4, 2): its chosen shot (the best by the
-    statistic over noisy replays, no nearest-best choice: the replays rarely tie). Returns
-    ``(raw shots (S, 4), targets (S, 4), simulations)``."""
+    statistic over noisy replays: the replays rarely tie), or, where that statistic beats the
+    proposer's own shot's (candidate 0) by no more than ``tolerance``, that own shot (the
+    policy's shot where the search cannot tell it from the best). Returns ``(raw shots (S, 4),
+    targets (S, 4), simulations)``."""
     actor.proposer, actor.rng = proposer, rng
     result = actor.search(positions)
-    return result.actions, normalized_target(positions, result.actions, params.ball_radius), result.n_sims
+    actions = result.actions
+    if tolerance > 0:
+        actions = np.where((result.own_margin <= tolerance)[:, None], result.own, actions)
+    return actions, normalized_target(positions, actions, params.ball_radius), result.n_sims
 
 
 def play_block(run: Run, block: int, proposer, search, params: PhysicsParams, noise=None) -> tuple[TensorDict, int, int]:
@@ -166,7 +173,7 @@ def play_block(run: Run, block: int, proposer, search, params: PhysicsParams, no
             if a.centre_probes:
                 raw, x, _ = centred(positions, raw, x, int(a.centre_probes), float(a.centre_scale), rng, params)
         else:
-            raw, x, _ = noisy_labels(positions, search, proposer, rng, params)
+            raw, x, _ = noisy_labels(positions, search, proposer, rng, params, float(a.label_tolerance))
         observations.append(domain.observation(positions, bool(cfg.env.extra_features)))
         targets.append(x.astype(np.float32))
         _, _, _, _, info = env.step(raw)

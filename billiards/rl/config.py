@@ -272,7 +272,10 @@ class ExItConfig(AlgoConfig):
     ``init_policy``: an exported policy file (:func:`billiards.rl.policy.export_policy`, e.g. a
     SAC run's) whose actor has this one's shape, table and observation: the policy starts from
     its weights and proposes from round 0 on (:func:`billiards.rl.policy.init_policy_problem`).
-    ``nll_beta``: the loss's beta (:class:`~billiards.rl.agents.ExItAgent`; 0 = maximum likelihood)."""
+    ``nll_beta``: the loss's beta (:class:`~billiards.rl.agents.ExItAgent`; 0 = maximum likelihood).
+    ``label_tolerance`` (under noise): the label is the proposer's own shot (candidate 0) where
+    the search's choice beats its statistic over the noisy replays by no more than this
+    (:func:`billiards.exit.noisy_labels`; 0: always the search's choice)."""
 
     name: str = "exit"
     lr: float = 1e-3
@@ -289,6 +292,7 @@ class ExItConfig(AlgoConfig):
     centre_scale: float = 0.02
     init_policy: Optional[str] = None  # an exported policy file of the same actor: the start (and proposer from round 0)
     nll_beta: float = 0.0  # beta-NLL: each label's likelihood term weighted by scale^(2 beta) (0: the plain likelihood)
+    label_tolerance: float = 0.0  # under noise: keep the proposer's own shot where the chosen one beats it by no more
 
     KEEPS_REPLAY: ClassVar[bool] = True
     UPPER: ClassVar[dict] = {
@@ -301,6 +305,7 @@ class ExItConfig(AlgoConfig):
         "search_budget": (10**6, "simulations per labelled shot"),
         "k1": (10**6, "candidates per shot"), "m1": (10**6, "expanded candidates per shot"),
         "centre_probes": (10**4, "probes per label"), "centre_scale": (1.0, "the probes' standard deviation"),
+        "label_tolerance": (1000.0, "the noisy search's statistic"),
     }
 
     @classmethod
@@ -320,6 +325,7 @@ class ExItConfig(AlgoConfig):
                 *_need(0.0 < a.policy_share <= 1.0, f"algo.policy_share must lie in (0, 1], got {a.policy_share}"),
                 *_positive("algo.centre_probes", a.centre_probes, strict=False), *_positive("algo.centre_scale", a.centre_scale),
                 *_need(0.0 <= a.nll_beta <= 1.0, f"algo.nll_beta must lie in [0, 1], got {a.nll_beta}"),
+                *_positive("algo.label_tolerance", a.label_tolerance, strict=False),
                 *_need(a.innings > 0 and a.shots_per_round % (a.innings * EXIT_SHOTS) == 0,
                        f"algo.shots_per_round ({a.shots_per_round}) must be whole blocks of algo.innings x {EXIT_SHOTS} "
                        f"shots ({a.innings * EXIT_SHOTS})")]
@@ -601,6 +607,9 @@ def _errors(cfg: DictConfig) -> list[str]:
             errs += _need(not noise.is_variable,
                           "algo=exit under variable noise is not built: its policy does not see the shot's noise level "
                           "(noise=none, fastfiz or fastfiz_x5)")
+            errs += _need(not noise.is_exact or not a.label_tolerance,
+                          "algo.label_tolerance picks among the noisy search's candidates: under exact play the label is "
+                          "already the best-valued shot nearest the policy's own (set algo.label_tolerance=0)")
             errs += _need(noise.is_exact or not a.centre_probes,
                           "algo.centre_probes centres exact play's labels: under noise the label is the noisy "
                           "search's choice (set algo.centre_probes=0)")

@@ -37,6 +37,10 @@ class SearchResult:
     r1: np.ndarray  # (S,) immediate verifier reward predicted for the chosen action
     positions: np.ndarray  # (S, 4, 2) predicted table after the chosen action
     n_sims: int  # shots simulated for this decision (all states)
+    # the robust search's: candidate 0 (the proposer's own shot) and the margin by which the
+    # chosen action's statistic beats its (S,) (inf where candidate 0 was not sampled); None elsewhere
+    own: np.ndarray | None = None
+    own_margin: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

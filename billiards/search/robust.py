@@ -269,7 +269,9 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
     for s in range(S) if value is not None else ():  # the verifier reward alone where leaves were priced
         if rewards[s][best[s]]:
             r1[s] = float(np.mean(rewards[s][best[s]]))
-    return SearchResult(a1[rows, best], chosen_value, r1, leave[rows, best], n_sims)
+    chosen_stat = stat[rows, best]
+    own_margin = np.where(np.isfinite(stat[:, 0]), chosen_stat - stat[:, 0], np.inf)
+    return SearchResult(a1[rows, best], chosen_value, r1, leave[rows, best], n_sims, own=a1[:, 0].copy(), own_margin=own_margin)
 
 
 __all__ = ["RobustConfig", "SCHEDULES", "leave_terms", "robust_search"]

@@ -119,6 +119,18 @@ def test_under_noise_the_label_is_the_default_noisy_searchs_own_choice():
     raw, target, sims = noisy_labels(positions, actor, mixed, np.random.default_rng(9), DEFAULT_PARAMS)
     own = robust_search(positions, mixed, actor.cfg, np.random.default_rng(9), DEFAULT_PARAMS, noise, value=actor.value)
     assert np.array_equal(raw, own.actions) and sims == own.n_sims == 12 * 330
+    # with a tolerance: the proposer's own shot (candidate 0, here the ranker's best) wherever the
+    # choice beats it by no more
+    ranked = MixedProposer(first, GeometricProposer(), 0.5)
+    own = robust_search(positions, ranked, actor.cfg, np.random.default_rng(9), DEFAULT_PARAMS, noise, value=actor.value)
+    assert own.own is not None and np.array_equal(own.own, ranked.propose(positions, 1, np.random.default_rng(9))[:, 0])
+    finite = own.own_margin[np.isfinite(own.own_margin)]
+    assert (own.own_margin >= 0).all() and len(finite) > 2 and (finite == 0).mean() < 1  # sampled, and sometimes beaten
+    tol = float(np.median(finite[finite > 0]))
+    kept, _, _ = noisy_labels(positions, actor, ranked, np.random.default_rng(9), DEFAULT_PARAMS, tolerance=tol)
+    near = own.own_margin <= tol
+    assert near.any() and (~near).any()
+    assert np.array_equal(kept[near], own.own[near]) and np.array_equal(kept[~near], own.actions[~near])
     again = domain.raw_action(target, positions, constrain_aim=True, normalized=True)
     assert np.allclose(np.mod(again[:, 0] - raw[:, 0] + np.pi, 2 * np.pi) - np.pi, 0.0, atol=1e-12)
     assert np.allclose(again[:, 1:], raw[:, 1:], atol=1e-12)
@@ -156,6 +168,8 @@ def test_an_exit_run_under_noise_labels_with_the_noisy_search_and_plays_its_shot
     (("algo=exit", "env=aim_features", "algo.policy_share=0"), "algo.policy_share must lie in (0, 1], got 0.0"),
     (("algo=exit", "env=aim_features", "algo.centre_probes=-1"), "algo.centre_probes must be >= 0, got -1"),
     (("algo=exit", "env=aim_features", "noise=fastfiz", "algo.centre_probes=8"), "algo.centre_probes centres exact play's"),
+    (("algo=exit", "env=aim_features", "algo.label_tolerance=0.1"), "algo.label_tolerance picks among the noisy search's"),
+    (("algo=exit", "env=aim_features", "noise=fastfiz", "algo.label_tolerance=-1"), "algo.label_tolerance must be >= 0"),
     (("algo=exit", "env=aim_features", "noise=fastfiz", "algo.search_budget=300"),
      "algo=exit under noise=fastfiz labels with search.py's search for it at algo.search_budget=300 simulations: "
      "search (robust): schedule=halving leaves 0 simulations"),
