@@ -235,7 +235,8 @@ def learning_curve(run_dirs, sac_dirs, out) -> dict:
     """The figure of expert iteration's learning (``out``, PNG) and its data: per-shot success
     of the policy alone (each evaluation of ``eval_history.jsonl``) and of the search over it
     (``metrics.csv``'s ``train_score_pct``: the labelled shots as played), against process
-    CPU hours, beside the evaluations of SAC runs (``sac_dirs``) on the same axis."""
+    CPU hours, beside the evaluations of SAC runs (``sac_dirs``) on the same axis. A run started
+    from a trained policy (``algo.init_policy``) starts at that policy's training CPU hours."""
     import csv
     from pathlib import Path
 
@@ -244,9 +245,10 @@ def learning_curve(run_dirs, sac_dirs, out) -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from billiards.files import display_path
-
     from omegaconf import OmegaConf
+
+    from billiards.files import display_path
+    from billiards.rl.policy import policy_summary
 
     data = {"exit": [], "sac": []}
     first = OmegaConf.load(Path(run_dirs[0]) / "config.yaml")  # the runs' noise and labeller, named in the figure
@@ -256,11 +258,15 @@ def learning_curve(run_dirs, sac_dirs, out) -> dict:
                 + (" and the shot ranker" if float(first.algo.get("policy_share", 1.0)) < 1.0 else ""))
     fig, ax = plt.subplots(figsize=(7.5, 4.2), dpi=120)
     for i, d in enumerate(run_dirs):
-        alone = [(e["cpu_time"] / 3600, e["eval_success_pct"]) for e in _history(d)]
+        start = OmegaConf.load(Path(d) / "config.yaml").algo.get("init_policy")
+        # a run from a trained policy starts at that policy's own training CPU time
+        hours = float(policy_summary(start).get("cpu_seconds", 0.0)) / 3600 if start else 0.0
+        alone = [(hours + e["cpu_time"] / 3600, e["eval_success_pct"]) for e in _history(d)]
         with (Path(d) / "metrics.csv").open(newline="") as f:
-            searched = [(float(r["cpu_time"]) / 3600, float(r["train_score_pct"])) for r in csv.DictReader(f)
+            searched = [(hours + float(r["cpu_time"]) / 3600, float(r["train_score_pct"])) for r in csv.DictReader(f)
                         if r.get("train_score_pct")]
-        data["exit"].append({"run": display_path(d), "policy_alone": alone, "search_over_policy": searched})
+        data["exit"].append({"run": display_path(d), "policy_alone": alone, "search_over_policy": searched,
+                             "init_policy": start, "init_cpu_hours": hours})
         ax.plot(*zip(*alone), "o-", color="tab:blue", ms=3, label="expert iteration: the policy alone" if i == 0 else None)
         ax.plot(*zip(*searched), "s--", color="tab:green", ms=3,
                 label=f"expert iteration: {searcher}" if i == 0 else None)

@@ -185,6 +185,14 @@ def init_policy_problem(path, cfg) -> str | None:
     return f"{display_path(path)} cannot start this policy: {'; '.join(differ)}" if differ else None
 
 
+def policy_summary(path) -> dict:
+    """The training summary an exported policy file records (``summary.json`` of its run: its
+    frames, CPU seconds, ...; empty where it has none), the file checked on load."""
+    from billiards.files import repo_path
+
+    return dict(_load_policy(repo_path(path))[0].get("summary") or {})
+
+
 def init_actor_state(path) -> dict:
     """The actor's weights of the exported policy file at ``path`` (checked by
     :func:`init_policy_problem`), where expert iteration's policy starts."""

@@ -317,6 +317,18 @@ def test_an_exit_run_can_start_from_a_trained_policy_which_proposes_from_round_0
     assert round_0(started) > round_0(plain) + 5.0
     assert eval_pct(started) > eval_pct(plain) + 20.0  # SAC's ~65 % against an untrained network
 
+    # the learning curve starts a run from a trained policy at that policy's training CPU time
+    from billiards.exit import learning_curve
+    from billiards.rl.policy import policy_summary
+
+    data = learning_curve([started, plain], [], tmp_path / "curve.png")
+    hours = policy_summary(SAC_POLICY)["cpu_seconds"] / 3600
+    assert hours > 0.1 and (tmp_path / "curve.png").stat().st_size > 0
+    (mine, other) = data["exit"]
+    assert mine["init_policy"] == SAC_POLICY and mine["init_cpu_hours"] == hours and other["init_cpu_hours"] == 0.0
+    assert all(x >= hours for x, _ in mine["policy_alone"] + mine["search_over_policy"])
+    assert all(x < hours for x, _ in other["policy_alone"])
+
 
 @pytest.mark.parametrize("beta", [0.0, 0.5, 1.0])
 def test_the_loss_weights_each_label_by_its_scale_to_the_power_two_beta(beta):
