@@ -6,6 +6,7 @@
     python -m billiards.bench campaign --only h2_ --tracks p3-exact-v1
     python -m billiards.bench record-training results/training/paper/table1/sac --row "SAC plain (Table 1)"
     python -m billiards.bench fingerprint                # each track's fingerprint, recomputed
+    python -m billiards.bench compare <scorecard> <scorecard>  # two agents on one track, paired by unit
 """
 
 from __future__ import annotations
@@ -53,7 +54,28 @@ def main(argv=None) -> int:
     rt.add_argument("--row", required=True)
     rt.add_argument("--slug", required=True)
     sub.add_parser("fingerprint", help="recompute each track's fingerprint")
+    co = sub.add_parser("compare", help="two scorecards of one track, unit by unit: the paired difference and its interval")
+    co.add_argument("first", type=Path, help="a scorecard (scorecard.json or its folder)")
+    co.add_argument("second", type=Path, help="another agent's scorecard on the same track")
+    co.add_argument("--json", action="store_true", help="print the comparison as JSON")
     args = parser.parse_args(argv)
+    if args.command == "compare":
+        from .leaderboard import compare
+
+        try:
+            c = compare(args.first, args.second)
+        except ValueError as err:
+            raise SystemExit(f"Error: {err}") from None
+        if args.json:
+            print(json.dumps(c, indent=2))
+        else:
+            pct = c["unit"] == "success per shot"
+            f = (lambda v: f"{100 * v:+.2f} points" if pct else f"{v:+.3f}")
+            g = (lambda v: f"{100 * v:.2f} %" if pct else f"{v:.3f}")
+            print(f"{c['track']}, {c['unit']}: {c['first']} {g(c['first_mean'])} - {c['second']} {g(c['second_mean'])} = "
+                  f"{f(c['difference'])}, paired 95 % interval [{f(c['ci95'][0])}, {f(c['ci95'][1])}] over {c['units']} units "
+                  f"({c['first']} ahead on {c['first_better']}, behind on {c['second_better']})")
+        return 0
     if args.command == "leaderboard":
         from .leaderboard import build
 

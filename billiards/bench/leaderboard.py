@@ -376,3 +376,34 @@ def record_training(setting: Path, row: str, slug: str, root: Path | None = None
 
 __all__ = ["EARLIER", "PROFILE_THRESHOLDS", "REBUILD", "STATUSES", "build", "collect", "draw_figure", "draw_profiles",
            "check_against_ledger", "earlier_figure", "leaderboard", "markdown", "record_training"]
+
+
+def compare(first: Path, second: Path) -> dict:
+    """Two agents' scorecards of one track compared unit by unit: every unit of a track is the
+    same rack (inning, chain or match) for every agent, so the difference of their per-unit
+    scores (a scorecard's ``values``: per shot for innings and P1, chain lengths for P3, match
+    scores) is paired, and its bootstrap interval is narrower than the two scorecards'
+    intervals side by side. ``first``, ``second``: scorecard files or their folders, complete
+    (not partial nor limited) and of the same track and version. ValueError says what differs."""
+    cards = []
+    for path in (Path(first), Path(second)):
+        path = path / "scorecard.json" if path.is_dir() else path
+        card = _load(path)
+        if card.get("partial") or card.get("limit"):
+            raise ValueError(f"{display_path(path)}: a partial or limited scorecard (play the whole track first)")
+        cards.append((path, card))
+    (pa, a), (pb, b) = cards
+    if a["track"] != b["track"]:
+        raise ValueError(f"{display_path(pa)} is on {a['track']}, {display_path(pb)} on {b['track']}: compare one track")
+    va, vb = (np.asarray(c["values"], dtype=np.float64) for c in (a, b))
+    if va.shape != vb.shape:
+        raise ValueError(f"{display_path(pa)} has {va.size} units, {display_path(pb)} {vb.size}")
+    track = TRACKS[a["track"]]
+    unit, scale = {"innings": ("success per shot", 1.0 / track.shots), "p1": ("success per shot", 1.0),
+                   "p3": ("chain length", 1.0)}.get(track.protocol, ("match score", 1.0))
+    diff = (va - vb) * scale
+    return {"track": a["track"], "unit": unit, "first": a["agent"]["name"], "second": b["agent"]["name"],
+            "first_mean": round(float(va.mean() * scale), 6), "second_mean": round(float(vb.mean() * scale), 6),
+            "difference": round(float(diff.mean()), 6), "ci95": stats.bootstrap_ci(diff), "units": int(diff.size),
+            "first_better": int((diff > 0).sum()), "second_better": int((diff < 0).sum()),
+            "sources": [display_path(pa), display_path(pb)]}

@@ -841,3 +841,35 @@ def test_the_committed_leaderboard_regenerates_byte_for_byte(tmp_path):
         assert (tmp_path / name).read_bytes() == (ROOT / "results" / name).read_bytes(), name
     board = json.loads(committed.read_text())
     assert board["agents"] >= 15
+
+
+def test_two_scorecards_of_one_track_are_compared_unit_by_unit(tmp_path):
+    """python -m billiards.bench compare: the paired difference of the per-unit scores (per shot
+    on an innings track), its bootstrap interval and the units each is ahead on; a scorecard of
+    another track, or of fewer units, is refused with its reason."""
+    from billiards.bench.leaderboard import compare
+
+    mine = ROOT / "results/bench/scorecards/innings-v1/sac_base_s0"
+    card = json.loads((mine / SCORECARD_JSON).read_text())
+    better = dict(card, values=[min(v + 1, 10) for v in card["values"]], agent=dict(card["agent"], name="better"))
+    (tmp_path / "better.json").write_text(json.dumps(better))
+    c = compare(tmp_path / "better.json", mine)
+    gain = np.mean(np.minimum(np.asarray(card["values"]) + 1, 10) - card["values"]) / 10
+    assert c["unit"] == "success per shot" and c["first"] == "better" and c["second"] == "sac_base_s0"
+    assert c["difference"] == pytest.approx(gain) and c["ci95"][0] <= c["difference"] <= c["ci95"][1] <= 0.1
+    assert c["first_mean"] == pytest.approx(card["success_per_shot"]["mean"] + gain)
+    assert c["first_better"] == sum(v < 10 for v in card["values"]) and c["second_better"] == 0
+    assert compare(mine, tmp_path / "better.json")["difference"] == pytest.approx(-gain)
+
+    (tmp_path / "short.json").write_text(json.dumps(dict(card, values=card["values"][:-1])))
+    with pytest.raises(ValueError, match="has 100 units"):
+        compare(mine, tmp_path / "short.json")
+    other = ROOT / "results/bench/scorecards/p1-exact-v1/sac_base_s0"
+    with pytest.raises(ValueError, match="is on innings-v1"):
+        compare(mine, other)
+    out = subprocess.run([sys.executable, "-m", "billiards.bench", "compare", str(tmp_path / "better.json"), str(mine)],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0 and "paired 95 % interval" in out.stdout and f"{100 * gain:+.2f} points" in out.stdout
+    bad = subprocess.run([sys.executable, "-m", "billiards.bench", "compare", str(mine), str(other)],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 1 and "Error:" in bad.stderr and "compare one track" in bad.stderr
