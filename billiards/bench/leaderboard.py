@@ -374,10 +374,6 @@ def record_training(setting: Path, row: str, slug: str, root: Path | None = None
     return path
 
 
-__all__ = ["EARLIER", "PROFILE_THRESHOLDS", "REBUILD", "STATUSES", "build", "collect", "draw_figure", "draw_profiles",
-           "check_against_ledger", "earlier_figure", "leaderboard", "markdown", "record_training"]
-
-
 def compare(first: Path, second: Path) -> dict:
     """Two agents' scorecards of one track compared unit by unit: every unit of a track is the
     same rack (inning, chain or match) for every agent, so the difference of their per-unit
@@ -407,3 +403,8 @@ def compare(first: Path, second: Path) -> dict:
             "difference": round(float(diff.mean()), 6), "ci95": stats.bootstrap_ci(diff), "units": int(diff.size),
             "first_better": int((diff > 0).sum()), "second_better": int((diff < 0).sum()),
             "sources": [display_path(pa), display_path(pb)]}
+
+
+__all__ = ["EARLIER", "PROFILE_THRESHOLDS", "REBUILD", "STATUSES", "build", "collect", "draw_figure", "draw_profiles",
+           "check_against_ledger", "compare", "earlier_figure", "leaderboard", "markdown", "record_training"]
+

@@ -162,16 +162,17 @@ GAUSSIAN_ACTORS = ("sac", "ppo", "exit")
 def init_policy_problem(path, cfg) -> str | None:
     """Why the exported policy file at ``path`` cannot be where expert iteration's policy starts
     (``algo.init_policy`` of the training config ``cfg``), or None: the file checked on load
-    (:func:`policy_file_error`), its actor the tanh-Gaussian one of the same hidden layers, its
+    (its seal, then its content), its actor the tanh-Gaussian one of the same hidden layers, its
     observation the same (carom features or not; no noise level), on the same table."""
     from billiards.files import repo_path
 
     path = repo_path(path)
     if not path.is_file() or path.name == CHECKPOINT_FILE:
         return f"{display_path(path)} is not an exported policy file (python -m billiards.rl.policy export <run dir>)"
-    if err := policy_file_error(path):
-        return err
-    _, _, pcfg = _load_policy(path)
+    try:  # sealed and checked, once
+        _, _, pcfg = _load_policy(path)
+    except CheckpointError as err:
+        return str(err)
     mine = {"algo": pcfg.algo.name, "hidden_sizes": list(pcfg.algo.hidden_sizes),
             "extra_features": bool(pcfg.env.get("extra_features", False)), "constrain_aim": bool(pcfg.env.constrain_aim)}
     wanted = {"algo": f"one of {', '.join(GAUSSIAN_ACTORS)}", "hidden_sizes": list(cfg.algo.hidden_sizes),
@@ -190,7 +191,7 @@ def policy_summary(path) -> dict:
     frames, CPU seconds, ...; empty where it has none), the file checked on load."""
     from billiards.files import repo_path
 
-    return dict(_load_policy(repo_path(path))[0].get("summary") or {})
+    return dict(_load_policy_file(repo_path(path)).get("summary") or {})
 
 
 def init_actor_state(path) -> dict:
@@ -198,7 +199,7 @@ def init_actor_state(path) -> dict:
     :func:`init_policy_problem`), where expert iteration's policy starts."""
     from billiards.files import repo_path
 
-    return _load_policy(repo_path(path))[0]["actor"]
+    return _load_policy_file(repo_path(path))["actor"]
 
 
 def reads_level(cfg) -> bool:
