@@ -91,9 +91,7 @@ def main(argv=None) -> None:
 
     proposer = load_policy_proposer([args.policy], params=params)
     own = proposer.propose(tables, 1, np.random.default_rng(0))[:, 0]
-    from billiards.exit import normalized_target
-
-    own_x = normalized_target(tables, own, params.ball_radius)
+    own_x = domain.normalized_aim_action(tables, own, params.ball_radius)
     _, nearest, _ = nearest_best(tables, proposer, search, np.random.default_rng(SEED + 2), params)
     gap = np.abs(nearest - own_x)
     policy = {"success": success(own_x),

@@ -12,11 +12,12 @@ same convention as the action's aim ``theta``.
 Contents
 --------
 * the observation: :func:`observation` (the 28 floats of :func:`rest_observation`, then with
-  the carom features the 4 of :func:`feature_observation`) and its bounds,
-  :func:`observation_bounds`;
+  the carom features the 4 of :func:`feature_observation`), its bounds,
+  :func:`observation_bounds`, and the table it holds, :func:`observed_positions`;
 * the action a policy emits and its bounds (:func:`action_bounds`), the normalised action
   [-1, 1]^4 and its map to the raw shot (:func:`unnormalize_action`), and the whole map from a
-  policy's action to the shot the simulator plays, :func:`raw_action`;
+  policy's action to the shot the simulator plays, :func:`raw_action`, and back,
+  :func:`normalized_aim_action`;
 * the aim constraint: :func:`nearest_red`, :func:`aim_window`, :func:`constrained_theta`,
   :func:`aim_action`;
 * the carom features: :func:`carom_features`;
@@ -69,6 +70,17 @@ def rest_observation(positions: np.ndarray) -> np.ndarray:
     obs = np.zeros(positions.shape[:-2] + (N_BALLS, BALL_STATE_DIM), dtype=np.float32)
     obs[..., :2] = positions
     return obs.reshape(positions.shape[:-2] + (OBS_DIM,))
+
+
+def observed_positions(obs: np.ndarray) -> np.ndarray:
+    """The ball centres an observation holds: the inverse of :func:`rest_observation` (to
+    float32's precision). obs (..., D >= 28) -> positions (..., 4, 2) float64; what an agent that
+    sees only the gymnasium observation knows of the table."""
+    obs = np.asarray(obs)
+    if obs.shape[-1] < OBS_DIM:
+        raise ValueError(f"observed_positions: an observation has at least {OBS_DIM} floats, got shape {obs.shape}")
+    balls = obs[..., :OBS_DIM].reshape(obs.shape[:-1] + (N_BALLS, BALL_STATE_DIM))
+    return balls[..., :2].astype(np.float64)
 
 
 def feature_observation(positions: np.ndarray) -> np.ndarray:
@@ -226,6 +238,18 @@ def raw_action(action: np.ndarray, positions: np.ndarray, R: float = DEFAULT_PAR
     its two stages, in that order. A new float64 array."""
     raw = unnormalize_action(action, constrain_aim) if normalized else np.array(action, dtype=np.float64)
     return aim_action(raw, positions, R) if constrain_aim else raw
+
+
+def normalized_aim_action(positions: np.ndarray, actions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius) -> np.ndarray:
+    """The inverse of :func:`raw_action` with the aim constraint and the normalised box: raw
+    shots (..., 4) on the tables ``positions`` (..., 4, 2) as the aim-constrained policy's
+    normalised action (u, 2p - 1, a, b), u the shot's angle inside the nearest red's window
+    (:func:`aim_window`; the angle's difference taken within half a turn, so |u| > 1 for a shot
+    aimed outside the window). (..., 4) float64."""
+    target, half = aim_window(positions, R)
+    actions = np.asarray(actions, dtype=np.float64)
+    u = (np.mod(actions[..., 0] - target + math.pi, 2.0 * math.pi) - math.pi) / half
+    return normalize_action(np.stack([u, actions[..., 1], actions[..., 2], actions[..., 3]], axis=-1), constrain_aim=True)
 
 
 # ----------------------------------------------------------------------------- carom features

@@ -38,7 +38,6 @@ exactly what the uninterrupted one did.
 from __future__ import annotations
 
 import logging
-import math
 
 import numpy as np
 import torch
@@ -59,26 +58,16 @@ log = logging.getLogger("billiards.exit")
 EXIT_SEED = 20_000_000  # inning i of seed s plays the rack of EXIT_SEED + 10,000,000 s + i
 
 
-def normalized_target(positions: np.ndarray, actions: np.ndarray, R: float) -> np.ndarray:
-    """Raw shots (..., 4) on tables (..., 4, 2) as the aim-constrained policy's normalised action
-    (u, 2p - 1, a, b), u the shot's angle inside the nearest red's window
-    (:func:`billiards.domain.aim_window`; the angle's difference taken within half a turn)."""
-    target, half = domain.aim_window(positions, R)
-    u = (np.mod(actions[..., 0] - target + math.pi, 2.0 * math.pi) - math.pi) / half
-    return domain.normalize_action(np.stack([u, actions[..., 1], actions[..., 2], actions[..., 3]], axis=-1),
-                                   constrain_aim=True)
-
-
 def nearest_best(positions: np.ndarray, proposer, cfg: H2Config, rng: np.random.Generator, params: PhysicsParams):
     """The depth-2 lookahead's labels for tables (S, 4, 2): among the expanded candidates of the
     best value (:func:`~billiards.search.lookahead.h2_values`; all candidates by r1 without
     expansion), the one nearest candidate 0 (the proposer's own shot) in the normalised
-    aim-constrained action (:func:`normalized_target`; ties: proposer order). Returns
+    aim-constrained action (:func:`billiards.domain.normalized_aim_action`; ties: proposer order). Returns
     ``(raw shots (S, 4), targets (S, 4), simulations)``."""
     v = h2_values(positions, proposer, cfg, rng, params)
     S = positions.shape[0]
     rows = np.arange(S)[:, None]
-    x = normalized_target(positions[:, None], v.candidates, params.ball_radius)  # (S, K1, 4)
+    x = domain.normalized_aim_action(positions[:, None], v.candidates, params.ball_radius)  # (S, K1, 4)
     if v.top.shape[1]:
         pool, value = v.top, v.value
     else:
@@ -150,7 +139,7 @@ def noisy_labels(positions: np.ndarray, actor, proposer, rng: np.random.Generato
     actions = result.actions
     if tolerance > 0:
         actions = np.where((result.own_margin <= tolerance)[:, None], result.own, actions)
-    return actions, normalized_target(positions, actions, params.ball_radius), result.n_sims
+    return actions, domain.normalized_aim_action(positions, actions, params.ball_radius), result.n_sims
 
 
 def play_block(run: Run, block: int, proposer, search, params: PhysicsParams, noise=None) -> tuple[TensorDict, int, int]:
@@ -310,7 +299,7 @@ def main(argv=None) -> None:
     print(f"wrote {args.out} and {args.out.with_suffix('.json')}")
 
 
-__all__ = ["EXIT_SEED", "labeller", "learning_curve", "nearest_best", "normalized_target", "play_block", "train_exit"]
+__all__ = ["EXIT_SEED", "labeller", "learning_curve", "nearest_best", "play_block", "train_exit"]
 
 
 if __name__ == "__main__":

@@ -218,6 +218,12 @@ def checksum(out: Path) -> str:
 # these datasets' layout but not their values: docs/datasets.md), scored on the benchmark track of
 # the dataset's noise.
 IQL_TRACK = {"none": "innings-v1", "fastfiz": "p1-fastfiz-v1"}
+# What the learner sees and emits: ``raw`` the gymnasium env's observation (28 floats) and
+# normalised action box (the angle over the whole turn); ``aim_features`` what the project's own
+# agents use (env=aim_features): the observation with the carom features (32 floats) and the
+# aim-constrained action (u inside the nearest red's window, p, a, b), both from the table the
+# observation holds (billiards.domain.observed_positions).
+SPACES = ("raw", "aim_features")
 IQL_SETTINGS = {"batch_size": 256, "lr": 3e-4, "gamma": 0.9, "tau": 0.005, "expectile": 0.7, "temperature": 3.0,
                 "hidden_sizes": [256, 256]}
 
@@ -234,10 +240,29 @@ def normalized_actions(actions: np.ndarray) -> np.ndarray:
     return np.clip(domain.normalize_action(raw), -edge, edge).astype(np.float32)
 
 
-def transitions(directory: Path):
+def space_rows(obs: np.ndarray, actions: np.ndarray | None, space: str):
+    """Observations (N, 28) and raw shots (N, 4) (or None) as the learner of ``space`` sees
+    them (:data:`SPACES`): (observation float32, action float32 in [-1, 1]^4 kept 0.001 inside
+    it, or None). Under ``aim_features`` a shot aimed outside the nearest red's window is
+    clipped to the window's edge."""
+    from billiards import domain
+
+    if space not in SPACES:
+        raise ValueError(f"space must be one of {', '.join(SPACES)}, got {space!r}")
+    if space == "raw":
+        return np.asarray(obs, dtype=np.float32), None if actions is None else normalized_actions(actions)
+    positions = domain.observed_positions(obs)
+    x = domain.observation(positions, extra_features=True)
+    if actions is None:
+        return x, None
+    edge = 1.0 - 1e-3
+    return x, np.clip(domain.normalized_aim_action(positions, actions), -edge, edge).astype(np.float32)
+
+
+def transitions(directory: Path, space: str = "raw"):
     """Every transition of the Minari dataset built in ``directory``, read with
-    ``minari.load_dataset``, as one TensorDict: observation, action (normalised), next
-    observation, reward, done and terminated."""
+    ``minari.load_dataset``, as one TensorDict in the learner's ``space`` (:func:`space_rows`):
+    observation, action (normalised), next observation, reward, done and terminated."""
     import minari
     import torch
     from tensordict import TensorDict
@@ -249,9 +274,10 @@ def transitions(directory: Path):
     os.environ["MINARI_DATASETS_PATH"] = str(root)
     parts = {k: [] for k in ("obs", "next", "action", "reward", "terminated", "truncated")}
     for ep in minari.load_dataset(manifest["dataset_id"]).iterate_episodes():
-        parts["obs"].append(ep.observations[:-1])
-        parts["next"].append(ep.observations[1:])
-        parts["action"].append(normalized_actions(ep.actions))
+        obs, action = space_rows(ep.observations[:-1], ep.actions, space)
+        parts["obs"].append(obs)
+        parts["next"].append(space_rows(ep.observations[1:], None, space)[0])
+        parts["action"].append(action)
         parts["reward"].append(ep.rewards)
         parts["terminated"].append(ep.terminations)
         parts["truncated"].append(ep.truncations)
@@ -264,9 +290,10 @@ def transitions(directory: Path):
                                 "done": flag(cat["terminated"]) | flag(cat["truncated"])}}, batch_size=[n])
 
 
-def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress: bool = True) -> dict:
+def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress: bool = True, space: str = "raw") -> dict:
     """IQL (TorchRL's ``IQLLoss``, :data:`IQL_SETTINGS`) for ``updates`` gradient steps on the
-    dataset built in ``directory`` (:func:`transitions`), then its deterministic policy scored on
+    dataset built in ``directory`` in the learner's ``space`` (:func:`transitions`), then its
+    deterministic policy (mapped back to the raw shot on the observed table) scored on
     the dataset noise's track (:data:`IQL_TRACK`) by the benchmark (``out/scorecard``); writes
     ``out/iql.json`` (settings, CPU seconds, the scorecard's figures) and returns it."""
     import time
@@ -277,12 +304,16 @@ def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress:
     from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
     from torchrl.objectives import IQLLoss, SoftUpdate, ValueEstimators
 
+    from billiards import domain
     from billiards.bench import evaluate
+    from billiards.bench.agents import CallableAgent
     from billiards.rl.agents import mlp
 
     manifest, cfg = _manifest(directory), IQL_SETTINGS
+    if space not in SPACES:
+        raise ValueError(f"space must be one of {', '.join(SPACES)}, got {space!r}")
     torch.manual_seed(seed)
-    data = transitions(directory)
+    data = transitions(directory, space)
     rb = ReplayBuffer(storage=LazyTensorStorage(data.shape[0]), batch_size=cfg["batch_size"])
     rb.extend(data)
     dim, ones = int(data["observation"].shape[-1]), torch.ones(4)
@@ -312,13 +343,19 @@ def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress:
     net = actor.module[0].module
 
     def act(obs):
+        obs = np.asarray(obs)
+        x, _ = space_rows(obs[..., :domain.OBS_DIM], None, space)
         with torch.no_grad():
-            return torch.tanh(net(torch.as_tensor(obs, dtype=torch.float32))[0]).numpy()
+            a = torch.tanh(net(torch.as_tensor(x, dtype=torch.float32))[0]).numpy()
+        if space == "raw":  # the env's own normalised box
+            return a
+        return domain.raw_action(a, domain.observed_positions(obs), constrain_aim=True, normalized=True)
 
     track = IQL_TRACK[manifest["noise"]]
-    card = evaluate(act, track, out=out / "scorecard", progress=False,
-                    command=f"python -m billiards.offline iql {directory} --updates {updates} --seed {seed} --out {out}")
-    record = {"dataset_id": manifest["dataset_id"], "updates": updates, "seed": seed, "settings": cfg,
+    flag = "" if space == "raw" else f" --space {space}"
+    card = evaluate(CallableAgent(act, f"iql:{space}", normalized=space == "raw"), track, out=out / "scorecard", progress=False,
+                    command=f"python -m billiards.offline iql {directory} --updates {updates} --seed {seed}{flag} --out {out}")
+    record = {"dataset_id": manifest["dataset_id"], "updates": updates, "seed": seed, "space": space, "settings": cfg,
               "train_cpu_seconds": round(train_cpu, 1), "train_wall_seconds": round(time.perf_counter() - start, 1),
               "track": track, **{k: card[k] for k in ("success_per_shot", "points_per_inning", "foul_per_shot", "ms_per_decision")}}
     out.mkdir(parents=True, exist_ok=True)
@@ -343,10 +380,13 @@ def main(argv=None) -> int:
     q.add_argument("dataset_dir", type=Path, metavar="DIR", help="the dataset's folder (built)")
     q.add_argument("--updates", type=int, default=20_000)
     q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--space", default="raw", choices=SPACES,
+                   help="what the learner sees and emits: the env's raw observation and action box (default), or "
+                        "aim_features: the carom features and the aim-constrained action, as the project's own agents")
     q.add_argument("--out", type=Path, required=True, help="where iql.json and the scorecard go")
     args = parser.parse_args(argv)
     if args.command == "iql":
-        rec = train_iql(args.dataset_dir, args.updates, args.out, args.seed)
+        rec = train_iql(args.dataset_dir, args.updates, args.out, args.seed, space=args.space)
         print(json.dumps({k: rec[k] for k in ("dataset_id", "updates", "train_cpu_seconds", "track", "success_per_shot")}))
         return 0
     if args.command == "generate":

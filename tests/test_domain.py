@@ -29,6 +29,15 @@ def test_rest_observation_layout():
     assert domain.rest_observation(np.stack([HAND] * 3)).shape == (3, 28)
 
 
+def test_observed_positions_are_the_tables_an_observation_holds():
+    batch = np.stack([HAND, HAND[[0, 1, 3, 2]]])
+    for extra in (False, True):
+        seen = domain.observed_positions(domain.observation(batch, extra))
+        assert seen.shape == (2, 4, 2) and seen.dtype == np.float64
+        np.testing.assert_array_equal(seen, batch.astype(np.float32))
+    with pytest.raises(ValueError, match="at least 28"):
+        domain.observed_positions(np.zeros((2, 27)))
+
 
 def test_observation_is_the_rest_floats_then_the_carom_features():
     batch = np.stack([HAND, HAND[[0, 1, 3, 2]]])
@@ -65,6 +74,20 @@ def test_action_bounds_and_the_map_to_the_played_shot():
     np.testing.assert_array_equal(both, domain.aim_action(domain.unnormalize_action(x, True), batch, R))
     assert both[0, 1] == pytest.approx(0.4) and both[1, 0] == domain.constrained_theta(batch[1], -1.0, R)
     assert not np.shares_memory(domain.raw_action(x, batch, R), x)
+
+
+def test_normalized_aim_action_inverts_the_aim_constrained_map():
+    """raw_action(normalized_aim_action(shot)) is the shot again, for angles given in any turn;
+    a shot outside the window has |u| > 1 (on HAND red1 lies straight up: u = 0 is pi / 2)."""
+    batch = np.stack([HAND, HAND[[0, 1, 3, 2]]])
+    x = np.array([[0.5, -0.2, 0.3, -0.9], [-1.0, 1.0, 0.0, 0.1]])
+    raw = domain.raw_action(x, batch, R, constrain_aim=True, normalized=True)
+    for turns in (-1, 0, 1):
+        shifted = raw + np.array([2 * math.pi * turns, 0, 0, 0])
+        np.testing.assert_allclose(domain.normalized_aim_action(batch, shifted, R), x, atol=1e-12)
+    u = domain.normalized_aim_action(HAND, np.array([math.pi / 2 + 0.5, 0.5, 0.0, 0.0]), R)[0]
+    assert u == pytest.approx(0.5 / math.asin(2 * R / 0.4))
+    assert abs(domain.normalized_aim_action(HAND, np.array([-math.pi / 2, 0.5, 0.0, 0.0]), R)[0]) > 1
 
 def test_nearest_red_and_ties():
     assert domain.nearest_red(HAND) == 2

@@ -143,3 +143,34 @@ def test_the_iql_baseline_reads_the_recorded_transitions_trains_and_is_scored(sa
     assert 0.0 <= record["success_per_shot"]["mean"] <= 1.0 and record["success_per_shot"]["n_shots"] == 1000
     assert json.loads((tmp_path / "iql" / "iql.json").read_text()) == record
     assert (tmp_path / "iql" / "scorecard" / "scorecard.json").is_file()
+
+
+def test_the_aim_features_space_is_the_recorded_shots_on_the_observed_tables(sample, tmp_path):
+    """Under ``--space aim_features`` the learner's rows are the observed table with the carom
+    features and the recorded shot as the aim-constrained action, which maps back to the shot
+    (the nearest-red agent aims at the red's centre: u = 0); a policy trained so is scored as
+    raw shots."""
+    import math
+
+    import minari
+
+    from billiards import domain
+
+    data = offline.transitions(sample, "aim_features")
+    first = next(minari.load_dataset(offline.dataset_id("nearest", "none")).iterate_episodes())
+    tables = domain.observed_positions(first.observations)
+    n = offline.SHOTS
+    np.testing.assert_array_equal(data["observation"][:n].numpy(), domain.observation(tables[:-1], True))
+    np.testing.assert_array_equal(data["next", "observation"][:n].numpy(), domain.observation(tables[1:], True))
+    x = data["action"][:n].numpy().astype(np.float64)
+    np.testing.assert_allclose(x[:, 0], 0.0, atol=1e-5)
+    back = domain.raw_action(x, tables[:-1], constrain_aim=True, normalized=True)
+    turn = np.mod(back[:, 0] - first.actions[:, 0] + math.pi, 2 * math.pi) - math.pi
+    np.testing.assert_allclose(turn, 0.0, atol=1e-5)
+    np.testing.assert_allclose(back[:, 1:], first.actions[:, 1:], atol=1e-3)  # float32, 0.001 inside the box
+    with pytest.raises(ValueError, match="space must be one of"):
+        offline.space_rows(first.observations, None, "aim")
+    record = offline.train_iql(sample, 20, tmp_path / "iql", progress=False, space="aim_features")
+    assert record["space"] == "aim_features" and record["success_per_shot"]["n_shots"] == 1000
+    card = json.loads((tmp_path / "iql" / "scorecard" / "scorecard.json").read_text())
+    assert card["agent"]["normalized"] is False and "--space aim_features" in card["command"]

@@ -72,9 +72,12 @@ class Agent(Protocol):
     one gradient step and returns its loss outputs (``metric_names`` among them).
     ``state_dict`` holds the networks (modules), ``state_dict_extra`` the optimizers and
     the update counter (plain types and tensors) -- the checkpoint's ``agent`` and ``agent_extra``.
+    ``actor_kind`` names the actor's form: ``"tanh_gaussian"`` (:func:`gaussian_actor`: SAC,
+    PPO, expert iteration; one such actor's weights fit another's) or ``"deterministic"`` (TD3).
     """
 
     metric_names: tuple[str, ...]
+    actor_kind: str
     n_updates: int
     policy: TensorDictModuleBase
     eval_policy: TensorDictModuleBase
@@ -254,6 +257,7 @@ class _OffPolicyBase(nn.Module):
 
 
 class SACAgent(_OffPolicyBase):
+    actor_kind = "tanh_gaussian"
     metric_names = ("loss_actor", "loss_qvalue", "loss_alpha", "alpha", "entropy")
 
     def __init__(self, cfg, obs_dim: int, action_spec, num_envs: int = 1, device: torch.device | str = "cpu"):
@@ -304,6 +308,7 @@ class SACAgent(_OffPolicyBase):
 
 
 class TD3Agent(_OffPolicyBase):
+    actor_kind = "deterministic"
     metric_names = ("loss_actor", "loss_qvalue")
 
     def __init__(self, cfg, obs_dim: int, action_spec, num_envs: int = 1, device: torch.device | str = "cpu"):
@@ -411,6 +416,7 @@ class PPOAgent(_OneOptimizer):
     """Clipped PPO with GAE on a tanh-Gaussian policy (``"action_norm"`` log-probabilities).
     No averaged actor: ``eval_policy`` is ``policy`` and ``explore`` too (sampling)."""
 
+    actor_kind = "tanh_gaussian"
     metric_names = ("loss_objective", "loss_critic", "loss_entropy", "entropy", "kl_approx", "clip_fraction")
 
     def __init__(self, cfg, obs_dim: int, action_spec, num_envs: int = 1, device: torch.device | str = "cpu"):
@@ -470,6 +476,7 @@ class ExItAgent(_OneOptimizer):
     scale where labels are hard to fit and learn the mean there less; beta = 1 gives the mean
     the squared error's gradient. ``eval_policy`` and ``explore`` are ``policy``."""
 
+    actor_kind = "tanh_gaussian"
     metric_names = ("loss_nll", "scale_mean")
     replay_keys = ("observation", "target")
     TARGET_EDGE = 1e-3

@@ -155,8 +155,12 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
     return save_tagged(out, payload)
 
 
-# the algorithms whose actor is the tanh-Gaussian one expert iteration trains (billiards.rl.agents)
-GAUSSIAN_ACTORS = ("sac", "ppo", "exit")
+def _gaussian_actors() -> tuple[str, ...]:
+    """The algorithms whose actor is the tanh-Gaussian one expert iteration trains (each agent's
+    ``actor_kind``, billiards.rl.agents)."""
+    from .agents import AGENTS
+
+    return tuple(name for name, agent in AGENTS.items() if agent.actor_kind == "tanh_gaussian")
 
 
 def init_policy_problem(path, cfg) -> str | None:
@@ -173,12 +177,13 @@ def init_policy_problem(path, cfg) -> str | None:
         _, _, pcfg = _load_policy(path)
     except CheckpointError as err:
         return str(err)
+    gaussian = _gaussian_actors()
     mine = {"algo": pcfg.algo.name, "hidden_sizes": list(pcfg.algo.hidden_sizes),
             "extra_features": bool(pcfg.env.get("extra_features", False)), "constrain_aim": bool(pcfg.env.constrain_aim)}
-    wanted = {"algo": f"one of {', '.join(GAUSSIAN_ACTORS)}", "hidden_sizes": list(cfg.algo.hidden_sizes),
+    wanted = {"algo": f"one of {', '.join(gaussian)}", "hidden_sizes": list(cfg.algo.hidden_sizes),
               "extra_features": bool(cfg.env.extra_features), "constrain_aim": True}
     differ = [f"{key}={mine[key]} (this run: {wanted[key]})" for key in mine
-              if (mine[key] not in GAUSSIAN_ACTORS if key == "algo" else mine[key] != wanted[key])]
+              if (mine[key] not in gaussian if key == "algo" else mine[key] != wanted[key])]
     if reads_level(pcfg):
         differ.append("it reads each shot's noise level (trained under variable noise)")
     if policy_physics(pcfg) != params_from_config(cfg.physics):

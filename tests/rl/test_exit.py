@@ -24,7 +24,7 @@ TINY = ["algo=exit", "env=aim_features", "algo.innings=10", "algo.shots_per_roun
 def test_the_label_is_the_best_valued_candidate_nearest_the_proposers_own_shot():
     from billiards import domain
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
-    from billiards.exit import nearest_best, normalized_target
+    from billiards.exit import nearest_best
     from billiards.physics import DEFAULT_PARAMS
     from billiards.search.lookahead import h2_values
     from billiards.search.proposers import GeometricProposer
@@ -38,7 +38,7 @@ def test_the_label_is_the_best_valued_candidate_nearest_the_proposers_own_shot()
         assert sims == v.n_sims == 40 * cfg.sims_per_decision
         pool = v.top if cfg.m1 else np.broadcast_to(np.arange(cfg.k1), v.r1.shape)
         value = v.value if cfg.m1 else v.r1
-        x = normalized_target(positions[:, None], v.candidates, DEFAULT_PARAMS.ball_radius)
+        x = domain.normalized_aim_action(positions[:, None], v.candidates, DEFAULT_PARAMS.ball_radius)
         for s in range(40):
             chosen = [j for j, k in enumerate(pool[s]) if np.array_equal(v.candidates[s, k], raw[s])]
             assert chosen and value[s, chosen[0]] == value[s].max()  # a best-valued candidate
@@ -363,3 +363,35 @@ def test_the_loss_weights_each_label_by_its_scale_to_the_power_two_beta(beta):
         assert torch.allclose(got, want, rtol=1e-5, atol=1e-7)
     last = dict(zip([id(p) for p in net.parameters()], taken[0]))[id(net[0][-1].weight)][:4]  # the loc rows
     assert torch.allclose(last, squared, rtol=1e-5, atol=1e-7) == (beta == 1.0)
+
+
+def test_each_agent_names_its_actors_form_truly():
+    """``actor_kind``, which decides what algo.init_policy accepts: the tanh-Gaussian agents'
+    actors share one layout (a SAC actor's weights load into expert iteration's), TD3's does not."""
+    import torch
+    from omegaconf import OmegaConf
+    from torchrl.data import Bounded
+    from torchrl.modules import ProbabilisticActor
+
+    from billiards.rl.agents import AGENTS, make_agent
+    from billiards.rl.config import ALGO_SCHEMAS
+    from billiards.rl.policy import _gaussian_actors
+
+    spec = Bounded(torch.tensor([0.0, 0.0, -1.0, -1.0]), torch.tensor([6.283, 1.0, 1.0, 1.0]), shape=(4,))
+    def actor_of(name):
+        algo = OmegaConf.structured(ALGO_SCHEMAS[name])
+        algo.hidden_sizes = [16, 16]
+        return make_agent(algo, 32, spec).actor
+
+    exit_actor = actor_of("exit")
+    for name in AGENTS:
+        actor = actor_of(name)
+        gaussian = isinstance(actor, ProbabilisticActor)
+        assert AGENTS[name].actor_kind == ("tanh_gaussian" if gaussian else "deterministic"), name
+        assert (name in _gaussian_actors()) == gaussian
+        if gaussian:
+            exit_actor.load_state_dict(actor.state_dict())
+        else:
+            with pytest.raises(RuntimeError):
+                exit_actor.load_state_dict(actor.state_dict())
+    assert set(_gaussian_actors()) == {"sac", "ppo", "exit"}
