@@ -283,7 +283,8 @@ def make_dataset(n_racks: int, candidates: int, samples: int, noise: NoiseModel,
                  params: PhysicsParams = DEFAULT_PARAMS, chunk: int = 500) -> tuple[np.ndarray, np.ndarray]:
     """Features (n_racks * candidates, N_FEATURES) float32 and targets (same rows,) float32:
     random racks, ``candidates`` pool draws each (:data:`POOL_DRAWS`), the share of
-    ``samples`` noisy replays that score for those that score exactly, 0 for the others."""
+    ``samples`` noisy replays that score for those that score exactly (1 under exact ``noise``,
+    nothing replayed), 0 for the others."""
     draws = GeometricProposer(R=params.ball_radius, **POOL_DRAWS)
     X, y = [], []
     for start in range(0, n_racks, chunk):
@@ -293,7 +294,9 @@ def make_dataset(n_racks: int, candidates: int, samples: int, noise: NoiseModel,
         exact = simulate_batch(np.repeat(racks, candidates, axis=0), cand.reshape(-1, 4), params).score
         q = np.zeros(n * candidates, dtype=np.float32)
         hit = np.flatnonzero(exact)
-        if hit.size:
+        if noise.is_exact:  # every replay would be the exact shot again
+            q[hit] = 1.0
+        elif hit.size:
             shots = np.repeat(cand.reshape(-1, 4)[hit], samples, axis=0)
             played = noise.apply(shots, noise.draw((len(shots),), rng), params)
             noisy = simulate_batch(np.repeat(racks[hit // candidates], samples, axis=0), played, params).score
@@ -370,7 +373,8 @@ def main(argv=None) -> int:
                                  description="Train a shot ranker for proposer=ranked (see the module docstring).")
     ap.add_argument("--out", required=True, help="the ranker file to write (e.g. results/rankers/fastfiz/ranker.pt)")
     ap.add_argument("--physics", default="korean_medium", choices=sorted(PRESETS))
-    ap.add_argument("--noise", default="fastfiz", choices=[n for n, m in NOISE_PRESETS.items() if not (m.is_exact or m.is_variable)])
+    ap.add_argument("--noise", default="fastfiz", choices=[n for n, m in NOISE_PRESETS.items() if not m.is_variable],
+                    help="the noise it ranks for (none: whether a shot scores under exact play; no replays)")
     ap.add_argument("--racks", type=int, default=12000, help="training racks")
     ap.add_argument("--candidates", type=int, default=500, help="candidates per rack")
     ap.add_argument("--samples", type=int, default=16, help="noisy replays of each candidate that scores exactly")

@@ -123,6 +123,10 @@ def test_dataset_targets_are_noisy_success_shares_of_exact_scorers():
     cand = draws.propose(pos, 40, rng)
     exact = simulate_batch(np.repeat(pos, 40, axis=0), cand.reshape(-1, 4), K).score
     assert (y[:280][~exact] == 0).all()
+    # under exact play the target is whether the shot scores, the same draws (nothing replayed)
+    X0, y0 = make_dataset(7, 40, 8, NOISE_PRESETS["none"], np.random.default_rng(0), K, chunk=7)
+    np.testing.assert_array_equal(y0, exact.astype(np.float32))
+    np.testing.assert_array_equal(X0, X[:280])
     np.testing.assert_array_equal(X[:280], shot_features(pos[:, None], cand, K).reshape(-1, N_FEATURES))
 
 
