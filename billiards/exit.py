@@ -134,8 +134,7 @@ def noisy_labels(positions: np.ndarray, actor, proposer, rng: np.random.Generato
     proposer's own shot's (candidate 0) by no more than ``tolerance``, that own shot (the
     policy's shot where the search cannot tell it from the best). Returns ``(raw shots (S, 4),
     targets (S, 4), simulations)``."""
-    actor.proposer, actor.rng = proposer, rng
-    result = actor.search(positions)
+    result = actor.search_with(positions, proposer, rng)
     actions = result.actions
     if tolerance > 0:
         actions = np.where((result.own_margin <= tolerance)[:, None], result.own, actions)

@@ -50,6 +50,17 @@ class SearchActor(TensorDictModuleBase):
         (variable noise: multipliers of the noise's sigmas; ignored by the exact searches)."""
         raise NotImplementedError
 
+    def search_with(self, positions: np.ndarray, proposer, rng: np.random.Generator, levels: np.ndarray | None = None):
+        """:meth:`search` over ``proposer``'s candidates drawn from ``rng`` instead of the actor's
+        own (expert iteration labels with each round's policy and the run's own stream); the
+        actor keeps its own proposer and stream for its later decisions."""
+        own = self.proposer, self.rng
+        self.proposer, self.rng = proposer, rng
+        try:
+            return self.search(positions) if levels is None else self.search(positions, levels)
+        finally:
+            self.proposer, self.rng = own
+
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         positions = tensordict.get("positions").detach().cpu().numpy().astype(np.float64, copy=False)
         batch = positions.shape[:-2]

@@ -97,6 +97,20 @@ def test_one_candidate_without_expansion_plays_the_proposer_action():
     assert res.n_sims == 5
 
 
+def test_search_with_another_proposer_and_stream_leaves_the_actors_own():
+    """search_with decides as an actor of that proposer and stream would, and the actor's next
+    decision is the one it would have made without it."""
+    tables = random_racks(np.random.default_rng(5), 3)
+    cfg = H2Config(budget=12, k1=12, m1=0)
+    other = GeometricProposer(power_low=0.6, power_high=0.9)
+    actor = LookaheadActor(GeometricProposer(), cfg, seed=1)
+    got = actor.search_with(tables, other, np.random.default_rng(9))
+    want = LookaheadActor(other, cfg, seed=9).search(tables)
+    np.testing.assert_array_equal(got.actions, want.actions)
+    assert (got.actions[:, 1] >= 0.5).all()  # candidate 0 is the geometric mode p = 0.5; the others 0.6-0.9
+    np.testing.assert_array_equal(actor.search(tables).actions, LookaheadActor(GeometricProposer(), cfg, seed=1).search(tables).actions)
+
+
 def test_actors_use_exactly_the_configured_number_of_simulations(count_sims):
     from tensordict import TensorDict
     import torch
