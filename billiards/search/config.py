@@ -341,10 +341,17 @@ EXIT_X5_PROPOSER = PolicyProposerConfig(
             "python -m billiards.rl.policy export <the run dir> --out results/policies/exit_x5")
 
 
+# ``proposer=ranked_exact``: the geometric draws ranked by the shot ranker trained for exact play
+# (whether a shot scores; results/rankers/README.md), from a pool of 500
+RANKED_EXACT = RankedProposerConfig(name="ranked_exact", ranker="results/rankers/none/ranker.pt", pool=500,
+                                    command=RANKER_COMMAND.format(out="results/rankers/none/ranker.pt", noise="none"))
+
+
 def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConfig]:
     """The ``proposer=`` options: ``geometric``, ``forgiving`` (geometric, narrowed for noise:
     :data:`FORGIVING`), ``ranked`` (geometric draws ranked by a learned shot ranker,
-    :class:`RankedProposerConfig`), the shipped ensembles by name, ``exit`` (the expert-iteration
+    :class:`RankedProposerConfig`), ``ranked_exact`` (ranked by the ranker trained for exact play,
+    :data:`RANKED_EXACT`), the shipped ensembles by name, ``exit`` (the expert-iteration
     policy, :data:`EXIT_PROPOSER`), ``exit_x5`` and ``exit_x5_mixed`` (the one trained under
     fastfiz_x5, alone and sharing the candidates with that noise's shot ranker), ``policy``
     (``proposer=policy proposer.checkpoints=[a.pt,b.pt,...]``: an ensemble of your own) and
@@ -353,7 +360,7 @@ def proposer_options() -> dict[str, GeometricProposerConfig | PolicyProposerConf
             **{name: shipped_proposer(name) for name in SHIPPED_PROPOSERS}, "exit": EXIT_PROPOSER, "exit_x5": EXIT_X5_PROPOSER,
             "exit_x5_mixed": EXIT_X5_MIXED,
             "policy": PolicyProposerConfig(name="policy", checkpoints=[]), "ranked": RankedProposerConfig(),
-            "mixed": MixedProposerConfig()}
+            "ranked_exact": RANKED_EXACT, "mixed": MixedProposerConfig()}
 
 
 # ``proposer=for_noise_<preset>``: each execution-noise preset's shot proposer, the strongest
