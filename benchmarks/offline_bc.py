@@ -4,8 +4,8 @@ dataset with a mixture of K squashed Gaussians, K = 1 being the plain Gaussian.
     python benchmarks/offline_bc.py datasets/none-expert --components 1 8 --epochs 10 --out results/datasets/bc/none-expert.json
 
 Reads a built dataset (``python -m billiards.offline build``) in the agents' own space
-(``billiards.offline.space_rows``: the carom-feature observation and the aim-constrained
-action), holds out its last ``--held-out`` shots, and for each ``--components`` K fits a policy
+(``billiards.offline.space_observation`` / ``space_action``: the carom-feature observation and
+the aim-constrained action), holds out its last ``--held-out`` shots, and for each ``--components`` K fits a policy
 whose head is a mixture of K Gaussians over atanh of the normalised action (three hidden layers
 of ``--hidden``, the mixture's negative log-likelihood, Adam with a one-cycle learning rate, one
 CPU thread, seed 0). After every epoch it plays the mode shot (the mean of the heaviest
@@ -36,9 +36,6 @@ from pathlib import Path  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from _shots import git_commit, write_json  # noqa: E402
-
-EDGE = 1.0 - 1e-3  # labels kept inside the box, where atanh is finite
-
 
 class Mixture:
     """A mixture-of-Gaussians policy head over an MLP: ``heads(x)`` -> (logits (N, K), loc
@@ -83,7 +80,6 @@ def main(argv=None) -> None:
 
     from billiards import domain, offline
     from billiards.bench import evaluate
-    from billiards.bench.agents import CallableAgent
     from billiards.physics import PRESETS, simulate_batch
     from billiards.physics.noise import NOISE_PRESETS
 
@@ -105,7 +101,7 @@ def main(argv=None) -> None:
     data = offline.transitions(args.dataset, "aim_features")
     obs, act = data["observation"], data["action"]
     n = obs.shape[0] - args.held_out
-    x_train, z_train = obs[:n], torch.atanh(act[:n].clamp(-EDGE, EDGE))
+    x_train, z_train = obs[:n], torch.atanh(act[:n])  # the actions lie offline.EDGE inside the box: atanh is finite
     x_test = obs[n:].numpy()
     tables = domain.observed_positions(x_test)
     mean, std = x_train.mean(0), x_train.std(0) + 1e-6
@@ -145,14 +141,8 @@ def main(argv=None) -> None:
                   f"{history[-1]['held_out_scored']:.1%} of the held-out tables", flush=True)
         train_cpu = time.process_time() - cpu
 
-        def act_fn(o):
-            o = np.asarray(o)
-            x, _ = offline.space_rows(o[..., :domain.OBS_DIM], None, "aim_features")
-            return domain.raw_action(policy.mode(x), domain.observed_positions(o), params.ball_radius, constrain_aim=True,
-                                     normalized=True)
-
         track = offline.IQL_TRACK[manifest["noise"]]
-        card = evaluate(CallableAgent(act_fn, f"bc:mixture{K}", normalized=False), track, progress=False)
+        card = evaluate(offline.space_agent(policy.mode, "aim_features", f"bc:mixture{K}"), track, progress=False)
         record["runs"].append({"components": K, "train_cpu_seconds": round(train_cpu, 1), "history": history,
                                "track": track, "success_per_shot": card["success_per_shot"],
                                "points_per_inning": card["points_per_inning"]})

@@ -228,40 +228,73 @@ IQL_SETTINGS = {"batch_size": 256, "lr": 3e-4, "gamma": 0.9, "tau": 0.005, "expe
                 "hidden_sizes": [256, 256]}
 
 
+EDGE = 1.0 - 1e-3  # a learner's normalised actions are kept this far inside [-1, 1] (a squashed Gaussian's log-likelihood is finite)
+
+
 def normalized_actions(actions: np.ndarray) -> np.ndarray:
     """The datasets' raw shots (theta within one turn either way, p, a, b) as the normalised box
-    [-1, 1]^4 of the gymnasium env (theta taken into [0, 2 pi) first), kept 0.001 inside it (where
-    a squashed Gaussian's log-likelihood is finite)."""
+    [-1, 1]^4 of the gymnasium env (theta taken into [0, 2 pi) first), kept :data:`EDGE` inside
+    it."""
     from billiards import domain
 
     raw = np.array(actions, dtype=np.float64)
     raw[..., 0] = np.mod(raw[..., 0], 2 * math.pi)
-    edge = 1.0 - 1e-3
-    return np.clip(domain.normalize_action(raw), -edge, edge).astype(np.float32)
+    return np.clip(domain.normalize_action(raw), -EDGE, EDGE).astype(np.float32)
 
 
-def space_rows(obs: np.ndarray, actions: np.ndarray | None, space: str):
-    """Observations (N, 28) and raw shots (N, 4) (or None) as the learner of ``space`` sees
-    them (:data:`SPACES`): (observation float32, action float32 in [-1, 1]^4 kept 0.001 inside
-    it, or None). Under ``aim_features`` a shot aimed outside the nearest red's window is
-    clipped to the window's edge."""
-    from billiards import domain
-
+def _check_space(space: str) -> None:
     if space not in SPACES:
         raise ValueError(f"space must be one of {', '.join(SPACES)}, got {space!r}")
+
+
+def space_observation(obs: np.ndarray, space: str) -> np.ndarray:
+    """The gymnasium env's observations (..., 28) as the learner of ``space`` sees them
+    (:data:`SPACES`), float32: themselves, or under ``aim_features`` the observed table's
+    observation with the carom features (..., 32)."""
+    from billiards import domain
+
+    _check_space(space)
     if space == "raw":
-        return np.asarray(obs, dtype=np.float32), None if actions is None else normalized_actions(actions)
-    positions = domain.observed_positions(obs)
-    x = domain.observation(positions, extra_features=True)
-    if actions is None:
-        return x, None
-    edge = 1.0 - 1e-3
-    return x, np.clip(domain.normalized_aim_action(positions, actions), -edge, edge).astype(np.float32)
+        return np.asarray(obs, dtype=np.float32)
+    return domain.observation(domain.observed_positions(obs), extra_features=True)
+
+
+def space_action(obs: np.ndarray, actions: np.ndarray, space: str) -> np.ndarray:
+    """Raw shots (..., 4) played on the tables of observations (..., 28) as the learner of
+    ``space`` emits them, float32 in [-1, 1]^4 kept :data:`EDGE` inside it: the env's normalised
+    box, or under ``aim_features`` the aim-constrained action (a shot aimed outside the nearest
+    red's window clipped to the window's edge)."""
+    from billiards import domain
+
+    _check_space(space)
+    if space == "raw":
+        return normalized_actions(actions)
+    return np.clip(domain.normalized_aim_action(domain.observed_positions(obs), actions), -EDGE, EDGE).astype(np.float32)
+
+
+def space_agent(policy, space: str, name: str):
+    """A benchmark agent (:class:`~billiards.bench.agents.CallableAgent`) of ``policy``, a NumPy
+    function from the learner's observations (:func:`space_observation`) to its normalised
+    actions in ``space``: raw, the env's own normalised box; under ``aim_features`` mapped back to
+    the raw shot on the observed table (:func:`billiards.domain.raw_action`)."""
+    from billiards import domain
+    from billiards.bench.agents import CallableAgent
+
+    _check_space(space)
+
+    def act(obs):
+        obs = np.asarray(obs)
+        a = policy(space_observation(obs[..., :domain.OBS_DIM], space))
+        return a if space == "raw" else domain.raw_action(a, domain.observed_positions(obs), constrain_aim=True,
+                                                          normalized=True)
+
+    return CallableAgent(act, name, normalized=space == "raw")
 
 
 def transitions(directory: Path, space: str = "raw"):
     """Every transition of the Minari dataset built in ``directory``, read with
-    ``minari.load_dataset``, as one TensorDict in the learner's ``space`` (:func:`space_rows`):
+    ``minari.load_dataset``, as one TensorDict in the learner's ``space`` (:func:`space_observation`,
+    :func:`space_action`):
     observation, action (normalised), next observation, reward, done and terminated."""
     import minari
     import torch
@@ -274,10 +307,10 @@ def transitions(directory: Path, space: str = "raw"):
     os.environ["MINARI_DATASETS_PATH"] = str(root)
     parts = {k: [] for k in ("obs", "next", "action", "reward", "terminated", "truncated")}
     for ep in minari.load_dataset(manifest["dataset_id"]).iterate_episodes():
-        obs, action = space_rows(ep.observations[:-1], ep.actions, space)
-        parts["obs"].append(obs)
-        parts["next"].append(space_rows(ep.observations[1:], None, space)[0])
-        parts["action"].append(action)
+        x = space_observation(ep.observations, space)
+        parts["obs"].append(x[:-1])
+        parts["next"].append(x[1:])
+        parts["action"].append(space_action(ep.observations[:-1], ep.actions, space))
         parts["reward"].append(ep.rewards)
         parts["terminated"].append(ep.terminations)
         parts["truncated"].append(ep.truncations)
@@ -304,14 +337,11 @@ def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress:
     from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
     from torchrl.objectives import IQLLoss, SoftUpdate, ValueEstimators
 
-    from billiards import domain
     from billiards.bench import evaluate
-    from billiards.bench.agents import CallableAgent
     from billiards.rl.agents import mlp
 
     manifest, cfg = _manifest(directory), IQL_SETTINGS
-    if space not in SPACES:
-        raise ValueError(f"space must be one of {', '.join(SPACES)}, got {space!r}")
+    _check_space(space)
     torch.manual_seed(seed)
     data = transitions(directory, space)
     rb = ReplayBuffer(storage=LazyTensorStorage(data.shape[0]), batch_size=cfg["batch_size"])
@@ -342,18 +372,13 @@ def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress:
     train_cpu = time.process_time() - cpu
     net = actor.module[0].module
 
-    def act(obs):
-        obs = np.asarray(obs)
-        x, _ = space_rows(obs[..., :domain.OBS_DIM], None, space)
+    def policy(x):
         with torch.no_grad():
-            a = torch.tanh(net(torch.as_tensor(x, dtype=torch.float32))[0]).numpy()
-        if space == "raw":  # the env's own normalised box
-            return a
-        return domain.raw_action(a, domain.observed_positions(obs), constrain_aim=True, normalized=True)
+            return torch.tanh(net(torch.as_tensor(x, dtype=torch.float32))[0]).numpy()
 
     track = IQL_TRACK[manifest["noise"]]
     flag = "" if space == "raw" else f" --space {space}"
-    card = evaluate(CallableAgent(act, f"iql:{space}", normalized=space == "raw"), track, out=out / "scorecard", progress=False,
+    card = evaluate(space_agent(policy, space, f"iql:{space}"), track, out=out / "scorecard", progress=False,
                     command=f"python -m billiards.offline iql {directory} --updates {updates} --seed {seed}{flag} --out {out}")
     record = {"dataset_id": manifest["dataset_id"], "updates": updates, "seed": seed, "space": space, "settings": cfg,
               "train_cpu_seconds": round(train_cpu, 1), "train_wall_seconds": round(time.perf_counter() - start, 1),

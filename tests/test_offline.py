@@ -169,7 +169,7 @@ def test_the_aim_features_space_is_the_recorded_shots_on_the_observed_tables(sam
     np.testing.assert_allclose(turn, 0.0, atol=1e-5)
     np.testing.assert_allclose(back[:, 1:], first.actions[:, 1:], atol=1e-3)  # float32, 0.001 inside the box
     with pytest.raises(ValueError, match="space must be one of"):
-        offline.space_rows(first.observations, None, "aim")
+        offline.space_observation(first.observations, "aim")
     record = offline.train_iql(sample, 20, tmp_path / "iql", progress=False, space="aim_features")
     assert record["space"] == "aim_features" and record["success_per_shot"]["n_shots"] == 1000
     card = json.loads((tmp_path / "iql" / "scorecard" / "scorecard.json").read_text())
