@@ -84,9 +84,10 @@ def test_appended_keys_and_contradicting_kinds_fail_validation():
 
 def test_option_groups_list_only_real_options():
     """The schemas live under schema/, outside the option groups (no ``search_schema`` option)."""
-    # for_noise_<noise>: the default search per execution noise (h2 without noise, robust with it)
-    assert group_options("search") == ["for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none", "for_noise_variable", "h2",
-                                       "puct", "robust"]
+    # for_noise_<noise>: the default search per execution noise (h2 without noise, robust with it);
+    # deep_fastfiz_x5: fastfiz_x5's at 2,400 simulations
+    assert group_options("search") == ["deep_fastfiz_x5", "for_noise_fastfiz", "for_noise_fastfiz_x5", "for_noise_none",
+                                       "for_noise_variable", "h2", "puct", "robust"]
     assert group_options("protocol") == ["p1", "p3", "p3_paper"]
     # for_noise_<noise>: each noise's shot proposer; default_for_<noise>: search.py's default proposer
     assert group_options("proposer") == ["base", "both", "default_for_fastfiz", "default_for_fastfiz_x5", "default_for_none",
