@@ -35,6 +35,7 @@ CONFIGS = {
     "default_fastfiz_x5": ["noise=fastfiz_x5", "proposer=for_noise_fastfiz_x5"],  # over the x5 shot ranker, as recorded
     "default_fastfiz_x5_mixed": ["noise=fastfiz_x5"],  # the default now: over the x5 policy and shot ranker
     "deep_fastfiz_x5": ["noise=fastfiz_x5", "search=deep_fastfiz_x5", "proposer=exit_x5"],  # 2,400 simulations
+    "default_fastfiz_x5_1600": ["noise=fastfiz_x5", "search.budget=1600", "search.k1=1200", "search.target=40"],  # its screen scaled
 }
 
 
