@@ -82,6 +82,31 @@ def test_appended_keys_and_contradicting_kinds_fail_validation():
         assert message in str(err.value), (overrides, str(err.value))
 
 
+def _noise_for(search: str) -> str:
+    """The noise a search option is written for: for_noise_<noise> and deep_<noise> name theirs,
+    h2 and puct play exact, robust needs one."""
+    for prefix in ("for_noise_", "deep_"):
+        if search.startswith(prefix):
+            return search.removeprefix(prefix)
+    return "fastfiz" if search == "robust" else "none"
+
+
+@pytest.mark.parametrize("search", group_options("search"))
+def test_every_search_option_composes_and_validates_under_its_noise(search):
+    """Each file of conf/search composes and passes the app's checks (the value file it names is
+    there and loads, its screen fits its budget), over the cheap geometric proposer."""
+    noise = _noise_for(search)
+    assert noise in group_options("noise"), (search, noise)
+    cfg = compose_search(f"search={search}", f"noise={noise}", "proposer=geometric")
+    assert search_config.errors(cfg) == []
+    s = cfg.search
+    if s.kind == "robust":
+        assert s.target <= s.k1 <= s.budget
+    if search.startswith("deep_"):  # more simulations than the noise's default, the same value and weight
+        default = compose_search(f"search=for_noise_{noise}", f"noise={noise}", "proposer=geometric").search
+        assert s.budget > default.budget and (s.value, s.position) == (default.value, default.position)
+
+
 def test_option_groups_list_only_real_options():
     """The schemas live under schema/, outside the option groups (no ``search_schema`` option)."""
     # for_noise_<noise>: the default search per execution noise (h2 without noise, robust with it);
