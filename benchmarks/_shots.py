@@ -18,6 +18,26 @@ ROOT = Path(__file__).resolve().parent.parent
 POOLTOOL_PY = Path(os.environ.get("POOLTOOL_VENV", ROOT / ".venv-pooltool")) / "bin" / "python"
 
 
+def cpu() -> str:
+    """The processor a benchmark ran on, for its record: the model name, its widest vector
+    extension and the cores this process may use (timings, and their ratios, depend on all
+    three; "unknown" where /proc/cpuinfo cannot be read)."""
+    name, flags = "unknown", set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and name == "unknown":
+                name = value.strip()
+            elif key.strip() == "flags" and not flags:
+                flags = set(value.split())
+    except OSError:
+        pass
+    vector = next((v for v, need in (("avx512f", {"avx512f"}), ("avx2+fma", {"avx2", "fma"})) if need <= flags),
+                  "no avx2" if flags else "flags unknown")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{name} ({vector}, {cores} cores)"
+
+
 def random_shots(n: int, seed: int, params: PhysicsParams = DEFAULT_PARAMS):
     """n random racks of params's table (its own sampling) and actions over its whole range:
     theta U[0, 2pi), p U[0.05, 1], a, b U[-1, 1] (the simulator projects (a, b) onto the unit

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import time
 
 import numpy as np
@@ -28,6 +27,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", default="results/bench_evaluate.json")
     args = parser.parse_args()
+
+    from _shots import cpu
 
     from billiards.bench import evaluate, get_track
     from billiards.device import set_threads
@@ -67,7 +68,7 @@ def main() -> None:
     result = {
         "command": f"python benchmarks/bench_evaluate.py --repeats {args.repeats}",
         "commit": git_commit(),
-        "cpu": platform.processor() or platform.machine(),
+        "cpu": cpu(),
         "threads": 1,
         "track": track.name,
         "block": track.block,

@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # time this checkout's billiards
-from _shots import ROOT, git_commit, write_json  # noqa: E402
+from _shots import ROOT, cpu, git_commit, write_json  # noqa: E402
 
 CONFIGS = {
     "ranked_pool2000": ["noise=fastfiz", "search=robust", "proposer=ranked"],  # the default before the value
@@ -92,7 +92,7 @@ def main() -> None:
         print(f"{name:20s} {r['ms_per_decision']:8.2f} ms  {r['times_raw']:6.2f} x raw", flush=True)
     if args.out:
         write_json(args.out, {"command": "python benchmarks/bench_noisy_search.py " + " ".join(sys.argv[1:]),
-                              "commit": git_commit(), "decisions": args.decisions, "threads": 1,
+                              "commit": git_commit(), "cpu": cpu(), "decisions": args.decisions, "threads": 1,
                               "configs": {k: " ".join(v) for k, v in CONFIGS.items()}, "results": rows,
                               "load_average": os.getloadavg()})
 

@@ -170,22 +170,14 @@ def main(argv=None) -> int:
 
 
 def _write(out: Path, argv, payload: dict) -> None:
+    from _shots import cpu
+
     from billiards.files import atomic_write_text
     from billiards.provenance import git_commit
 
     cmd = "python benchmarks/cross_cpu.py" + "".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:]))
-    atomic_write_text(out, json.dumps({"command": cmd, "commit": git_commit(), "cpu": _cpu_name(), **payload}, indent=2) + "\n")
+    atomic_write_text(out, json.dumps({"command": cmd, "commit": git_commit(), "cpu": cpu(), **payload}, indent=2) + "\n")
     print(f"wrote {out}")
-
-
-def _cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown"
 
 
 if __name__ == "__main__":
