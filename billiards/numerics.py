@@ -12,8 +12,8 @@ so everything between a committed model and a cited number computes here instead
 * :func:`dense` / :func:`mlp`: Linear(+ReLU) layers in float32 with a fixed summation order
   (each output sums its inputs in index order, the bias last). Compiled by numba without
   fast-math, so nothing is reassociated or fused into FMAs: the same bits whether numba targets
-  this host or ``NUMBA_CPU_NAME=generic``. Vector lanes run across *outputs*, never within
-  one sum.
+  this host or ``NUMBA_CPU_NAME=generic``. Vector lanes run across outputs (or, for a layer of
+  a few outputs, across rows), never within one sum.
 * :func:`asin`, :func:`atan2`, :func:`exp`, :func:`log1p`, :func:`tanh`, :func:`sin`,
   :func:`cos`: float64 ufuncs over the C library's functions (the ones the simulator kernel
   calls), whatever NumPy's dispatch would pick. Float32 arguments are widened and the result
@@ -33,27 +33,66 @@ import numba  # Intel's SVML stays off: billiards/__init__ sets NUMBA_DISABLE_IN
 import numpy as np
 
 
+SAMPLE_BLOCK = 8  # rows of x that share each row of w while it is in the L1 cache
+NARROW = 8  # fewer outputs than this (a network's last layer): lanes across rows instead
+
+
 @numba.njit(cache=True, nogil=True)
 def _dense_kernel(x, w, b, relu, out):
-    """out[e, s] = relu?(x[e or 0, s] @ w[e] + b[e]) in float32, inputs summed in index order."""
+    """out[e, s] = relu?(x[e or 0, s] @ w[e] + b[e]) in float32, inputs summed in index order.
+
+    Two loop orders, the same sums: ``SAMPLE_BLOCK`` rows at a time, each row of ``w`` added into
+    all of their outputs while it is cached (lanes across outputs); or, for fewer than ``NARROW``
+    outputs, one output at a time over all rows (lanes across rows, ``x`` transposed once)."""
     E, I, O = w.shape
+    S = x.shape[1]
     shared = x.shape[0] == 1
+    if O < NARROW:
+        xt = np.empty((I, S), dtype=np.float32)
+        acc = np.empty(S, dtype=np.float32)
+        for e in range(E):
+            if e == 0 or not shared:
+                xe = x[0] if shared else x[e]
+                for s in range(S):
+                    for i in range(I):
+                        xt[i, s] = xe[s, i]
+            for o in range(O):
+                for s in range(S):
+                    acc[s] = np.float32(0.0)
+                for i in range(I):
+                    wio = w[e, i, o]
+                    xi = xt[i]
+                    for s in range(S):
+                        acc[s] = acc[s] + xi[s] * wio
+                bo = b[e, o]
+                for s in range(S):
+                    v = acc[s] + bo
+                    if relu and v < np.float32(0.0):
+                        v = np.float32(0.0)
+                    out[e, s, o] = v
+        return out
     for e in range(E):
         xe = x[0] if shared else x[e]
-        for s in range(x.shape[1]):
-            acc = out[e, s]
-            for o in range(O):
-                acc[o] = np.float32(0.0)
-            for i in range(I):
-                xi = xe[s, i]
-                wi = w[e, i]
+        oe = out[e]
+        for s0 in range(0, S, SAMPLE_BLOCK):
+            n = min(SAMPLE_BLOCK, S - s0)
+            for j in range(n):
                 for o in range(O):
-                    acc[o] = acc[o] + xi * wi[o]
-            for o in range(O):
-                v = acc[o] + b[e, o]
-                if relu and v < np.float32(0.0):
-                    v = np.float32(0.0)
-                acc[o] = v
+                    oe[s0 + j, o] = np.float32(0.0)
+            for i in range(I):
+                wi = w[e, i]
+                for j in range(n):
+                    xi = xe[s0 + j, i]
+                    acc = oe[s0 + j]
+                    for o in range(O):
+                        acc[o] = acc[o] + xi * wi[o]
+            for j in range(n):
+                acc = oe[s0 + j]
+                for o in range(O):
+                    v = acc[o] + b[e, o]
+                    if relu and v < np.float32(0.0):
+                        v = np.float32(0.0)
+                    acc[o] = v
     return out
 
 

@@ -108,26 +108,29 @@ def test_networks_and_functions_give_the_same_bits_under_another_kernel(kernel):
     assert _probe_of(kernel) == _probe_of("default")
 
 
-def test_dense_sums_in_index_order_in_float32():
+# (rows, outputs): a few outputs (lanes across rows), and many with rows in several blocks and a remainder
+@pytest.mark.parametrize("S,O", [(5, 6), (19, 11), (3, 1)])
+def test_dense_sums_in_index_order_in_float32(S, O):
     """numerics.dense is the documented arithmetic, not merely close to it: each output sums
-    x_i * w_io in float32 in index order, then adds the bias (checked against a Python loop)."""
+    x_i * w_io in float32 in index order, then adds the bias (checked against a Python loop),
+    whichever loop order the layer's shape takes."""
     from billiards import numerics
 
     rng = np.random.default_rng(3)
-    x = rng.standard_normal((2, 5, 37)).astype(np.float32) * 100
-    w = rng.standard_normal((2, 37, 6)).astype(np.float32)
-    b = rng.standard_normal((2, 6)).astype(np.float32)
+    x = rng.standard_normal((2, S, 37)).astype(np.float32) * 100
+    w = rng.standard_normal((2, 37, O)).astype(np.float32)
+    b = rng.standard_normal((2, O)).astype(np.float32)
     out = numerics.dense(x, w, b, relu=True)
     for e in range(2):
-        for s in range(5):
-            for o in range(6):
+        for s in range(S):
+            for o in range(O):
                 acc = np.float32(0)
                 for i in range(37):
                     acc = np.float32(acc + np.float32(x[e, s, i] * w[e, i, o]))
                 v = np.float32(acc + b[e, o])
                 assert out[e, s, o] == (v if v > 0 else 0)
     shared = numerics.dense(x[:1], w, b)  # one input for every layer of the stack
-    assert shared.shape == (2, 5, 6) and np.array_equal(shared[0], numerics.dense(x[:1], w[:1], b[:1])[0])
+    assert shared.shape == (2, S, O) and np.array_equal(shared[0], numerics.dense(x[:1], w[:1], b[:1])[0])
     with pytest.raises(ValueError, match="do not chain"):
         numerics.dense(x, w[:, :36], b)
 
