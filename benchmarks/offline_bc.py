@@ -142,7 +142,8 @@ def main(argv=None) -> None:
         train_cpu = time.process_time() - cpu
 
         track = offline.IQL_TRACK[manifest["noise"]]
-        card = evaluate(offline.space_agent(policy.mode, "aim_features", f"bc:mixture{K}"), track, progress=False)
+        card = evaluate(offline.space_agent(policy.mode, "aim_features", f"bc:mixture{K}", offline.track_radius(track)), track,
+                        progress=False)
         record["runs"].append({"components": K, "train_cpu_seconds": round(train_cpu, 1), "history": history,
                                "track": track, "success_per_shot": card["success_per_shot"],
                                "points_per_inning": card["points_per_inning"]})

@@ -242,6 +242,20 @@ def normalized_actions(actions: np.ndarray) -> np.ndarray:
     return np.clip(domain.normalize_action(raw), -EDGE, EDGE).astype(np.float32)
 
 
+def _radius(R: float | None) -> float:
+    from billiards.physics import DEFAULT_PARAMS
+
+    return DEFAULT_PARAMS.ball_radius if R is None else float(R)
+
+
+def track_radius(track: str) -> float:
+    """The ball radius of a benchmark track's table (where a learner's aim-space policy plays)."""
+    from billiards.bench import get_track
+    from billiards.physics import PRESETS
+
+    return PRESETS[get_track(track).physics].ball_radius
+
+
 def _check_space(space: str) -> None:
     if space not in SPACES:
         raise ValueError(f"space must be one of {', '.join(SPACES)}, got {space!r}")
@@ -259,33 +273,37 @@ def space_observation(obs: np.ndarray, space: str) -> np.ndarray:
     return domain.observation(domain.observed_positions(obs), extra_features=True)
 
 
-def space_action(obs: np.ndarray, actions: np.ndarray, space: str) -> np.ndarray:
+def space_action(obs: np.ndarray, actions: np.ndarray, space: str, R: float | None = None) -> np.ndarray:
     """Raw shots (..., 4) played on the tables of observations (..., 28) as the learner of
     ``space`` emits them, float32 in [-1, 1]^4 kept :data:`EDGE` inside it: the env's normalised
     box, or under ``aim_features`` the aim-constrained action (a shot aimed outside the nearest
-    red's window clipped to the window's edge)."""
+    red's window clipped to the window's edge; the window of balls of radius ``R``, the table's:
+    default the default table's)."""
     from billiards import domain
 
     _check_space(space)
     if space == "raw":
         return normalized_actions(actions)
-    return np.clip(domain.normalized_aim_action(domain.observed_positions(obs), actions), -EDGE, EDGE).astype(np.float32)
+    R = _radius(R)
+    return np.clip(domain.normalized_aim_action(domain.observed_positions(obs), actions, R), -EDGE, EDGE).astype(np.float32)
 
 
-def space_agent(policy, space: str, name: str):
+def space_agent(policy, space: str, name: str, R: float | None = None):
     """A benchmark agent (:class:`~billiards.bench.agents.CallableAgent`) of ``policy``, a NumPy
     function from the learner's observations (:func:`space_observation`) to its normalised
     actions in ``space``: raw, the env's own normalised box; under ``aim_features`` mapped back to
-    the raw shot on the observed table (:func:`billiards.domain.raw_action`)."""
+    the raw shot on the observed table (:func:`billiards.domain.raw_action`, balls of radius
+    ``R``: the table it plays on; default the default table's)."""
     from billiards import domain
     from billiards.bench.agents import CallableAgent
 
     _check_space(space)
+    R = _radius(R)
 
     def act(obs):
         obs = np.asarray(obs)
         a = policy(space_observation(obs[..., :domain.OBS_DIM], space))
-        return a if space == "raw" else domain.raw_action(a, domain.observed_positions(obs), constrain_aim=True,
+        return a if space == "raw" else domain.raw_action(a, domain.observed_positions(obs), R, constrain_aim=True,
                                                           normalized=True)
 
     return CallableAgent(act, name, normalized=space == "raw")
@@ -306,11 +324,14 @@ def transitions(directory: Path, space: str = "raw"):
         raise SystemExit(f"Error: {directory}: no Minari dataset yet; run python -m billiards.offline build {directory}")
     os.environ["MINARI_DATASETS_PATH"] = str(root)
     parts = {k: [] for k in ("obs", "next", "action", "reward", "terminated", "truncated")}
+    from billiards.physics import PRESETS
+
+    R = PRESETS[manifest["physics"]].ball_radius  # the aim window of the table the dataset was played on
     for ep in minari.load_dataset(manifest["dataset_id"]).iterate_episodes():
         x = space_observation(ep.observations, space)
         parts["obs"].append(x[:-1])
         parts["next"].append(x[1:])
-        parts["action"].append(space_action(ep.observations[:-1], ep.actions, space))
+        parts["action"].append(space_action(ep.observations[:-1], ep.actions, space, R))
         parts["reward"].append(ep.rewards)
         parts["terminated"].append(ep.terminations)
         parts["truncated"].append(ep.truncations)
@@ -378,7 +399,7 @@ def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress:
 
     track = IQL_TRACK[manifest["noise"]]
     flag = "" if space == "raw" else f" --space {space}"
-    card = evaluate(space_agent(policy, space, f"iql:{space}"), track, out=out / "scorecard", progress=False,
+    card = evaluate(space_agent(policy, space, f"iql:{space}", track_radius(track)), track, out=out / "scorecard", progress=False,
                     command=f"python -m billiards.offline iql {directory} --updates {updates} --seed {seed}{flag} --out {out}")
     record = {"dataset_id": manifest["dataset_id"], "updates": updates, "seed": seed, "space": space, "settings": cfg,
               "train_cpu_seconds": round(train_cpu, 1), "train_wall_seconds": round(time.perf_counter() - start, 1),

@@ -174,3 +174,27 @@ def test_the_aim_features_space_is_the_recorded_shots_on_the_observed_tables(sam
     assert record["space"] == "aim_features" and record["success_per_shot"]["n_shots"] == 1000
     card = json.loads((tmp_path / "iql" / "scorecard" / "scorecard.json").read_text())
     assert card["agent"]["normalized"] is False and "--space aim_features" in card["command"]
+
+
+def test_the_aim_space_takes_the_tables_ball_radius():
+    """The aim space's window is the table's: shots inside the international table's windows,
+    mapped into the aim space with its ball radius and played back by ``space_agent`` with it, are
+    the same shots; read back with the default table's radius they are not. A dataset's actions
+    take its own table's radius and an agent the radius of its track's table."""
+    from billiards import domain
+    from billiards.physics import PRESETS, random_racks
+
+    rng = np.random.default_rng(5)
+    R = PRESETS["international"].ball_radius
+    assert R != PRESETS["korean_medium"].ball_radius
+    tables = random_racks(rng, 64, PRESETS["international"])
+    obs = domain.observation(tables)
+    u = rng.uniform(-0.9, 0.9, (64, 4))
+    shots = domain.raw_action(u, tables, R, constrain_aim=True, normalized=True)
+    x = offline.space_action(obs, shots, "aim_features", R)
+    np.testing.assert_allclose(x, u, atol=1e-5)
+    same = offline.space_agent(lambda o: x, "aim_features", "t", R).fn(obs)
+    other = offline.space_agent(lambda o: x, "aim_features", "t").fn(obs)
+    np.testing.assert_allclose(same, shots, atol=1e-5)
+    assert np.abs(other[:, 0] - shots[:, 0]).max() > 1e-4
+    assert offline.track_radius("innings-v1") == PRESETS["korean_medium"].ball_radius
