@@ -12,30 +12,11 @@ from pathlib import Path
 import numpy as np
 
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams, action_to_cue, random_racks
-from billiards.provenance import git_commit  # noqa: F401  (re-exported for the benchmarks)
+from billiards.provenance import cpu, git_commit  # noqa: F401  (re-exported for the benchmarks)
 
 ROOT = Path(__file__).resolve().parent.parent
 POOLTOOL_PY = Path(os.environ.get("POOLTOOL_VENV", ROOT / ".venv-pooltool")) / "bin" / "python"
 
-
-def cpu() -> str:
-    """The processor a benchmark ran on, for its record: the model name, its widest vector
-    extension and the cores this process may use (timings, and their ratios, depend on all
-    three; "unknown" where /proc/cpuinfo cannot be read)."""
-    name, flags = "unknown", set()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() == "model name" and name == "unknown":
-                name = value.strip()
-            elif key.strip() == "flags" and not flags:
-                flags = set(value.split())
-    except OSError:
-        pass
-    vector = next((v for v, need in (("avx512f", {"avx512f"}), ("avx2+fma", {"avx2", "fma"})) if need <= flags),
-                  "no avx2" if flags else "flags unknown")
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return f"{name} ({vector}, {cores} cores)"
 
 
 def random_shots(n: int, seed: int, params: PhysicsParams = DEFAULT_PARAMS):

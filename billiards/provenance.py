@@ -1,8 +1,9 @@
-"""Where a result came from: the git commit it was produced at."""
+"""Where a result came from: the git commit it was produced at, and the processor a timing was taken on."""
 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -10,7 +11,7 @@ from pathlib import Path
 
 from billiards.files import ROOT, recorded_command
 
-__all__ = ["ROOT", "STARTS_FILE", "git_commit", "record_start"]
+__all__ = ["ROOT", "STARTS_FILE", "cpu", "git_commit", "record_start"]
 
 STARTS_FILE = "starts.jsonl"  # one line per start of a run in its directory: the commit it ran under
 
@@ -28,6 +29,26 @@ def git_commit() -> str:
     commit = run("git", "rev-parse", "--short", "HEAD") or "unknown"
     dirty = commit != "unknown" and bool(run("git", "status", "--porcelain", "--untracked-files=no", "--", "billiards"))
     return commit + ("+dirty" if dirty else "")
+
+
+def cpu() -> str:
+    """The processor a benchmark ran on, for its record: the model name, its widest vector
+    extension and the cores this process may use (timings, and their ratios, depend on all
+    three; "unknown" where /proc/cpuinfo cannot be read)."""
+    name, flags = "unknown", set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and name == "unknown":
+                name = value.strip()
+            elif key.strip() == "flags" and not flags:
+                flags = set(value.split())
+    except OSError:
+        pass
+    vector = next((v for v, need in (("avx512f", {"avx512f"}), ("avx2+fma", {"avx2", "fma"})) if need <= flags),
+                  "no avx2" if flags else "flags unknown")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{name} ({vector}, {cores} cores)"
 
 
 def record_start(run_dir, mode: str, frames: int = 0, command: list[str] | None = None) -> dict:

@@ -422,6 +422,13 @@ def _commit() -> str:
     return _COMMIT[0]
 
 
+def _cpu() -> str:
+    """The processor the agent's time was measured on (:func:`billiards.provenance.cpu`)."""
+    from billiards.provenance import cpu
+
+    return cpu()
+
+
 def agent_record(agent: Agent, spec) -> dict:
     rec = agent.describe()
     if isinstance(spec, (str, Path)):
@@ -493,7 +500,7 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
         bar.close()
     records = [done[u] for u in sorted(done)]
     card = {"track": full.name, "version": full.version, "rules": track.rules(), "agent": identity_agent,
-            **score_records(track, records), "command": command, "commit": commit, "limit": limit,
+            **score_records(track, records), "command": command, "commit": commit, "cpu": _cpu(), "limit": limit,
             "partial": len(records) < n_units, "verified": True, "run": run_id}
     card["track_record"] = full.record()
     card = _ordered(card)
@@ -509,7 +516,7 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
 
 def _ordered(card: dict) -> dict:
     first = ["track", "version", "agent", "success_per_shot", "points_per_inning", "chain", "match", "elo",
-             "ms_per_decision", "sims_per_decision", "command", "commit"]
+             "ms_per_decision", "sims_per_decision", "command", "commit", "cpu"]
     return {**{k: card[k] for k in first if k in card}, **{k: v for k, v in card.items() if k not in first}}
 
 

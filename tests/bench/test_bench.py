@@ -18,6 +18,7 @@ from billiards.bench import TRACKS, AgentError, EvaluationError, evaluate, get_t
 from billiards.bench.agents import as_agent
 from billiards.bench.run import IDENTITY_FILE, LEDGER_FILE, SCORECARD_JSON, SCORECARD_MD, fingerprint
 from billiards.physics import get_params, random_racks
+from billiards.provenance import cpu
 
 from billiards import stats
 
@@ -133,6 +134,7 @@ def check_card(card: dict, track) -> None:
     assert isinstance(card["agent"]["name"], str) and card["agent"]["name"]
     assert isinstance(card["ms_per_decision"], float) and card["ms_per_decision"] >= 0
     assert isinstance(card["command"], str) and card["command"] and isinstance(card["commit"], str) and card["commit"]
+    assert card["cpu"] == cpu()  # the processor the milliseconds were measured on
     assert card["partial"] is False and card["units_done"] == track.n_blocks()
     if track.protocol in ("innings", "p1"):
         s = card["success_per_shot"]
