@@ -48,6 +48,7 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("h2, expert-iteration policy proposer", "h2_exit", "search:h2/exit", EXACT),
     Entry("h2, SAC ensemble proposer (base)", "h2_base", "search:h2/base", EXACT),
     Entry("h2, exact-play shot ranker proposer", "h2_ranked_exact", "search:h2/ranked_exact", EXACT),
+    Entry("h2, small exact-play shot ranker proposer", "h2_ranked_exact_small", "search:h2/ranked_exact_small", EXACT),
     Entry("PUCT, geometric proposer", "puct_geometric", "search:puct/geometric", EXACT),
     Entry("PUCT, SAC ensemble proposer (near_miss)", "puct_near_miss", "search:puct/near_miss", EXACT),
     Entry("robust search over the shot ranker, blind to the leave", "robust_ranked", "search:robust/for_noise", NOISY),

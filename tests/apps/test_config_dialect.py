@@ -118,7 +118,8 @@ def test_option_groups_list_only_real_options():
     assert group_options("proposer") == ["base", "both", "default_for_fastfiz", "default_for_fastfiz_x5", "default_for_none",
                                          "default_for_variable", "exit", "exit_x5", "exit_x5_mixed", "for_noise_fastfiz",
                                          "for_noise_fastfiz_x5", "for_noise_none", "for_noise_variable", "forgiving", "gentle",
-                                         "geometric", "mixed", "near_miss", "policy", "ranked", "ranked_exact"]
+                                         "geometric", "mixed", "near_miss", "policy", "ranked", "ranked_exact",
+                                         "ranked_exact_small"]
     assert group_options("noise") == ["fastfiz", "fastfiz_x5", "none", "variable"]
     assert group_options("algo") == ["exit", "ppo", "ppo_paper", "sac", "sac_paper", "td3", "td3_paper"]
     assert not (REPO / "conf" / "proposer").exists()  # one proposer config, parametrised by name

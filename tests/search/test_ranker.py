@@ -186,7 +186,9 @@ def test_the_shipped_rankers_load_and_record_how_they_were_made():
     assert files
     for path in files:
         ranker = ShotRanker.load(path)
-        assert ranker.params == K and ranker.noise == NOISE_PRESETS[path.parent.name]
+        preset = ranker.meta["noise_preset"]  # each in a folder named for its noise (results/rankers/<noise>[_<variant>])
+        assert ranker.params == K and ranker.noise == NOISE_PRESETS[preset]
+        assert path.parent.name == preset or path.parent.name.startswith(preset + "_")
         assert ranker.meta["command"].startswith("python -m billiards.search.ranker") and ranker.meta["commit"]
         held = ranker.meta["held_out"]
         assert held["best_of_top_ranked"] > held["best_of_first_drawn"]  # it ranks better than drawing
