@@ -18,7 +18,6 @@ ROOT = Path(__file__).resolve().parent.parent
 POOLTOOL_PY = Path(os.environ.get("POOLTOOL_VENV", ROOT / ".venv-pooltool")) / "bin" / "python"
 
 
-
 def random_shots(n: int, seed: int, params: PhysicsParams = DEFAULT_PARAMS):
     """n random racks of params's table (its own sampling) and actions over its whole range:
     theta U[0, 2pi), p U[0.05, 1], a, b U[-1, 1] (the simulator projects (a, b) onto the unit

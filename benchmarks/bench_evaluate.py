@@ -28,14 +28,12 @@ def main() -> None:
     parser.add_argument("--out", default="results/bench_evaluate.json")
     args = parser.parse_args()
 
-    from _shots import cpu
-
     from billiards.bench import evaluate, get_track
     from billiards.device import set_threads
     from billiards.files import atomic_write_text
     from billiards.physics import get_params, simulate_batch
     from billiards.physics.api import random_racks
-    from billiards.provenance import git_commit
+    from billiards.provenance import cpu, git_commit
 
     set_threads(1)
     track = get_track("p1-exact-v1")

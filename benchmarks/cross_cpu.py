@@ -170,10 +170,8 @@ def main(argv=None) -> int:
 
 
 def _write(out: Path, argv, payload: dict) -> None:
-    from _shots import cpu
-
     from billiards.files import atomic_write_text
-    from billiards.provenance import git_commit
+    from billiards.provenance import cpu, git_commit
 
     cmd = "python benchmarks/cross_cpu.py" + "".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:]))
     atomic_write_text(out, json.dumps({"command": cmd, "commit": git_commit(), "cpu": cpu(), **payload}, indent=2) + "\n")

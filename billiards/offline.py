@@ -251,9 +251,9 @@ def _radius(R: float | None) -> float:
 def track_radius(track: str) -> float:
     """The ball radius of a benchmark track's table (where a learner's aim-space policy plays)."""
     from billiards.bench import get_track
-    from billiards.physics import PRESETS
+    from billiards.physics import get_params
 
-    return PRESETS[get_track(track).physics].ball_radius
+    return get_params(get_track(track).physics).ball_radius
 
 
 def _check_space(space: str) -> None:
@@ -318,15 +318,15 @@ def transitions(directory: Path, space: str = "raw"):
     import torch
     from tensordict import TensorDict
 
+    from billiards.physics import get_params
+
     manifest = _manifest(directory)
     root = (directory / "minari").resolve()
     if not (root / manifest["dataset_id"]).exists():
         raise SystemExit(f"Error: {directory}: no Minari dataset yet; run python -m billiards.offline build {directory}")
     os.environ["MINARI_DATASETS_PATH"] = str(root)
     parts = {k: [] for k in ("obs", "next", "action", "reward", "terminated", "truncated")}
-    from billiards.physics import PRESETS
-
-    R = PRESETS[manifest["physics"]].ball_radius  # the aim window of the table the dataset was played on
+    R = get_params(manifest["physics"]).ball_radius  # the aim window of the table the dataset was played on
     for ep in minari.load_dataset(manifest["dataset_id"]).iterate_episodes():
         x = space_observation(ep.observations, space)
         parts["obs"].append(x[:-1])

@@ -57,7 +57,7 @@ class SearchActor(TensorDictModuleBase):
         own = self.proposer, self.rng
         self.proposer, self.rng = proposer, rng
         try:
-            return self.search(positions) if levels is None else self.search(positions, levels)
+            return self.search(positions, levels)
         finally:
             self.proposer, self.rng = own
 
