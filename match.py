@@ -4,23 +4,10 @@
     python match.py noise=fastfiz target=30 matches=200 players=[greedy,safety]
     python match.py resume=<run dir>                          # play the league's missing matches
 
-Thin entry point: composes conf/match.yaml and calls billiards.league.run.
+The app is :mod:`billiards.apps.match`, the same as ``sagu match`` after ``pip install sagu-bench``.
 """
 
-import hydra
-from hydra.core.hydra_config import HydraConfig
-
-from billiards.app_config import guard_command_line
-import billiards.league.config  # noqa: F401  (registers the schema and resolvers before Hydra composes)
-
-
-@hydra.main(version_base="1.3", config_path="conf", config_name="match")
-def main(cfg) -> None:
-    from billiards.league import run
-
-    run(cfg, HydraConfig.get().runtime.output_dir)
-
+from billiards.apps.match import main
 
 if __name__ == "__main__":
-    guard_command_line()  # a command line that names code fails here, before Hydra builds anything
     main()

@@ -10,23 +10,10 @@ simulations is measured in results/bench_search_korean_medium_1m.json (docs/sear
 prints what it will do and where before it starts, and an upper bound on the time left after
 its first chain. Ctrl-C keeps every finished chain (results.json marked partial).
 
-Thin entry point: composes conf/search.yaml and calls billiards.search.run.
+The app is :mod:`billiards.apps.search`, the same as ``sagu search`` after ``pip install sagu-bench``.
 """
 
-import hydra
-from hydra.core.hydra_config import HydraConfig
-
-from billiards.app_config import guard_command_line
-import billiards.search.config  # noqa: F401  (registers the schema and resolvers before Hydra composes)
-
-
-@hydra.main(version_base="1.3", config_path="conf", config_name="search")
-def main(cfg) -> None:
-    from billiards.search.run import run
-
-    run(cfg, HydraConfig.get().runtime.output_dir)
-
+from billiards.apps.search import main
 
 if __name__ == "__main__":
-    guard_command_line()  # a command line that names code fails here, before Hydra builds anything
     main()

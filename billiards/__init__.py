@@ -7,7 +7,7 @@ import os
 # the simulator and billiards.numerics compute the same bits on every machine
 os.environ.setdefault("NUMBA_DISABLE_INTEL_SVML", "1")
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 # The gymnasium env IDs, registered on ``import billiards`` (so ``gym.make("billiards:Billiards4Ball-v0")``
 # works without another import) by name only: the env's modules load when an env is made. IDs

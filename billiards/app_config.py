@@ -38,6 +38,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from billiards import files
+from billiards.files import CONF_DIR
 from billiards.physics.config import PhysicsConfig
 from billiards.physics.noise import NoiseConfig
 
@@ -825,7 +826,6 @@ SWEEP_PARAMS = "hydra.sweeper.params"
 # an option of a config group: a name, or sub/name for a group's sub-groups (variant=table4/aim)
 OPTION_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*(/[A-Za-z0-9_][A-Za-z0-9_.-]*)*")
 FILE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
-CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 
 
 def _is_hydra_group(group: str) -> bool:

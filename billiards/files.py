@@ -33,7 +33,14 @@ from typing import IO, Callable, Hashable, Iterator
 
 TMP_SUFFIX = ".tmp"
 
-ROOT = Path(__file__).resolve().parent.parent  # the repository (a checkout; billiards/ is in it)
+PACKAGE = Path(__file__).resolve().parent
+# Where the project's own files are read from (conf/, the shipped models under results/, the
+# leaderboard's snapshot): the repository when this package is a source checkout's (billiards/
+# beside conf/ and pyproject.toml), else the copy an installed wheel carries in billiards/_data,
+# laid out as in the repository (setup.py: SHIPPED). Nothing is written under it outside a checkout.
+IN_CHECKOUT = (PACKAGE.parent / "conf").is_dir() and (PACKAGE.parent / "pyproject.toml").is_file()
+ROOT = PACKAGE.parent if IN_CHECKOUT else PACKAGE / "_data"
+CONF_DIR = ROOT / "conf"  # the Hydra configs every app composes
 
 # What a training run directory holds (billiards.rl) ...
 CONFIG_FILE = "config.yaml"  # the resolved config, written at start (training and search runs)

@@ -18,7 +18,14 @@ STARTS_FILE = "starts.jsonl"  # one line per start of a run in its directory: th
 
 def git_commit() -> str:
     """Short commit of the repository, with ``+dirty`` if tracked files under ``billiards/``
-    differ from it; ``unknown`` outside a git checkout."""
+    differ from it; for an installed package (no checkout), its release (``sagu-bench==X.Y.Z``);
+    ``unknown`` in a source tree outside git."""
+    from billiards.files import IN_CHECKOUT
+
+    if not IN_CHECKOUT:
+        from billiards import __version__
+
+        return f"sagu-bench=={__version__}"
 
     def run(*cmd: str) -> str:
         try:

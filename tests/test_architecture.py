@@ -15,8 +15,8 @@ name counts too; the relative lazy imports of ``billiards.envs`` and ``billiards
 The allowed direction: a unit imports only units of lower layers (:data:`LAYERS`, lowest
 first; an import inside one layer is a cycle waiting to happen and is not allowed either)::
 
-    campaign -> pictures, report -> search -> rl -> evaluation -> envs -> render, rm, baselines
-      -> domain, app_config -> physics, provenance -> files, device
+    cli -> apps -> web -> campaign -> offline -> bench -> pictures, report, league, exit -> search -> rl
+      -> evaluation -> envs -> render, rm, baselines -> domain, app_config -> physics, provenance -> files, device
 
 ``search`` may import ``rl`` (a trained policy as a proposer); ``rl`` never imports ``search``.
 ``render`` only draws (physics, domain): playing an inning for a picture is ``pictures``'.
@@ -140,6 +140,8 @@ LAYERS = [  # lowest first; a new top-level module or subpackage takes its place
     ("billiards.offline",),  # datasets played by any agent the benchmark adapts
     ("billiards.campaign",),
     ("billiards.web",),  # the viewer: plays agents (bench), leagues and runs, on top of everything
+    ("billiards.apps",),  # the Hydra apps (train, search, evaluate, match) the scripts and the console command run
+    ("billiards.cli",),  # the console command `sagu`: names the apps and tools by module, imports them when asked
 ]
 
 

@@ -9,8 +9,8 @@
 
 The rules, observation, action and reward: :mod:`billiards.envs.sagu`. ``env()`` is
 ``raw_env()`` inside PettingZoo's order-enforcing wrapper (PettingZoo's convention); TorchRL
-runs it through ``torchrl.envs.PettingZooWrapper`` (docs/matches.md). Needs the ``marl`` extra
-(``pip install -e ".[marl]"``: pettingzoo).
+runs it through ``torchrl.envs.PettingZooWrapper`` (docs/matches.md). pettingzoo is a
+dependency of the package.
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
-"""``python -m billiards.web [--host 127.0.0.1] [--port 0] [--out outputs/web] [RUN_DIR ...]``:
-serve the viewer; prints its URL on one line (port 0, the default: a free port)."""
+"""``python -m billiards.web [--host 127.0.0.1] [--port 0] [--allow-host NAME ...] [--out outputs/web] [RUN_DIR ...]``:
+serve the viewer; prints its URL on one line (port 0, the default: a free port). It answers only
+the loopback names, the ``--host`` address and the ``--allow-host`` names (docs/reliability.md)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,9 @@ def main(argv=None) -> int:
     parser.add_argument("run_dirs", nargs="*", type=Path, help="run directories to offer in the replay view, besides results/")
     parser.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
     parser.add_argument("--port", type=int, default=0, help="port (default 0: a free one)")
+    parser.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                        help="a host name or address the browser uses to reach the viewer, besides localhost, 127.0.0.1, [::1] "
+                             "and the --host address (repeatable; any other Host is refused: DNS rebinding)")
     parser.add_argument("--out", type=Path, default=None, help="where played matches are saved (default outputs/web)")
     parser.add_argument("--threads", type=int, default=1, help="threads of the simulator's batches and the networks (default 1)")
     args = parser.parse_args(argv)
@@ -30,9 +34,14 @@ def main(argv=None) -> int:
     from billiards.device import set_threads
 
     from .app import DEFAULT_OUT, create_app
+    from .guard import host_names
 
+    try:
+        hosts = host_names([args.host, *args.allow_host])
+    except ValueError as err:
+        parser.error(f"--host / --allow-host: {err}")
     set_threads(args.threads)
-    app = create_app(run_dirs=args.run_dirs, out_dir=args.out or DEFAULT_OUT)
+    app = create_app(run_dirs=args.run_dirs, out_dir=args.out or DEFAULT_OUT, hosts=hosts)
     family = socket.AF_INET6 if ":" in args.host else socket.AF_INET
     # proto IPPROTO_TCP, not 0: asyncio sets TCP_NODELAY only on sockets that say they are TCP, and without it a
     # kept-alive connection waits ~40 ms per answer (Nagle's algorithm against the client's delayed ACK)
@@ -47,6 +56,9 @@ def main(argv=None) -> int:
     host, port = sock.getsockname()[:2]
     shown = f"[{host}]" if ":" in host else host
     print(f"billiards viewer: http://{shown}:{port}/", flush=True)
+    if host in ("0.0.0.0", "::") and not args.allow_host:
+        print(f"note: the viewer answers only the Host names {', '.join(f'[{h}]' if ':' in h else h for h in hosts)}; "
+              f"give the name or address other machines use with --allow-host", file=sys.stderr, flush=True)
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
     server.run(sockets=[sock])
     return 0

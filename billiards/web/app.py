@@ -7,11 +7,16 @@ agent or a league replay does not hold up the other requests. Bad input is a 4xx
 Unprocessable Content for a value out of its range (balls overlapping or off the table, an
 action outside the box, an unknown preset or agent), Forbidden for a path outside the folders
 the viewer reads, Not Found for what does not exist, Conflict for a shot in a match that is over.
+Every error, FastAPI's and Starlette's own included (an unknown route, a method a route does not
+take), has that one shape, ``{"error": "<one sentence>"}``; a bug is a 500 with a generic sentence.
+:class:`.guard.Guard` answers only the viewer's own host names and refuses writes from other
+origins (docs/reliability.md).
 """
 
 from __future__ import annotations
 
 import threading
+from collections.abc import Iterable
 from http import HTTPStatus
 from pathlib import Path
 
@@ -19,26 +24,45 @@ import numpy as np
 from fastapi import FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
+from starlette.exceptions import HTTPException
 
 from billiards.files import ROOT, LedgerError
 
 from . import agents as web_agents
 from . import sim
+from .guard import Guard, error, host_names
 from .match import HUMAN, Matches, MatchError, MatchOver
 from .models import AgentRequest, ConsideredRequest, MatchRequest, MatchShotRequest, ShotRequest
 from .runs import PathRefused, ReplayRefused, RunNotFound, RunStore
 
 # the answers' statuses, by name (HTTP's numbers)
 BAD, REFUSED, MISSING, CONFLICT = HTTPStatus.BAD_REQUEST, HTTPStatus.FORBIDDEN, HTTPStatus.NOT_FOUND, HTTPStatus.CONFLICT
-INVALID, FAILED = HTTPStatus.UNPROCESSABLE_ENTITY, HTTPStatus.INTERNAL_SERVER_ERROR
-STATUS = {"bad_json": BAD, "invalid": INVALID, "outside": REFUSED, "not_found": MISSING, "match_over": CONFLICT, "bug": FAILED}
+INVALID, FAILED, ELSEWHERE = HTTPStatus.UNPROCESSABLE_ENTITY, HTTPStatus.INTERNAL_SERVER_ERROR, HTTPStatus.MISDIRECTED_REQUEST
+STATUS = {"bad_json": BAD, "invalid": INVALID, "outside": REFUSED, "not_found": MISSING, "match_over": CONFLICT, "bug": FAILED,
+          "other_host": ELSEWHERE, "other_origin": REFUSED}  # the last two: Guard's
 STATIC = Path(__file__).resolve().parent / "static"
 STATIC_FILES = {"app.js": "text/javascript", "style.css": "text/css"}
 DEFAULT_OUT = ROOT / "outputs" / "web"
 
 
-def _error(status: int, message: str, **extra) -> JSONResponse:
-    return JSONResponse({"error": message, **extra}, status_code=status)
+def _error(status: int, message: str) -> JSONResponse:
+    return error(status, message)
+
+
+def _http_message(request: Request, exc: HTTPException) -> str:
+    """One sentence for Starlette's own errors: an unknown route, a method a route does not take."""
+    method, path = request.method, request.url.path
+    if exc.status_code == HTTPStatus.NOT_FOUND:
+        return f"no page or endpoint {method} {path!r} (the API is docs/viewer.md's)"
+    if exc.status_code == HTTPStatus.METHOD_NOT_ALLOWED:
+        allowed = (exc.headers or {}).get("Allow")
+        return f"{path!r} does not take {method}" + (f" (it takes {allowed})" if allowed else "")
+    detail = exc.detail if isinstance(exc.detail, str) else None
+    try:
+        phrase = HTTPStatus(exc.status_code).phrase
+    except ValueError:
+        phrase = f"status {exc.status_code}"
+    return detail or phrase
 
 
 def _validation_message(errors: list[dict]) -> tuple[int, str]:
@@ -61,10 +85,15 @@ def _quietly(fn) -> None:
         pass
 
 
-def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path = ROOT) -> FastAPI:
+def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path = ROOT, hosts: Iterable[str] = ()) -> FastAPI:
     """The viewer's app: runs read from ``root/results``, ``out_dir`` (where played matches are
-    saved; None: not saved) and ``run_dirs``."""
+    saved; None: not saved) and ``run_dirs``. It answers the loopback names (localhost,
+    127.0.0.1, [::1]) and ``hosts`` (the address it binds, ``--allow-host`` names; a name that
+    is not one raises ValueError), on any port."""
+    names = host_names(hosts)
     app = FastAPI(title="billiards viewer", description="Korean 4-ball: shots, agents, replays and matches", version="1")
+    app.add_middleware(Guard, hosts=names)
+    app.state.hosts = names
     out = Path(out_dir) if out_dir is not None else None
     store = RunStore(root, run_dirs, out)
     matches = Matches(out)
@@ -78,9 +107,11 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
         status, message = _validation_message(list(exc.errors()))
         return _error(status, message)
 
-    @app.exception_handler(Exception)
-    async def _failed(request: Request, exc: Exception):  # a bug, not bad input: said in JSON, and the server goes on
-        return _error(FAILED, f"{type(exc).__name__}: {exc}")
+    @app.exception_handler(HTTPException)
+    async def _http(request: Request, exc: HTTPException):
+        return error(exc.status_code, _http_message(request, exc), headers=exc.headers)
+
+    # a bug (an exception no route answered) is Guard's: logged with its traceback, answered 500 with a generic sentence
 
     # ------------------------------------------------------------------------- the page
 

@@ -110,7 +110,8 @@ class Match:
         """The person's shot (raw theta, p, a, b), then the league player's turns."""
         with self.lock:
             if self.over:
-                raise MatchOver(f"match {self.id} is over ({self.state()['scores']}); start another")
+                scores = ", ".join(f"{who} {points}" for who, points in self.state()["scores"].items())
+                raise MatchOver(f"match {self.id} is over ({scores}); start another")
             if self.game.mover != 0:
                 raise MatchError(f"match {self.id}: it is {self.opponent}'s turn")
             raw = np.asarray(action, dtype=np.float64)

@@ -4,7 +4,8 @@ succeeds, agents answer, recorded runs list and replay exactly (P3 chains from t
 benchmark scorecards' units, P1 innings and training evaluations played again, their scores
 equal to the recorded ones), a scorecard whose agent names code is refused, what a search
 considered is shown for a recorded shot, paths outside the allowed folders are refused, a match
-plays to its end and is saved as a league ledger."""
+plays to its end and is saved as a league ledger; only the viewer's own host names are answered,
+a write from another origin is refused, and every error has one shape, a bug's included."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -61,9 +63,14 @@ def out_dir(tmp_path_factory):
     return tmp_path_factory.mktemp("web_out")
 
 
+def viewer(app, **kwargs) -> TestClient:
+    """A client of ``app`` at one of the viewer's own names (TestClient's default Host, testserver, is refused)."""
+    return TestClient(app, base_url="http://localhost", **kwargs)
+
+
 @pytest.fixture(scope="module")
 def client(extra_runs, out_dir):
-    return TestClient(create_app(run_dirs=[extra_runs], out_dir=out_dir))
+    return viewer(create_app(run_dirs=[extra_runs], out_dir=out_dir))
 
 
 # ----------------------------------------------------------------------------- shots
@@ -153,6 +160,169 @@ def test_a_symlink_out_of_a_run_directory_is_refused(client, extra_runs):
     r = client.get("/api/run", params={"path": str(extra_runs / "out")})
     assert r.status_code == 403 and "symlink" in r.json()["error"]
     assert str(extra_runs) in client.get("/api/runs").json()["folders"]
+
+
+# ----------------------------------------------------------------------------- hosts, origins, one error shape
+
+OTHER_HOSTS = ["evil.example", "evil.example:8000", "localhost.evil.example", "127.0.0.1.nip.io:80", "localhost@evil.example",
+               "127.0.0.2", "[::2]:80", "testserver", "localhost:80:80", ""]
+OWN_HOSTS = ["localhost", "localhost:8000", "LocalHost:51234", "127.0.0.1", "127.0.0.1:80", "[::1]", "[::1]:8000", "[0:0::1]:9"]
+
+
+def _only_error(r, status: int, *words: str) -> str:
+    """The answer is ``status`` with the viewer's one error shape, a sentence holding ``words``."""
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"] == "application/json", r.headers
+    body = r.json()
+    assert list(body) == ["error"] and isinstance(body["error"], str) and body["error"], body
+    for w in words:
+        assert w in body["error"], body
+    assert "Traceback" not in r.text and "{'" not in body["error"], body  # a sentence: no traceback, no raw dict
+    return body["error"]
+
+
+@pytest.mark.parametrize("host", OTHER_HOSTS)
+def test_another_host_is_refused_on_every_route(client, host):
+    """DNS rebinding: another site's page whose name now points here sends its own name as the Host."""
+    for method, url in [("GET", "/api/runs"), ("GET", "/"), ("GET", "/static/app.js"), ("GET", "/api/config"), ("GET", "/no/such/page"),
+                        ("GET", f"/api/run?path={P3_RUN}"), ("POST", "/api/shot")]:
+        r = client.request(method, url, headers={"host": host}, json=GOOD if method == "POST" else None)
+        _only_error(r, 421, "is not one of this viewer's names", "DNS rebinding", "--allow-host")
+    assert client.get("/api/runs").status_code == 200
+
+
+def test_a_match_is_not_started_for_another_host(client):
+    matches = client.app.state.matches
+    before = len(matches.sessions)
+    r = client.post("/api/match", json={"opponent": "random", "target": 1}, headers={"host": "evil.example:8000"})
+    _only_error(r, 421, "'evil.example:8000'")
+    assert len(matches.sessions) == before
+
+
+@pytest.mark.parametrize("host", OWN_HOSTS)
+def test_the_viewer_s_own_names_pass_on_any_port(client, host):
+    r = client.get("/api/runs", headers={"host": host})
+    assert r.status_code == 200 and r.json()["runs"], r.text
+    page = client.get("/", headers={"host": host})
+    assert page.status_code == 200 and b"/static/app.js" in page.content
+    assert client.get("/static/style.css", headers={"host": host}).status_code == 200
+
+
+def test_the_bind_address_and_allowed_names_pass_and_no_other(out_dir):
+    c = viewer(create_app(out_dir=out_dir, hosts=["192.168.1.5", "Viewer.LAN", "[fe80::1]", "::"]))
+    for host in ["192.168.1.5:8000", "viewer.lan", "VIEWER.lan:1", "[fe80::1]:8000", "[::]:80", "localhost", "[::1]"]:
+        assert c.get("/api/config", headers={"host": host}).status_code == 200, host
+    for host in ["192.168.1.6", "other.lan", "viewer.lan.evil.example", "[fe80::2]"]:
+        _only_error(c.get("/api/config", headers={"host": host}), 421, "192.168.1.5, viewer.lan, [fe80::1], [::]")
+    for bad in ["viewer.lan:8000", "a b", "", "http://viewer.lan", "[::1]:80", "fe80::1%eth0"]:
+        with pytest.raises(ValueError, match="not a host name or address"):
+            create_app(out_dir=out_dir, hosts=[bad])
+
+
+def test_python_m_billiards_web_refuses_an_allowed_host_that_is_not_one():
+    from billiards.web.__main__ import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--allow-host", "viewer.lan:8000"])
+    assert exit_.value.code == 2
+
+
+CROSS = [  # headers a browser sends with a write from another origin or site
+    {"origin": "http://evil.example"},
+    {"origin": "http://evil.example:80"},
+    {"origin": "http://localhost:8001"},  # another local app, another port
+    {"origin": "https://localhost"},  # another scheme
+    {"origin": "http://127.0.0.1"},  # another of the viewer's names is another origin
+    {"origin": "null"},  # a sandboxed frame, a file:// page
+    {"origin": "http://localhost@evil.example"},
+    {"referer": "http://evil.example/page.html"},
+    {"sec-fetch-site": "cross-site"},
+    {"sec-fetch-site": "same-site"},
+    {"origin": "http://localhost", "sec-fetch-site": "cross-site"},
+]
+
+
+@pytest.mark.parametrize("headers", CROSS, ids=[",".join(f"{k}={v}" for k, v in h.items()) for h in CROSS])
+def test_a_cross_origin_write_is_refused_and_starts_nothing(client, headers):
+    matches = client.app.state.matches
+    before = len(matches.sessions)
+    r = client.post("/api/match", json={"opponent": "random", "target": 1}, headers=headers)
+    _only_error(r, 403, "is refused: only the viewer's own page (http://localhost)")
+    assert len(matches.sessions) == before
+    _only_error(client.post("/api/shot", json=GOOD, headers=headers), 403, "from another")
+    _only_error(client.put("/api/shot", json=GOOD, headers=headers), 403)
+    _only_error(client.delete("/api/match/abc", headers=headers), 403)
+
+
+SAME = [
+    {"origin": "http://localhost", "sec-fetch-site": "same-origin"},
+    {"origin": "http://localhost:80"},
+    {"referer": "http://localhost/", "sec-fetch-site": "same-origin"},
+    {"sec-fetch-site": "none"},
+    {},  # no browser: curl, a script
+]
+
+
+@pytest.mark.parametrize("headers", SAME, ids=[",".join(f"{k}={v}" for k, v in h.items()) or "none" for h in SAME])
+def test_a_same_origin_write_or_one_without_a_browser_passes(client, headers):
+    assert client.post("/api/shot", json=GOOD, headers=headers).status_code == 200
+    r = client.post("/api/match", json={"opponent": "random", "target": 1}, headers=headers)
+    assert r.status_code == 200, r.text
+
+
+def test_the_origin_is_compared_with_the_host_the_browser_used(client):
+    """Reached as 127.0.0.1:8000 (or through a tunnel on another port), the page's own origin is that one."""
+    h = {"host": "127.0.0.1:8000", "origin": "http://127.0.0.1:8000", "sec-fetch-site": "same-origin"}
+    assert client.post("/api/shot", json=GOOD, headers=h).status_code == 200
+    _only_error(client.post("/api/shot", json=GOOD, headers={**h, "origin": "http://localhost:8000"}), 403, "'http://localhost:8000'")
+    h6 = {"host": "[::1]:9", "origin": "http://[::1]:9"}
+    assert client.post("/api/shot", json=GOOD, headers=h6).status_code == 200
+
+
+def test_a_cross_origin_read_gets_no_cors_header(client):
+    """Reads are not refused by origin: the browser keeps another origin's page from reading them, and no
+    Access-Control-Allow-Origin header lets it."""
+    r = client.get("/api/runs", headers={"origin": "http://evil.example"})
+    assert r.status_code == 200 and not any(k.lower().startswith("access-control") for k in r.headers)
+
+
+def test_every_error_has_one_shape(client):
+    _only_error(client.get("/no/such/page"), 404, "no page or endpoint GET '/no/such/page'")
+    _only_error(client.post("/api/runs"), 405, "'/api/runs' does not take POST (it takes GET)")
+    _only_error(client.get("/api/run", params={"path": "results/no_such_run"}), 404, "no run")
+    _only_error(client.get("/static/nothing.js"), 404, "no static file")
+    _only_error(client.get("/api/match/nothing"), 404, "no match 'nothing'")
+    _only_error(client.get("/api/run"), 422, "query.path: Field required")
+    _only_error(client.get("/api/run", params={"path": P3_RUN, "unit": -1}), 422, "query.unit")
+    _only_error(client.post("/api/shot", json={"positions": RACK}), 422, "action: Field required")
+    _only_error(client.post("/api/shot", content=b"[", headers={"content-type": "application/json"}), 400, "malformed JSON")
+
+
+def test_a_shot_in_a_match_that_is_over_is_409_with_a_sentence(client):
+    start = client.post("/api/match", json={"opponent": "random", "target": 1, "seed": 2})
+    assert start.status_code == 200, start.text
+    state = start.json()["state"]
+    client.app.state.matches.get(state["id"]).over = True  # ended (the full match is test_a_match_against_random_...)
+    r = client.post(f"/api/match/{state['id']}/shot", json={"action": [1.0, 0.5, 0.0, 0.0]})
+    scores = ", ".join(f"{who} {n}" for who, n in state["scores"].items())
+    _only_error(r, 409, f"match {state['id']} is over ({scores}); start another")
+
+
+def test_a_bug_is_a_500_with_a_generic_sentence_logged_with_its_traceback(client, monkeypatch, caplog):
+    from billiards.web.guard import BUG
+
+    def broken():
+        raise RuntimeError("secret detail /home/someone/.ssh")
+
+    monkeypatch.setattr(client.app.state.store, "list_runs", broken)
+    with caplog.at_level("ERROR", logger="billiards.web"):
+        r = client.get("/api/runs")
+    assert _only_error(r, 500) == BUG
+    assert "secret" not in r.text and "RuntimeError" not in r.text
+    logged = [rec for rec in caplog.records if rec.name == "billiards.web" and rec.exc_info]
+    assert logged and "GET /api/runs" in logged[0].getMessage() and "secret detail" in str(logged[0].exc_info[1])
+    monkeypatch.undo()
+    assert client.get("/api/runs").status_code == 200 and client.post("/api/shot", json=GOOD).status_code == 200
 
 
 # ----------------------------------------------------------------------------- agents
@@ -319,7 +489,7 @@ def test_a_training_evaluation_is_played_again_with_its_shipped_policy(tmp_path)
     evaluate(policy, n_innings=12, max_shots=6, seed=5, constrain_aim=cfg.env.constrain_aim, extra_features=cfg.env.extra_features,
              env_kwargs=dict(params=params_from_config(cfg.physics)), noise=noise_from_config(cfg.get("noise"))).to_json(run / "eval.json")
     recorded = json.loads((run / "eval.json").read_text())["points"]
-    client = TestClient(create_app(out_dir=None, root=root))
+    client = viewer(create_app(out_dir=None, root=root))
     listed = {r["path"]: r for r in client.get("/api/runs").json()["runs"]}
     assert listed[name]["replayable"] and listed[name]["policy"] == "results/policies/tiny/seed0.pt"
     r = client.get("/api/run", params={"path": name, "unit": 4})
@@ -480,7 +650,8 @@ def test_a_slow_agent_does_not_block_a_shot(monkeypatch, out_dir):
 @pytest.mark.slow
 def test_python_m_billiards_web_prints_its_url_and_serves(out_dir):
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "billiards.web", "--port", "0", "--out", str(out_dir)], cwd=ROOT,
+    proc = subprocess.Popen([sys.executable, "-m", "billiards.web", "--port", "0", "--out", str(out_dir), "--allow-host", "viewer.test"],
+                            cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         line = proc.stdout.readline().strip()
@@ -490,6 +661,16 @@ def test_python_m_billiards_web_prints_its_url_and_serves(out_dir):
             assert "korean_medium" in json.loads(resp.read())["physics"]
         with urllib.request.urlopen(url, timeout=600) as resp:
             assert b"/static/app.js" in resp.read()
+        port = url.rstrip("/").rsplit(":", 1)[1]
+        with urllib.request.urlopen(urllib.request.Request(url, headers={"Host": f"viewer.test:{port}"}), timeout=600) as resp:
+            assert resp.status == 200
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(urllib.request.Request(url + "api/runs", headers={"Host": f"evil.example:{port}"}), timeout=600)
+        assert refused.value.code == 421 and "DNS rebinding" in json.loads(refused.value.read())["error"]
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(urllib.request.Request(url + "api/shot", json.dumps(GOOD).encode(), {
+                "content-type": "application/json", "Origin": "http://evil.example"}), timeout=600)
+        assert refused.value.code == 403
     finally:
         proc.terminate()
         proc.wait(30)
