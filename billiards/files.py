@@ -41,6 +41,7 @@ PACKAGE = Path(__file__).resolve().parent
 IN_CHECKOUT = (PACKAGE.parent / "conf").is_dir() and (PACKAGE.parent / "pyproject.toml").is_file()
 ROOT = PACKAGE.parent if IN_CHECKOUT else PACKAGE / "_data"
 CONF_DIR = ROOT / "conf"  # the Hydra configs every app composes
+OUTPUTS = PACKAGE.parent / "outputs" if IN_CHECKOUT else Path("outputs")  # where tools write by default (an install: the working directory)
 
 # What a training run directory holds (billiards.rl) ...
 CONFIG_FILE = "config.yaml"  # the resolved config, written at start (training and search runs)

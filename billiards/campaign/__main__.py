@@ -21,7 +21,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from billiards.files import ROOT, display_path
+from billiards.files import OUTPUTS, ROOT, display_path
 
 from .stages import BUDGETS, LAUNCHERS, StageError, check_options, paper_stages
 
@@ -57,7 +57,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     args.campaign = getattr(args, "campaign", NAME)
-    root = (args.root or ROOT / "outputs" / "campaign" / args.campaign).resolve()
+    root = (args.root or OUTPUTS / "campaign" / args.campaign).resolve()
     try:
         stages = paper_stages(root, [t for t in args.only.split(",") if t] if args.only else None)
         if args.command == "report":

@@ -26,7 +26,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
 from starlette.exceptions import HTTPException
 
-from billiards.files import ROOT, LedgerError
+from billiards.files import OUTPUTS, ROOT, LedgerError
 
 from . import agents as web_agents
 from . import sim
@@ -42,7 +42,7 @@ STATUS = {"bad_json": BAD, "invalid": INVALID, "outside": REFUSED, "not_found": 
           "other_host": ELSEWHERE, "other_origin": REFUSED}  # the last two: Guard's
 STATIC = Path(__file__).resolve().parent / "static"
 STATIC_FILES = {"app.js": "text/javascript", "style.css": "text/css"}
-DEFAULT_OUT = ROOT / "outputs" / "web"
+DEFAULT_OUT = OUTPUTS / "web"
 
 
 def _error(status: int, message: str) -> JSONResponse:
