@@ -23,6 +23,10 @@ killed run keeps its finished blocks; the same command resumes with the rest);
 ``minari.load_dataset`` reads it with ``MINARI_DATASETS_PATH=DIR/minari``, and TorchRL's
 ``MinariExperienceReplay(..., load_from_local_minari=True)`` too.
 
+Every input is checked before anything is written and every file when it is read (the
+"inputs" section below; docs/datasets.md, "Bounds and checks"): a refusal is one sentence,
+``Error: ...``, never a traceback.
+
 The actions are the raw shots as played (float64 theta, p, a, b): the searches' angles come
 from ``atan2`` (within one turn either way), so the dataset's action space spans
 ``[-2pi, 2pi]`` for the angle, not the env's ``[0, 2pi]``; the simulator plays either.
@@ -36,12 +40,14 @@ import hashlib
 import json
 import math
 import os
+import re
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from billiards.files import atomic_write_bytes
+from billiards.files import atomic_write_bytes, display_path
 
 DATASET_SEED = 9_000_000
 BLOCK = 100  # innings played side by side, one file each
@@ -52,7 +58,13 @@ DATASETS = {
     "medium": {"none": "results/policies/base/seed0.pt", "fastfiz": "results/policies/fastfiz_aim_features/seed0.pt"},
     "random": {"none": "random", "fastfiz": "random"},
 }
-INFO = ("score", "foul", "miss", "first_contact", "second_red", "cushions", "positions", "raw_action", "commanded_action")
+# the env's info keys a dataset keeps: their shape per step and dtype
+INFO_LAYOUT = {"score": ((), np.bool_), "foul": ((), np.bool_), "miss": ((), np.bool_), "first_contact": ((), np.int64),
+               "second_red": ((), np.int64), "cushions": ((), np.int64), "positions": ((4, 2), np.float64),
+               "raw_action": ((4,), np.float64), "commanded_action": ((4,), np.float64)}
+INFO = tuple(INFO_LAYOUT)
+# the datasets' action space: the raw shot, its angle within one turn either way (module docstring)
+ACTION_LOW, ACTION_HIGH = np.array([-2 * math.pi, 0.0, -1.0, -1.0]), np.array([2 * math.pi, 1.0, 1.0, 1.0])
 
 
 def dataset_id(dataset: str, noise: str) -> str:
@@ -98,66 +110,359 @@ def play_block(agent, track, first: int, n: int) -> dict[str, np.ndarray]:
 
 
 def _block_path(out: Path, index: int) -> Path:
-    return out / "blocks" / f"block{index:05d}.npz"
+    return Path(out) / "blocks" / f"block{index:05d}.npz"
 
 
-def _manifest(out: Path) -> dict:
-    return json.loads((out / "dataset.json").read_text())
+# ----------------------------------------------------------------------------- inputs
+#
+# One mechanism checks what the datasets' commands are given, before anything is written, and
+# every file when it is read: the options against :data:`LIMITS` and the choices, the agent by
+# building it, the folders by looking (``billiards.app_config.path_problem``), ``dataset.json``
+# against :data:`MANIFEST`, each block against the episodes its manifest says it holds
+# (:func:`block_layout`). Each refusal is one sentence naming the option or the file and what is
+# wrong -- never a file's contents -- raised as :class:`DatasetError` (``Error: ...``, exit
+# status 1, no traceback: the project's convention for its command lines).
 
 
-def generate(dataset: str, noise: str, shots: int, out: Path, agent_spec: str | None = None, progress: bool = True) -> dict:
-    """Play ``shots`` shots (rounded up to whole blocks of innings) into ``out``; resumes."""
-    from billiards.bench.agents import resolve_agent
-    from billiards.provenance import git_commit
+class DatasetError(SystemExit):
+    """A bad input to the datasets' commands: ``Error: <one sentence>``. A ``SystemExit``, so
+    that a command line, or a script calling these functions, ends with the sentence and no
+    traceback."""
 
-    if noise not in NOISES and agent_spec is None:
-        raise SystemExit(f"Error: --noise must be one of {', '.join(NOISES)} (or give --agent), got {noise!r}")
-    if dataset not in DATASETS and agent_spec is None:
-        raise SystemExit(f"Error: --dataset must be one of {', '.join(DATASETS)} (or give --agent), got {dataset!r}")
-    if shots < 1:
-        raise SystemExit(f"Error: --shots must be >= 1, got {shots}")
+    def __init__(self, problem: str):
+        super().__init__(f"Error: {problem}")
+
+
+MANIFEST_FILE = "dataset.json"
+MAX_SHOTS = 2_000_000
+LIMITS = {  # option -> (lowest, highest, why the highest)
+    "--shots": (1, MAX_SHOTS, "ten times the shipped datasets: about 8 GiB in Minari's format, and build holds every "
+                              "episode in memory, about 1 GiB per 200,000 shots"),
+    "--updates": (1, 10_000_000, "gradient steps, about a day on one core; the baseline takes 20,000"),
+    "--seed": (0, 2**31 - 1, "a 31-bit seed"),
+}
+NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")  # a dataset's name: part of its Minari id and of a path
+# dataset.json: key -> type; "commit" may be there besides (the code that played the blocks)
+MANIFEST = {"dataset_id": str, "dataset": str, "noise": str, "agent": str, "physics": str, "shots_per_inning": int,
+            "block": int, "blocks": int, "seed": int, "budget": int}
+MAX_MANIFEST_BYTES = 1 << 20
+
+
+def option_problem(value, option: str) -> str | None:
+    """Why ``value`` is no valid integer ``option`` (:data:`LIMITS`), or None."""
+    lo, hi, why = LIMITS[option]
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        return f"{option} must be a whole number, got {str(value)[:40]!r}"
+    if value < lo:
+        return f"{option} must be at least {lo:,}, got {value}"
+    if value > hi:
+        return f"{option} must be at most {hi:,} ({why}), got {value}"
+    return None
+
+
+def _check(problem: str | None) -> None:
+    if problem is not None:
+        raise DatasetError(problem)
+
+
+def _kind(value) -> str:
+    """What a JSON value is, in words (not what it holds)."""
+    if value is None:
+        return "null"
+    return {bool: "a boolean", int: "a number", float: "a number", str: "a string", list: "a list",
+            dict: "an object"}.get(type(value), type(value).__name__)
+
+
+def manifest_problem(manifest) -> str | None:
+    """Why ``manifest`` (dataset.json, parsed) describes no dataset this code reads, or None."""
+    from billiards.physics import PRESETS
+    from billiards.physics.noise import NOISE_PRESETS
+
+    if not isinstance(manifest, dict):
+        return f"not a JSON object but {_kind(manifest)}"
+    missing = [k for k in MANIFEST if k not in manifest]
+    if missing:
+        return f"lacks {', '.join(missing)}"
+    for key, kind in MANIFEST.items():
+        value = manifest[key]
+        if isinstance(value, bool) or not isinstance(value, kind):
+            return f"{key} must be {'a string' if kind is str else 'a whole number'}, got {_kind(value)}"
+    if "commit" in manifest and not isinstance(manifest["commit"], str):
+        return f"commit must be a string, got {_kind(manifest['commit'])}"
+    if not NAME.fullmatch(manifest["dataset"]):
+        return "dataset is no dataset name (letters, digits, _ and -, at most 64)"
+    if manifest["noise"] not in NOISE_PRESETS:
+        return f"noise must be one of {', '.join(NOISE_PRESETS)}"
+    if manifest["physics"] not in PRESETS:
+        return f"physics must be one of {', '.join(sorted(PRESETS))}"
+    if manifest["dataset_id"] != dataset_id(manifest["dataset"], manifest["noise"]):
+        return f"dataset_id is not {dataset_id(manifest['dataset'], manifest['noise'])}, its dataset's and noise's"
+    for key, want in (("shots_per_inning", SHOTS), ("block", BLOCK), ("seed", DATASET_SEED)):
+        if manifest[key] != want:
+            return f"{key} is {manifest[key]}; this code plays and reads {key} {want}"
+    if not 1 <= manifest["blocks"] <= _blocks(MAX_SHOTS):
+        return f"blocks must lie in 1..{_blocks(MAX_SHOTS):,}, got {manifest['blocks']}"
+    if manifest["budget"] < 1:
+        return f"budget must be at least 1, got {manifest['budget']}"
+    return None
+
+
+def _blocks(shots: int) -> int:
+    return math.ceil(shots / (SHOTS * BLOCK))
+
+
+def _folder_problem(out: Path) -> str | None:
+    """Why ``out`` is no dataset folder to read, or None."""
+    where = display_path(out)
+    if not os.path.lexists(out):
+        return f"{where}: no such folder"
+    if not out.is_dir():
+        return f"{where}: a file, not a dataset folder"
+    path = out / MANIFEST_FILE
+    if not os.path.lexists(path):
+        return f"{where}: holds no {MANIFEST_FILE}, so no dataset of python -m billiards.offline generate"
+    if not path.is_file():
+        return f"{display_path(path)}: not a file"
+    return None
+
+
+def read_manifest(out: Path) -> dict:
+    """``out/dataset.json``, checked (:func:`manifest_problem`); a :class:`DatasetError` names
+    the folder or the file and what is wrong."""
+    out = Path(out)
+    _check(_folder_problem(out))
+    path = out / MANIFEST_FILE
+    where = display_path(path)
+    try:
+        with open(path, "rb") as f:
+            data = f.read(MAX_MANIFEST_BYTES + 1)
+    except OSError as err:
+        raise DatasetError(f"{where}: cannot be read ({err.strerror})") from None
+    if len(data) > MAX_MANIFEST_BYTES:
+        raise DatasetError(f"{where}: damaged: larger than {MAX_MANIFEST_BYTES:,} bytes, far more than a manifest")
+    try:
+        manifest = json.loads(data)
+    except json.JSONDecodeError as err:
+        raise DatasetError(f"{where}: damaged: not JSON (line {err.lineno}, column {err.colno}); move the folder aside "
+                           f"and generate the dataset again") from None
+    except (ValueError, RecursionError):  # not UTF-8, or nested past the parser's stack
+        raise DatasetError(f"{where}: damaged: not JSON text; move the folder aside and generate the dataset again") from None
+    problem = manifest_problem(manifest)
+    if problem:
+        raise DatasetError(f"{where}: damaged: {problem}; move the folder aside and generate the dataset again")
+    return manifest
+
+
+def obs_dim(noise: str) -> int:
+    """The gymnasium env's observation size under ``noise``: the table, and under variable noise
+    the next shot's level."""
+    from billiards import domain
+    from billiards.physics.noise import get_noise
+
+    return domain.OBS_DIM + int(get_noise(noise).is_variable)
+
+
+def block_layout(manifest: dict) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Each array a block of ``manifest``'s dataset holds: its shape ((innings, steps, ...): T
+    actions, rewards and flags to T + 1 observations and infos) and dtype."""
+    n, T = manifest["block"], manifest["shots_per_inning"]
+    layout = {"observations": ((n, T + 1, obs_dim(manifest["noise"])), np.float32), "actions": ((n, T, 4), np.float64),
+              "rewards": ((n, T), np.float64), "terminations": ((n, T), np.bool_), "truncations": ((n, T), np.bool_),
+              **{f"info/{k}": ((n, T + 1, *shape), dtype) for k, (shape, dtype) in INFO_LAYOUT.items()}}
+    return {k: (shape, np.dtype(dtype)) for k, (shape, dtype) in layout.items()}
+
+
+def _headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """The shape and dtype of each array of an ``.npz`` file, from the arrays' headers alone."""
+    from numpy.lib import format as npy
+
+    headers = {}
+    with zipfile.ZipFile(path) as z:
+        for info in z.infolist():
+            with z.open(info) as f:
+                version = npy.read_magic(f)
+                read = {(1, 0): npy.read_array_header_1_0, (2, 0): npy.read_array_header_2_0}.get(version)
+                if read is None:
+                    raise ValueError(f"array format {version}")
+                shape, _, dtype = read(f)
+            headers[info.filename.removesuffix(".npy")] = (shape, dtype)
+    return headers
+
+
+def _unreadable(where: str, err: BaseException) -> DatasetError:
+    return DatasetError(f"{where}: not a readable block (truncated or damaged: {type(err).__name__}); remove it and run "
+                        f"generate again to play it again")
+
+
+def read_block(out: Path, index: int, manifest: dict) -> dict[str, np.ndarray]:
+    """Block ``index`` of the dataset in ``out``, checked against the episodes ``manifest`` says
+    it holds: the arrays of :func:`block_layout`, no more, no fewer, each of its shape and dtype
+    (read from the headers before any data), every float finite, the shots within the datasets'
+    action space. A :class:`DatasetError` names the file and what is wrong."""
+    path = _block_path(out, index)
+    where = display_path(path)
+    if not path.is_file():
+        raise DatasetError(f"{where}: missing; run generate again to play it")
+    layout = block_layout(manifest)
+    # A damaged zip raises whatever its damage makes zipfile, zlib or NumPy raise (BadZipFile,
+    # EOFError, zlib.error, ValueError, NotImplementedError for an unknown compression ...).
+    try:
+        headers = _headers(path)
+    except Exception as err:  # noqa: BLE001
+        raise _unreadable(where, err) from None
+    missing = [k for k in layout if k not in headers]
+    if missing:
+        raise DatasetError(f"{where}: lacks {', '.join(missing)}; remove it and run generate again to play it again")
+    extra = [k for k in headers if k not in layout]
+    if extra:
+        raise DatasetError(f"{where}: holds {len(extra)} array(s) a block does not ({', '.join(sorted(extra)[:3])}); remove it "
+                           f"and run generate again to play it again")
+    for key, (shape, dtype) in layout.items():
+        got_shape, got_dtype = headers[key]
+        if got_shape != shape or got_dtype != dtype:
+            n, T = manifest["block"], manifest["shots_per_inning"]
+            raise DatasetError(f"{where}: {key} is {got_dtype} of shape {got_shape}, where {n} innings of {T} shots need "
+                               f"{dtype} of shape {shape}; remove it and run generate again to play it again")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in layout}
+    except Exception as err:  # noqa: BLE001
+        raise _unreadable(where, err) from None
+    for key, a in arrays.items():
+        if a.dtype.kind == "f" and not np.isfinite(a).all():
+            raise DatasetError(f"{where}: {key} holds NaN or an infinity; remove it and run generate again to play it again")
+    a = arrays["actions"]
+    if ((a < ACTION_LOW) | (a > ACTION_HIGH)).any():
+        raise DatasetError(f"{where}: actions hold shots outside the datasets' action space (the angle within 2 pi either way, "
+                           f"power 0 to 1, spin -1 to 1); remove it and run generate again to play it again")
+    return arrays
+
+
+def _out_problem(out: Path, option: str = "--out") -> str | None:
+    """Why no dataset can be written at ``out``: a file, under a file, not writable, a name too
+    long (looked at, nothing created), or a folder of other files; None if it can."""
+    from billiards.app_config import path_problem
+
+    problem = path_problem(str(out), f"{option} {display_path(out)}")
+    if problem or not out.is_dir():
+        return problem
+    names = os.listdir(out)
+    if names and MANIFEST_FILE not in names:
+        return (f"{option} {display_path(out)}: holds {len(names)} file(s) and no {MANIFEST_FILE}, so no dataset; choose a "
+                f"new or empty folder")
+    if os.path.lexists(out / "blocks") and not (out / "blocks").is_dir():
+        return f"{option} {display_path(out)}: its blocks is a file, not a folder"
+    return None
+
+
+def _played(out: Path) -> list[Path]:
+    blocks = out / "blocks"
+    return sorted(blocks.glob("block[0-9][0-9][0-9][0-9][0-9].npz")) if blocks.is_dir() else []
+
+
+def _differences(held: dict, manifest: dict) -> str:
+    short = lambda v: repr(v) if len(repr(v)) <= 60 else repr(v)[:56] + "...'"  # noqa: E731
+    keys = [k for k in manifest if held.get(k) != manifest[k]]
+    return "; ".join(f"{k} {short(held.get(k))} there, {short(manifest[k])} here" for k in keys[:3])
+
+
+def _plan(dataset: str, noise: str, shots: int, out: Path, agent_spec: str | None):
+    """Every input of :func:`generate` checked, nothing written: the manifest, the track, the
+    blocks to play, the agent (built; None when nothing is left to play) and whether
+    dataset.json is to be written."""
+    _check(option_problem(shots, "--shots"))
+    from billiards.physics.noise import NOISE_PRESETS
+
+    if not isinstance(noise, str) or not isinstance(dataset, str):
+        raise DatasetError(f"--noise and --dataset must be names, got {type(noise).__name__} and {type(dataset).__name__}")
+    if agent_spec is None:
+        if noise not in NOISES:
+            raise DatasetError(f"--noise must be one of {', '.join(NOISES)} (or give --agent), got {str(noise)[:40]!r}")
+        if dataset not in DATASETS:
+            raise DatasetError(f"--dataset must be one of {', '.join(DATASETS)} (or give --agent), got {str(dataset)[:40]!r}")
+    else:
+        if not isinstance(agent_spec, str) or not agent_spec.strip():
+            raise DatasetError("--agent must name an agent (docs/benchmark.md lists the specs), got an empty one")
+        if noise not in NOISE_PRESETS:
+            raise DatasetError(f"--noise must be one of {', '.join(NOISE_PRESETS)}, got {str(noise)[:40]!r}")
+        if not NAME.fullmatch(dataset):
+            raise DatasetError(f"--dataset must be a name of letters, digits, _ and - (at most 64, a letter or digit "
+                               f"first), got {str(dataset)[:40]!r}")
+    out = Path(out)
+    _check(_out_problem(out))
     spec = agent_spec or DATASETS[dataset][noise]
     track = track_for(noise)
-    blocks = math.ceil(shots / (SHOTS * BLOCK))
+    blocks = _blocks(shots)
     manifest = {"dataset_id": dataset_id(dataset, noise), "dataset": dataset, "noise": noise, "agent": spec,
                 "physics": track.physics, "shots_per_inning": SHOTS, "block": BLOCK, "blocks": blocks,
                 "seed": DATASET_SEED, "budget": track.budget}
-    out.mkdir(parents=True, exist_ok=True)
-    if (out / "dataset.json").exists():
-        held = {k: v for k, v in _manifest(out).items() if k != "commit"}
-        if held != manifest:
-            raise SystemExit(f"Error: {out} holds another dataset ({held}); give another --out")
-    else:
-        atomic_write_bytes(out / "dataset.json", json.dumps({**manifest, "commit": git_commit()}, indent=1).encode())
+    write = True
+    if os.path.lexists(out / MANIFEST_FILE):
+        held = {k: v for k, v in read_manifest(out).items() if k != "commit"}
+        if held == manifest:
+            write = False
+        elif _played(out):  # a manifest without a finished block holds nothing: the new command's replaces it
+            raise DatasetError(f"{display_path(out)} holds another dataset ({_differences(held, manifest)}); give another --out")
     todo = [b for b in range(blocks) if not _block_path(out, b).exists()]
+    for b in sorted(set(range(blocks)) - set(todo)):  # the finished blocks are checked before more are played beside them
+        read_block(out, b, manifest)
+    if not todo:
+        return manifest, track, todo, None, write
+    from billiards.bench.agents import resolve_agent
+
+    try:
+        agent = resolve_agent(spec, track)
+    except (ValueError, OSError) as err:  # AgentError is a ValueError; a file it names may not be readable
+        raise DatasetError(f"{'--agent' if agent_spec else f'--dataset {dataset} --noise {noise}'}: {err}") from None
+    return manifest, track, todo, agent, write
+
+
+def generate(dataset: str, noise: str, shots: int, out: Path, agent_spec: str | None = None, progress: bool = True) -> dict:
+    """Play ``shots`` shots (rounded up to whole blocks of innings) into ``out``; resumes.
+    Every input is checked first (:func:`_plan`): a refused one leaves nothing written."""
+    out = Path(out)
+    manifest, track, todo, agent, write = _plan(dataset, noise, shots, out, agent_spec)
     if not todo:
         return manifest
-    agent = resolve_agent(spec, track)
-    print(f"{manifest['dataset_id']}: {blocks} blocks of {BLOCK} innings x {SHOTS} shots by {spec}; "
-          f"{blocks - len(todo)} done, {len(todo)} to play -> {out}", flush=True)
     import time
 
+    from billiards.bench.agents import AgentError
+    from billiards.provenance import git_commit
+
+    spec, blocks = manifest["agent"], manifest["blocks"]
+    print(f"{manifest['dataset_id']}: {blocks} blocks of {BLOCK} innings x {SHOTS} shots by {spec}; "
+          f"{blocks - len(todo)} done, {len(todo)} to play -> {out}", flush=True)
     start = time.perf_counter()
-    for i, b in enumerate(todo):
-        arrays = play_block(agent, track, b * BLOCK, BLOCK)
-        path = _block_path(out, b)
-        path.parent.mkdir(exist_ok=True)
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-        if progress:
-            left = (time.perf_counter() - start) / (i + 1) * (len(todo) - i - 1)
-            print(f"block {b + 1}/{blocks} written; about {left / 60:.1f} min left", file=sys.stderr, flush=True)
+    try:
+        (out / "blocks").mkdir(parents=True, exist_ok=True)
+        if write:
+            atomic_write_bytes(out / MANIFEST_FILE, json.dumps({**manifest, "commit": git_commit()}, indent=1).encode())
+        for i, b in enumerate(todo):
+            try:
+                arrays = play_block(agent, track, b * BLOCK, BLOCK)
+            except AgentError as err:
+                raise DatasetError(f"the agent {spec[:80]!r} failed in block {b + 1}: {err}; the {blocks - len(todo) + i} "
+                                   f"finished blocks are kept") from None
+            path = _block_path(out, b)
+            tmp = path.with_suffix(".tmp.npz")
+            np.savez(tmp, **arrays)
+            os.replace(tmp, path)
+            if progress:
+                left = (time.perf_counter() - start) / (i + 1) * (len(todo) - i - 1)
+                print(f"block {b + 1}/{blocks} written; about {left / 60:.1f} min left", file=sys.stderr, flush=True)
+    except OSError as err:
+        raise DatasetError(f"{display_path(err.filename or out)}: cannot be written ({err.strerror or err}); the finished "
+                           f"blocks are kept") from None
     return manifest
 
 
 def episodes(out: Path):
-    """The dataset's innings as Minari episode buffers, in seed order."""
-    manifest = _manifest(out)
+    """The dataset's innings as Minari episode buffers, in seed order; each block checked as it
+    is read (:func:`read_block`)."""
+    manifest = read_manifest(out)
     for b in range(manifest["blocks"]):
-        with np.load(_block_path(out, b)) as data:
-            arrays = {k: data[k] for k in data.files}
-        for i in range(arrays["observations"].shape[0]):
+        arrays = read_block(out, b, manifest)
+        for i in range(manifest["block"]):
             yield {"observations": arrays["observations"][i], "actions": arrays["actions"][i],
                    "rewards": arrays["rewards"][i], "terminations": arrays["terminations"][i],
                    "truncations": arrays["truncations"][i], "id": b * manifest["block"] + i,
@@ -166,28 +471,32 @@ def episodes(out: Path):
 
 
 def build(out: Path, root: Path | None = None):
-    """The Minari dataset of the blocks in ``out`` (every block must be there), under ``root``
-    (default ``out/minari``); returns it."""
+    """The Minari dataset of the blocks in ``out`` (every block must be there and sound), under
+    ``root`` (default ``out/minari``); returns it. Nothing is written before every block has
+    been read and checked."""
+    out = Path(out)
+    manifest = read_manifest(out)
+    missing = [b for b in range(manifest["blocks"]) if not _block_path(out, b).exists()]
+    if missing:
+        raise DatasetError(f"{display_path(out)}: {len(missing)} of {manifest['blocks']} blocks not played yet; run generate again")
+    from billiards.app_config import path_problem
+
+    root = Path(root) if root is not None else out / "minari"
+    _check(path_problem(str(root), f"--root {display_path(root)}"))
+    root = root.resolve()  # Minari resolves a relative one against itself
+    if os.path.lexists(root / manifest["dataset_id"]):
+        raise DatasetError(f"{root / manifest['dataset_id']} exists already; remove it to build the dataset again")
     import gymnasium as gym
     import minari
+    from minari.data_collector import EpisodeBuffer
 
     from billiards import GYM_ID
 
-    manifest = _manifest(out)
-    missing = [b for b in range(manifest["blocks"]) if not _block_path(out, b).exists()]
-    if missing:
-        raise SystemExit(f"Error: {out}: {len(missing)} of {manifest['blocks']} blocks not played yet; run generate again")
-    root = Path(root or out / "minari").resolve()  # Minari resolves a relative one against itself
+    buffers = [EpisodeBuffer(**ep) for ep in episodes(out)]
     os.environ["MINARI_DATASETS_PATH"] = str(root)
     env = gym.make(GYM_ID, start="random", on_miss="continue", max_shots=SHOTS, physics=manifest["physics"],
                    noise=manifest["noise"], normalize_actions=False)
-    action_space = gym.spaces.Box(low=np.array([-2 * math.pi, 0.0, -1.0, -1.0]), high=np.array([2 * math.pi, 1.0, 1.0, 1.0]),
-                                  dtype=np.float64)
-    from minari.data_collector import EpisodeBuffer
-
-    buffers = [EpisodeBuffer(**ep) for ep in episodes(out)]
-    if (root / manifest["dataset_id"]).exists():
-        raise SystemExit(f"Error: {root / manifest['dataset_id']} exists already; remove it to build the dataset again")
+    action_space = gym.spaces.Box(low=ACTION_LOW, high=ACTION_HIGH, dtype=np.float64)
     import warnings
 
     with warnings.catch_warnings():  # no e-mail address and no URL of the code: the commit names the code
@@ -204,12 +513,13 @@ def checksum(out: Path) -> str:
     """sha256 over the dataset's content: every block's arrays in order (name, dtype, shape and
     bytes), so the same command gives the same checksum whatever Minari's files hold besides."""
     h = hashlib.sha256()
-    for b in range(_manifest(out)["blocks"]):
-        with np.load(_block_path(out, b)) as data:
-            for name in sorted(data.files):
-                a = np.ascontiguousarray(data[name])
-                h.update(f"{name}:{a.dtype.str}:{a.shape}".encode())
-                h.update(a.tobytes())
+    manifest = read_manifest(out)
+    for b in range(manifest["blocks"]):
+        arrays = read_block(out, b, manifest)
+        for name in sorted(arrays):
+            a = np.ascontiguousarray(arrays[name])
+            h.update(f"{name}:{a.dtype.str}:{a.shape}".encode())
+            h.update(a.tobytes())
     return h.hexdigest()
 
 
@@ -309,32 +619,72 @@ def space_agent(policy, space: str, name: str, R: float | None = None):
     return CallableAgent(act, name, normalized=space == "raw")
 
 
+def _minari_episodes(directory: Path, manifest: dict):
+    """The episodes of the Minari dataset built in ``directory`` (``MINARI_DATASETS_PATH`` set),
+    read with ``minari.load_dataset``: each episode's observations, actions, rewards and flags,
+    checked as the blocks are (their shapes, finite values), and as many as the manifest says.
+    A :class:`DatasetError` names the dataset and what is wrong."""
+    import minari
+
+    where = display_path(Path(directory) / "minari" / manifest["dataset_id"])
+    layout = {k: shape[1:] for k, (shape, _) in block_layout(manifest).items() if "/" not in k}
+    damaged = lambda err: DatasetError(f"{where}: not a readable Minari dataset (damaged: {type(err).__name__}); "  # noqa: E731
+                                       f"remove it and build it again")
+    # Minari's HDF5 files: whatever their damage makes Minari or h5py raise (OSError, KeyError, ValueError ...)
+    try:
+        episodes = iter(minari.load_dataset(manifest["dataset_id"]).iterate_episodes())
+    except Exception as err:  # noqa: BLE001
+        raise damaged(err) from None
+    count = 0
+    while True:
+        try:
+            ep = next(episodes, None)
+            arrays = None if ep is None else {k: np.asarray(getattr(ep, k)) for k in layout}
+        except Exception as err:  # noqa: BLE001
+            raise damaged(err) from None
+        if arrays is None:
+            break
+        for key, shape in layout.items():
+            a = arrays[key]
+            if a.shape != shape:
+                raise DatasetError(f"{where}: episode {count}'s {key} is of shape {a.shape}, where an inning of "
+                                   f"{manifest['shots_per_inning']} shots needs {shape}; remove it and build it again")
+            if a.dtype.kind in "fc" and not np.isfinite(a).all():
+                raise DatasetError(f"{where}: episode {count}'s {key} holds NaN or an infinity; remove it and build it again")
+        count += 1
+        yield arrays
+    want = manifest["blocks"] * manifest["block"]
+    if count != want:
+        raise DatasetError(f"{where}: holds {count} episodes where {MANIFEST_FILE} says {want}; remove it and build it again")
+
+
 def transitions(directory: Path, space: str = "raw"):
     """Every transition of the Minari dataset built in ``directory``, read with
     ``minari.load_dataset``, as one TensorDict in the learner's ``space`` (:func:`space_observation`,
     :func:`space_action`):
     observation, action (normalised), next observation, reward, done and terminated."""
-    import minari
     import torch
     from tensordict import TensorDict
 
     from billiards.physics import get_params
 
-    manifest = _manifest(directory)
+    directory = Path(directory)
+    manifest = read_manifest(directory)
     root = (directory / "minari").resolve()
-    if not (root / manifest["dataset_id"]).exists():
-        raise SystemExit(f"Error: {directory}: no Minari dataset yet; run python -m billiards.offline build {directory}")
+    if not (root / manifest["dataset_id"]).is_dir():
+        raise DatasetError(f"{display_path(directory)}: no Minari dataset yet; run python -m billiards.offline build "
+                           f"{display_path(directory)}")
     os.environ["MINARI_DATASETS_PATH"] = str(root)
     parts = {k: [] for k in ("obs", "next", "action", "reward", "terminated", "truncated")}
     R = get_params(manifest["physics"]).ball_radius  # the aim window of the table the dataset was played on
-    for ep in minari.load_dataset(manifest["dataset_id"]).iterate_episodes():
-        x = space_observation(ep.observations, space)
+    for arrays in _minari_episodes(directory, manifest):
+        x = space_observation(arrays["observations"], space)
         parts["obs"].append(x[:-1])
         parts["next"].append(x[1:])
-        parts["action"].append(space_action(ep.observations[:-1], ep.actions, space, R))
-        parts["reward"].append(ep.rewards)
-        parts["terminated"].append(ep.terminations)
-        parts["truncated"].append(ep.truncations)
+        parts["action"].append(space_action(arrays["observations"][:-1], arrays["actions"], space, R))
+        parts["reward"].append(arrays["rewards"])
+        parts["terminated"].append(arrays["terminations"])
+        parts["truncated"].append(arrays["truncations"])
     cat = {k: torch.from_numpy(np.concatenate(v)) for k, v in parts.items()}
     n = cat["obs"].shape[0]
     flag = lambda x: x.bool().reshape(n, 1)
@@ -344,12 +694,34 @@ def transitions(directory: Path, space: str = "raw"):
                                 "done": flag(cat["terminated"]) | flag(cat["truncated"])}}, batch_size=[n])
 
 
+def _check_iql(directory: Path, updates: int, out: Path, seed: int) -> dict:
+    """Every input of :func:`train_iql` checked, nothing written; returns the dataset's manifest.
+    ``out`` must be new or empty: the policy is not saved, and a scorecard left there by another
+    run would be continued as this one's."""
+    from billiards.app_config import path_problem
+
+    for value, option in ((updates, "--updates"), (seed, "--seed")):
+        _check(option_problem(value, option))
+    _check(path_problem(str(out), f"--out {display_path(out)}"))
+    if out.is_dir() and os.listdir(out):
+        raise DatasetError(f"--out {display_path(out)}: not empty (another run's iql.json or scorecard would be mixed with "
+                           f"this one's); choose a new or empty folder")
+    manifest = read_manifest(directory)
+    if not (directory / "minari" / manifest["dataset_id"]).is_dir():
+        raise DatasetError(f"{display_path(directory)}: no Minari dataset yet; run python -m billiards.offline build "
+                           f"{display_path(directory)}")
+    return manifest
+
+
 def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress: bool = True, space: str = "raw") -> dict:
     """IQL (TorchRL's ``IQLLoss``, :data:`IQL_SETTINGS`) for ``updates`` gradient steps on the
     dataset built in ``directory`` in the learner's ``space`` (:func:`transitions`), then its
     deterministic policy (mapped back to the raw shot on the observed table) scored on
     the dataset noise's track (:data:`IQL_TRACK`) by the benchmark (``out/scorecard``); writes
     ``out/iql.json`` (settings, CPU seconds, the scorecard's figures) and returns it."""
+    directory, out, cfg = Path(directory), Path(out), IQL_SETTINGS
+    _check_space(space)
+    manifest = _check_iql(directory, updates, out, seed)
     import time
 
     import torch
@@ -361,8 +733,6 @@ def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress:
     from billiards.bench import evaluate
     from billiards.rl.agents import mlp
 
-    manifest, cfg = _manifest(directory), IQL_SETTINGS
-    _check_space(space)
     torch.manual_seed(seed)
     data = transitions(directory, space)
     rb = ReplayBuffer(storage=LazyTensorStorage(data.shape[0]), batch_size=cfg["batch_size"])
@@ -415,7 +785,8 @@ def main(argv=None) -> int:
     g = sub.add_parser("generate", help="play the dataset's innings into --out (resumable)")
     g.add_argument("--dataset", default="expert", help=f"one of {', '.join(DATASETS)} (default expert)")
     g.add_argument("--noise", default="none", help=f"one of {', '.join(NOISES)} (default none)")
-    g.add_argument("--shots", type=int, default=200_000, help="shots to play, in whole blocks of innings (default 200000)")
+    g.add_argument("--shots", type=int, default=200_000,
+                   help=f"shots to play, in whole blocks of innings (default 200000, at most {MAX_SHOTS})")
     g.add_argument("--agent", default=None, help="another agent spec (docs/benchmark.md) instead of the dataset's own")
     g.add_argument("--out", type=Path, required=True, help="the dataset's folder (blocks/, dataset.json)")
     g.add_argument("--no-progress", action="store_true")
@@ -424,13 +795,20 @@ def main(argv=None) -> int:
     b.add_argument("--root", type=Path, default=None, help="Minari's datasets folder (default OUT/minari)")
     q = sub.add_parser("iql", help="train TorchRL's IQL on a built dataset and score it on its noise's track")
     q.add_argument("dataset_dir", type=Path, metavar="DIR", help="the dataset's folder (built)")
-    q.add_argument("--updates", type=int, default=20_000)
-    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--updates", type=int, default=20_000, help=f"gradient steps (default 20000, at most {LIMITS['--updates'][1]})")
+    q.add_argument("--seed", type=int, default=0, help=f"the learner's seed (0 to {LIMITS['--seed'][1]})")
     q.add_argument("--space", default="raw", choices=SPACES,
                    help="what the learner sees and emits: the env's raw observation and action box (default), or "
                         "aim_features: the carom features and the aim-constrained action, as the project's own agents")
     q.add_argument("--out", type=Path, required=True, help="where iql.json and the scorecard go")
     args = parser.parse_args(argv)
+    try:
+        return _run(args)
+    except OSError as err:  # the file system failed under a checked input (full, gone read-only ...): a sentence too
+        raise DatasetError(f"{display_path(err.filename) if err.filename else 'a file'}: {err.strerror or err}") from None
+
+
+def _run(args) -> int:
     if args.command == "iql":
         rec = train_iql(args.dataset_dir, args.updates, args.out, args.seed, space=args.space)
         print(json.dumps({k: rec[k] for k in ("dataset_id", "updates", "train_cpu_seconds", "track", "success_per_shot")}))

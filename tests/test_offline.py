@@ -1,7 +1,8 @@
 """Offline datasets (billiards.offline): a small sample generated here, loaded with
 ``minari.load_dataset`` and TorchRL's ``MinariExperienceReplay`` from local storage; its fields
 are the env's, a replayed transition gives the recorded next observation and reward, a killed
-generation resumes to the same data, and a folder of another dataset is refused."""
+generation resumes to the same data, and a folder of another dataset is refused. The input
+checks on small synthetic datasets: tests/test_offline_inputs.py."""
 
 from __future__ import annotations
 
@@ -114,6 +115,33 @@ def test_another_datasets_folder_or_a_bad_choice_is_refused(sample, tmp_path):
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
     manifest = json.loads((sample / "dataset.json").read_text())
     assert manifest["agent"] == "nearest" and manifest["seed"] == offline.DATASET_SEED
+
+
+def test_a_block_of_real_innings_cut_short_builds_nothing_and_a_damaged_minari_dataset_is_named(sample, tmp_path):
+    """The adversarial trial's case on played innings: the block's observations cut to 5 for its
+    10 actions is refused by build, naming the file, and nothing is built; the built Minari
+    dataset with its HDF5 file cut short is named by the IQL baseline's reader, with no traceback."""
+    import shutil
+
+    cut = tmp_path / "cut"
+    (cut / "blocks").mkdir(parents=True)
+    shutil.copy(sample / "dataset.json", cut / "dataset.json")
+    with np.load(sample / "blocks" / "block00000.npz") as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays["observations"] = arrays["observations"][:, :5]
+    np.savez(cut / "blocks" / "block00000.npz", **arrays)
+    with pytest.raises(offline.DatasetError, match=r"block00000.npz: observations is float32 of shape \(100, 5, 28\), where "
+                       r"100 innings of 10 shots need float32 of shape \(100, 11, 28\)"):
+        offline.build(cut)
+    assert not (cut / "minari").exists()
+
+    damaged = tmp_path / "damaged"
+    shutil.copytree(sample, damaged)
+    data = damaged / "minari" / offline.dataset_id("nearest", "none") / "data" / "main_data.hdf5"
+    data.write_bytes(data.read_bytes()[: data.stat().st_size // 3])
+    with pytest.raises(offline.DatasetError, match=r"^Error: .*nearest-v0: not a readable Minari dataset \(damaged: \w+\); "
+                       "remove it and build it again$"):
+        offline.transitions(damaged)
 
 
 def test_the_datasets_seeds_are_far_from_every_tracks():
