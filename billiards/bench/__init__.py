@@ -2,8 +2,8 @@
 (docs/benchmark.md).
 
     import billiards.bench as bench
-    card = bench.evaluate(my_act, "p1-exact-v1")          # a NumPy callable obs -> action
-    card = bench.evaluate("results/policies/base/seed0.pt", "innings-v1", out="outputs/eval/sac")
+    card = bench.evaluate(my_act, "p1-exact-v1")          # a NumPy callable obs -> action: the scorecard, nothing written
+    card = bench.evaluate("results/policies/base/seed0.pt", "innings-v1", out="outputs/eval/sac")  # ... and its files
 
 ``python evaluate.py track=<name> agent=<spec>`` is the same from the command line, and
 ``python -m billiards.bench leaderboard`` rebuilds ``results/leaderboard.md`` / ``.json``.

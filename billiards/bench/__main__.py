@@ -2,6 +2,7 @@
 
     python -m billiards.bench leaderboard                # rebuild results/leaderboard.md / .json / .png from the scorecards
     python -m billiards.bench leaderboard --out /tmp/lb  # ... elsewhere (CI diffs it against the committed one)
+    python -m billiards.bench leaderboard --scorecards DIR --out /tmp/lb  # from another folder of scorecards
     python -m billiards.bench campaign                   # play every missing scorecard of the project's own entries
     python -m billiards.bench campaign --only h2_ --tracks p3-exact-v1
     python -m billiards.bench record-training results/training/paper/table1/sac --row "SAC plain (Table 1)"
@@ -13,11 +14,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
-from billiards.files import ROOT
+from billiards.files import IN_CHECKOUT, ROOT
 
 SCORECARDS = Path("results/bench/scorecards")
+
+
+def _checkout_only(what: str) -> None:
+    """Commands that write under the repository's results/ run in a source checkout only (an
+    installed package's files are never written)."""
+    if not IN_CHECKOUT:
+        raise SystemExit(f"Error: {what} writes under the repository's results/; run it in a source checkout of the project")
 
 
 def campaign(only: str | None, tracks: list[str] | None, progress: bool) -> None:
@@ -43,7 +52,10 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m billiards.bench", description="The benchmark's leaderboard tools.")
     sub = parser.add_subparsers(dest="command", required=True)
     lb = sub.add_parser("leaderboard", help="rebuild the leaderboard from the committed scorecards")
-    lb.add_argument("--out", type=Path, default=ROOT / "results", help="folder for leaderboard.md/.json/.png (default results/)")
+    lb.add_argument("--scorecards", type=Path, default=ROOT / "results" / "bench",
+                    help="the folder of scorecards/, recorded/ and submissions/ (default the repository's results/bench)")
+    lb.add_argument("--out", type=Path, default=None,
+                    help="folder for leaderboard.md/.json/.png (default the repository's results/; required outside a checkout)")
     lb.add_argument("--no-figure", action="store_true", help="skip the PNG")
     cp = sub.add_parser("campaign", help="play the project's missing scorecards (resumable)")
     cp.add_argument("--only", help="entries whose slug contains this")
@@ -77,18 +89,23 @@ def main(argv=None) -> int:
                   f"({c['first']} ahead on {c['first_better']}, behind on {c['second_better']})")
         return 0
     if args.command == "leaderboard":
-        from .leaderboard import build
+        from .leaderboard import leaderboard, write
 
-        try:
-            paths = build(ROOT / "results" / "bench", args.out, figure=not args.no_figure)
+        try:  # each scorecard left out (partial, limited) is said on stderr
+            board = leaderboard(args.scorecards, report=lambda line: print(line, file=sys.stderr))
         except ValueError as err:
             raise SystemExit(f"Error: {err}") from None
+        if args.out is None and not IN_CHECKOUT:
+            raise SystemExit("Error: outside a source checkout give --out DIR (the installed package's files are never written)")
+        paths = write(board, args.out or ROOT / "results", figure=not args.no_figure)
         print("\n".join(str(p) for p in paths))
     elif args.command == "campaign":
+        _checkout_only("campaign")
         campaign(args.only, args.tracks, not args.quiet)
     elif args.command == "record-training":
         from .leaderboard import record_training
 
+        _checkout_only("record-training")
         print(record_training(args.setting, args.row, args.slug))
     else:
         from .run import fingerprint

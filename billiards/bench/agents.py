@@ -25,7 +25,8 @@
   over the shot proposer of the track's noise, ``proposer=for_noise_<preset>``), at the track's budget;
 * ``league:<name>``: a player of ``conf/match.yaml`` by name (``league:greedy``, ``league:safety_r``).
 
-Code is imported only from a spec the person gave or an object they passed; nothing the
+Given no name, an agent built from a spec goes by :func:`spec_name` (a file's stem, never its
+path). Code is imported only from a spec the person gave or an object they passed; nothing the
 benchmark reads from disk (a scorecard, a config, a ledger) names code to import.
 """
 
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import re
 from pathlib import Path
 
 import numpy as np
@@ -190,7 +192,7 @@ class ProjectPolicy(Agent):
     kind = "policy"
 
     def __init__(self, path: str | Path, params):
-        from billiards.files import display_path, repo_path
+        from billiards.files import repo_path
         from billiards.rl.checkpoint import CheckpointError
         from billiards.rl.policy import load_policy, reads_level
 
@@ -198,7 +200,7 @@ class ProjectPolicy(Agent):
             policy, cfg = load_policy(repo_path(path))
         except (CheckpointError, OSError) as err:
             raise AgentError(f"{path}: not a policy of this project ({err})") from None
-        super().__init__(display_path(repo_path(path)))
+        super().__init__(spec_name(str(path)))  # the file's (or the run directory's) stem: never a path of this machine
         self.policy = policy
         self.constrain_aim, self.extra_features = bool(cfg.env.constrain_aim), bool(cfg.env.extra_features)
         self.reads_level, self.R = reads_level(cfg), params.ball_radius
@@ -391,7 +393,9 @@ def _sb3(spec: str):
     try:
         import stable_baselines3 as sb3
     except ImportError:
-        raise AgentError(f"agent {spec!r}: Stable-Baselines3 is not installed (pip install -e '.[sb3]')") from None
+        from .extras import install_hint
+
+        raise AgentError(f"agent {spec!r}: Stable-Baselines3 is not installed ({install_hint('stable_baselines3')})") from None
     classes = {n.lower(): getattr(sb3, n) for n in ("SAC", "TD3", "PPO", "A2C", "DDPG", "DQN")}
     if algo.lower() not in classes:
         raise AgentError(f"agent {spec!r}: expected sb3:<algo>:<model.zip> with algo one of {', '.join(classes)}")
@@ -401,8 +405,7 @@ def _sb3(spec: str):
         model = classes[algo.lower()].load(path, device="cpu")
     except Exception as err:
         raise AgentError(f"agent {spec!r}: {path} is not a {algo.upper()} model ({type(err).__name__}: {err})") from None
-    agent = as_agent(model, name=f"sb3:{algo.lower()}:{Path(path).name}")
-    return agent
+    return as_agent(model, name=f"sb3:{algo.lower()}:{Path(path).stem}")
 
 
 def _search(spec: str, track) -> Agent:
@@ -497,7 +500,7 @@ def resolve_agent(spec, track, name: str | None = None) -> Agent:
         agent = ProjectPolicy(spec, params)
     elif ":" in spec:
         obj = _import_object(spec)
-        agent = as_agent(obj, name or spec)
+        agent = as_agent(obj, name or spec_name(spec))
     else:
         raise AgentError(f"agent {spec!r} names nothing: give random | nearest | random_aim, file.py:name, "
                          f"package.module:name, sb3:<algo>:<model.zip>, a policy .pt file or training run dir, "
@@ -505,6 +508,24 @@ def resolve_agent(spec, track, name: str | None = None) -> Agent:
     if name:
         agent.name = name
     return agent
+
+
+def spec_name(spec: str) -> str:
+    """The name an agent built from ``spec`` goes by when it is given none: never a path of the
+    machine that played it. A file or a folder goes by its stem (``agents/mine.py:act`` ->
+    ``mine:act``, ``runs/base/seed0.pt`` -> ``seed0``, a training run directory by its own name);
+    any other spec (``package.module:act``, ``random``) by itself."""
+    def stem(path: str) -> str:
+        return Path(re.split(r"[/\\]", path.rstrip("/\\"))[-1]).stem or path
+
+    if spec.startswith(("search:", "league:", "sb3:")):  # these name themselves (sb3: the model file's stem)
+        return spec
+    target, colon, attr = spec.rpartition(":")
+    if colon and target.endswith(".py") and attr.isidentifier():
+        return f"{stem(target)}:{attr}"
+    if spec.endswith(".pt") or re.search(r"[/\\]", spec):
+        return stem(spec)
+    return spec
 
 
 def spec_kind(spec: str) -> str:
@@ -517,4 +538,4 @@ def spec_kind(spec: str) -> str:
 
 __all__ = ["Agent", "AgentError", "BASELINES", "CallableAgent", "LeagueAgent", "NearestRedAgent", "ProjectPolicy",
            "RandomAgent", "RandomAimAgent", "SearchActorAgent", "as_agent", "league_player", "league_players",
-           "resolve_agent", "spec_kind", "to_raw"]
+           "resolve_agent", "spec_kind", "spec_name", "to_raw"]

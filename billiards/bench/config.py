@@ -17,7 +17,7 @@ from billiards.app_config import ValidatingCallback, numeric_bound_errors, regis
 class EvaluateConfig:
     track: str = "p1-exact-v1"  # a track of billiards.bench.tracks (python evaluate.py --help lists them)
     agent: str = MISSING  # the agent spec (docs/benchmark.md): file.py:act, module:act, a .pt policy, search:h2, league:greedy, ...
-    name: Optional[str] = None  # the agent's display name (default: from the spec)
+    name: Optional[str] = None  # the agent's name on its scorecard and row, required to submit (default: from the spec, never a path)
     group: Optional[str] = None  # the leaderboard row it pools into (training seeds of one setting)
     limit: Optional[int] = None  # only the first N innings / chains / matches per opponent (a quick look, not a leaderboard entry)
     out: Optional[str] = None  # the run directory (default outputs/evaluate/<track>/<date>/<time>); the same out resumes

@@ -1,6 +1,7 @@
 """The leaderboard: every scorecard of ``results/bench/``, one table per track, with intervals.
 
-Sources (all data; nothing here names code):
+Sources (all data; nothing here names code). The folder a scorecard lies in gives its status: a
+scorecard claims none (the ``verified`` key of older scorecards is ignored).
 
 * ``scorecards/<track>/<slug>/scorecard.json``: evaluations played here by ``evaluate.py``
   (status ``verified``);
@@ -12,15 +13,21 @@ Sources (all data; nothing here names code):
 
 Scorecards sharing an agent ``group`` (a policy's training seeds) pool into one row: the mean
 and the interquartile mean over every (seed, unit) score with stratified bootstrap intervals
-(:func:`billiards.stats.aggregate`). ``python -m billiards.bench leaderboard`` writes
+(:func:`billiards.stats.aggregate`). Partial and limited scorecards are left out, each reported
+by name; a played scorecard whose agent (or group) is named after a path is refused. The board
+counts the project's rows (``agents``, ``scorecards``) apart from the outside submissions
+(``outside``, present when there are any). ``python -m billiards.bench leaderboard`` writes
 ``leaderboard.json``, ``leaderboard.md``, ``leaderboard.png`` and ``leaderboard_profiles.png``
-(CI rebuilds the first two and diffs them).
+(CI rebuilds the first two and diffs them). :func:`placement` says where a score would rank on
+the committed snapshot (``results/leaderboard.json``).
 """
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -30,6 +37,9 @@ from billiards import stats
 from .tracks import TRACKS
 
 STATUSES = ("verified", "recorded", "unverified")
+OUTSIDE = "unverified"  # the status of outside submissions: counted apart from the project's rows
+SOURCES = (("verified", "scorecards/*/*/scorecard.json"), ("recorded", "recorded/*/*.json"),
+           ("unverified", "submissions/*/*/scorecard.json"))
 # performance profiles: the share of units (innings, chains) scoring above each threshold
 PROFILE_THRESHOLDS = {"innings": tuple(range(10)), "p1": tuple(round(0.1 * k, 1) for k in range(10)),
                       "p3": (0, 1, 2, 5, 10, 20, 50, 100, 200, 500)}
@@ -88,11 +98,30 @@ def earlier_figure(kind: str, files: tuple[str, ...]) -> dict:
     return {"value": round(value, 6), "ci95": ci, "where": ", ".join(files)}
 
 
+_FILE_SUFFIX = re.compile(r"\.(py|pt|pth|zip|ckpt|pkl|onnx|json|npz|safetensors)(:\w+)?$", re.IGNORECASE)
+_SEARCH_NAME = re.compile(r"^search:[\w-]+(/[\w-]+)?$")  # search:h2/geometric names a search, not a file
+
+
+def looks_like_path(name: str) -> bool:
+    """Whether an agent or row name names a file or folder: a path separator (but in a search's
+    own ``search:<search>/<proposer>``), a home, relative or drive prefix, or a file's suffix
+    (``.py``, ``.pt``, ``.zip`` ...)."""
+    name = str(name).strip()
+    if "\\" in name or name.startswith(("~", ".", "/")) or re.match(r"^[A-Za-z]:[\\/]", name):
+        return True
+    if "/" in name and not _SEARCH_NAME.match(name):
+        return True
+    return bool(_FILE_SUFFIX.search(name))
+
+
 def _load(path: Path) -> dict:
     try:
         card = json.loads(path.read_text())
     except (OSError, ValueError) as err:
         raise ValueError(f"{display_path(path)}: not a readable scorecard ({err})") from None
+    if not isinstance(card, dict):
+        raise ValueError(f"{display_path(path)}: not a scorecard (a JSON object)")
+    card.pop("verified", None)  # older scorecards claimed a status: the board gives it (collect)
     for key in ("track", "version", "agent"):
         if key not in card:
             raise ValueError(f"{display_path(path)}: a scorecard needs the key {key!r}")
@@ -104,16 +133,45 @@ def _load(path: Path) -> dict:
     return card
 
 
-def collect(root: Path) -> list[dict]:
-    """Every scorecard under ``root`` with its status and source path; partial and limited ones are left out."""
+def left_out(card: dict) -> str | None:
+    """Why a scorecard does not enter the board (partial or limited), or None."""
+    if card.get("partial"):
+        return (f"partial, {card.get('units_done', 'not all')} units finished: the same command with out=<its directory> "
+                "plays the rest")
+    if card.get("limit"):
+        return f"limited to {card['limit']} units per opponent or track (limit=): play the whole track, without limit="
+    return None
+
+
+def _check_names(path: Path, card: dict) -> None:
+    """A played scorecard's agent and group name a leaderboard row: never a path."""
+    agent = card["agent"] if isinstance(card["agent"], dict) else {}
+    for key in ("name", "group"):
+        value = agent.get(key)
+        if isinstance(value, str) and looks_like_path(value):
+            again = "name=<your agent's name>" if key == "name" else "group=<the row's name>"
+            raise ValueError(f"{display_path(path)}: its agent's {key} {value!r} is a path, not a name; a leaderboard row "
+                             f"is never named after a file: evaluate it again with {again} "
+                             f"(docs/benchmark.md, Submitting an agent)")
+    if not (isinstance(agent.get("name"), str) and agent["name"].strip()):
+        raise ValueError(f"{display_path(path)}: its agent has no name: evaluate it again with name=<your agent's name>")
+
+
+def collect(root: Path, report: Callable[[str], None] | None = None) -> list[dict]:
+    """Every scorecard under ``root`` with its status and source path. Partial and limited ones
+    are left out, each reported to ``report`` (a line naming the file and why); a played one
+    whose agent is named after a path, or that its ledger does not give, is refused (ValueError)."""
     cards = []
-    for status, pattern in (("verified", "scorecards/*/*/scorecard.json"), ("recorded", "recorded/*/*.json"),
-                            ("unverified", "submissions/*/*/scorecard.json")):
-        for path in sorted(root.glob(pattern)):
+    for status, pattern in SOURCES:
+        for path in sorted(Path(root).glob(pattern)):
             card = _load(path)
-            if card.get("partial") or card.get("limit"):
+            why = left_out(card)
+            if why is not None:
+                if report is not None:
+                    report(f"left out {display_path(path)}: {why}")
                 continue
             if status != "recorded":
+                _check_names(path, card)
                 check_against_ledger(path, card)
             card["status"] = status
             card["source"] = display_path(path)
@@ -193,9 +251,15 @@ def _row(track, cards: list[dict]) -> dict:
     return row
 
 
-def leaderboard(root: Path) -> dict:
-    """The leaderboard of the scorecards under ``root`` (see the module docstring)."""
-    cards = collect(root)
+def leaderboard(root: Path, report: Callable[[str], None] | None = None) -> dict:
+    """The leaderboard of the scorecards under ``root`` (see the module docstring; ``report``
+    as for :func:`collect`). ValueError where it finds none, naming where it looked."""
+    cards = collect(root, report)
+    if not cards:
+        where = ", ".join(pattern for _, pattern in SOURCES)
+        found = "no such folder" if not Path(root).is_dir() else f"looked for {where}"
+        raise ValueError(f"no scorecards to rank under {display_path(root)} ({found}); nothing written "
+                         f"(`{REBUILD} --scorecards DIR` reads another folder)")
     tracks = {}
     for name, track in TRACKS.items():
         groups: dict[tuple, list[dict]] = {}
@@ -212,15 +276,43 @@ def leaderboard(root: Path) -> dict:
             entry["profiles"] = {"thresholds": list(thresholds),
                                  "rows": {row["row"]: stats.performance_profile(runs, thresholds) for row, runs in ranked}}
         tracks[name] = entry
-    agents = sorted({r["row"] for t in tracks.values() for r in t["rows"]})
-    return {"rebuild": REBUILD, "agents": len(agents), "scorecards": len(cards), "tracks": tracks}
+    board = {"rebuild": REBUILD, **_counts(tracks, cards, own=True)}
+    outside = _counts(tracks, cards, own=False)
+    if outside["agents"]:  # present only where there are outside rows
+        board["outside"] = outside
+    board["tracks"] = tracks
+    return board
+
+
+def _counts(tracks: dict, cards: list[dict], own: bool) -> dict:
+    """The distinct rows and the scorecards of the project (``own``) or of outside submissions."""
+    rows = {r["row"] for t in tracks.values() for r in t["rows"] if (r["status"] != OUTSIDE) == own}
+    return {"agents": len(rows), "scorecards": sum((c["status"] != OUTSIDE) == own for c in cards)}
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}{'' if n == 1 else 's'}"
+
+
+def format_score(protocol: str, value: float) -> str:
+    """A row's figure as the board writes it: success per shot in %, points per inning to three
+    decimals, chain lengths to two, Elo to the unit."""
+    if protocol == "p1":
+        return f"{100 * value:.2f} %"
+    if protocol == "innings":
+        return f"{value:.3f}"
+    return f"{value:.0f}" if protocol == "match" else f"{value:.2f}"
 
 
 def markdown(board: dict) -> str:
     """``leaderboard.md``."""
+    outside = board.get("outside")
+    others = "" if not outside else \
+        (f", and {_count(outside['agents'], 'outside agent')} submitted to it ({_count(outside['scorecards'], 'scorecard')}; "
+         "status unverified)")
     lines = ["# Leaderboard", "",
              f"Every agent of the project on every track it applies to ({board['agents']} agents, {board['scorecards']} "
-             "scorecards). Rebuilt by `" + board["rebuild"] + "` from the scorecards under `results/bench/` "
+             f"scorecards){others}. Rebuilt by `" + board["rebuild"] + "` from the scorecards under `results/bench/` "
              "(docs/benchmark.md: the tracks, how to score and submit an agent). Intervals are 95 % bootstrap "
              "intervals resampled by inning, chain or match (rows pooling training seeds: a stratified bootstrap over "
              "seeds and their units; IQM: the interquartile mean); match win rates carry Wilson intervals. Compute: "
@@ -240,12 +332,11 @@ def markdown(board: dict) -> str:
         lines += [f"| # | agent | {metric} [95 %] | {extra} | P(above the next) [95 %] | seeds | ms · sims / decision | class "
                   "| status | earlier figure |", "|---|---|---|---|---|---|---|---|---|---|"]
         for i, r in enumerate(t["rows"], 1):
+            fmt = lambda v: format_score(track.protocol, v)  # noqa: E731
             if track.protocol == "match":
-                main = f"{r['score']:.0f} [{r['elo_ci95'][0]:.0f}, {r['elo_ci95'][1]:.0f}]"
+                main = f"{fmt(r['score'])} [{fmt(r['elo_ci95'][0])}, {fmt(r['elo_ci95'][1])}]"
                 more = f"{100 * r['win_rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}]"
             else:
-                fmt = (lambda v: f"{100 * v:.2f} %") if track.protocol == "p1" else (lambda v: f"{v:.3f}") if \
-                    track.protocol == "innings" else (lambda v: f"{v:.2f}")
                 main = f"{fmt(r['score'])} [{fmt(r['ci95'][0])}, {fmt(r['ci95'][1])}]"
                 more = fmt(r["iqm"]) if track.protocol != "p3" else \
                     f"{r['median']:.1f} · {r['iqm']:.2f} · {r['max']} · {r['reached_cap']}/{r['chains']}"
@@ -253,10 +344,8 @@ def markdown(board: dict) -> str:
             earlier = ""
             if "earlier" in r:
                 e = r["earlier"]
-                f = (lambda v: f"{100 * v:.2f} %") if track.protocol == "p1" else \
-                    (lambda v: f"{v:.3f}" if track.protocol == "innings" else f"{v:.2f}")
                 verdict = "agrees" if e["within_ci95"] else "intervals overlap" if e["intervals_overlap"] else "differs"
-                earlier = f"{f(e['value'])} [{f(e['ci95'][0])}, {f(e['ci95'][1])}], {verdict} ({e['protocol']})"
+                earlier = f"{fmt(e['value'])} [{fmt(e['ci95'][0])}, {fmt(e['ci95'][1])}], {verdict} ({e['protocol']})"
             above = "" if "p_above_next" not in r else \
                 f"{r['p_above_next']['p']:.2f} [{r['p_above_next']['ci95'][0]:.2f}, {r['p_above_next']['ci95'][1]:.2f}]"
             lines.append(f"| {i} | {r['row']} | {main} | {more} | {above} | {r['seeds']} | {cost} | {r['compute']} | {r['status']} "
@@ -311,9 +400,15 @@ def draw_figure(board: dict, path: Path) -> Path:
     return path
 
 
-def build(root: Path, out: Path, figure: bool = True) -> list[Path]:
-    """Write ``leaderboard.json``, ``.md`` (and ``.png``) into ``out`` from the scorecards under ``root``."""
-    board = leaderboard(root)
+def build(root: Path, out: Path, figure: bool = True, report: Callable[[str], None] | None = None) -> list[Path]:
+    """Write ``leaderboard.json``, ``.md`` (and ``.png``) into ``out`` from the scorecards under
+    ``root`` (``report``: as for :func:`collect`)."""
+    return write(leaderboard(root, report), out, figure)
+
+
+def write(board: dict, out: Path, figure: bool = True) -> list[Path]:
+    """Write a board's ``leaderboard.json``, ``.md`` (and ``.png``) into ``out``."""
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = [atomic_write_text(out / "leaderboard.json", json.dumps(board, indent=2) + "\n"),
              atomic_write_text(out / "leaderboard.md", markdown(board))]
@@ -374,6 +469,80 @@ def record_training(setting: Path, row: str, slug: str, root: Path | None = None
     return path
 
 
+def snapshot_path() -> Path:
+    """The committed leaderboard snapshot (in a checkout, or the copy an installed package carries)."""
+    from billiards.files import ROOT
+
+    return ROOT / "results" / "leaderboard.json"
+
+
+def headline_value(card: dict) -> float:
+    """The figure of a scorecard that the board ranks rows by (a row's ``score``): points per
+    inning (innings), success per shot (P1), the mean chain length (P3), the Elo (matches)."""
+    protocol = TRACKS[card["track"]].protocol
+    if protocol == "innings":
+        return float(card["points_per_inning"]["mean"])
+    if protocol == "p1":
+        return float(card["success_per_shot"]["mean"])
+    return float(card["chain"]["mean"]) if protocol == "p3" else float(card["elo"])
+
+
+def placement(track: str, value: float, board: dict | str | Path | None = None, version: int | None = None) -> str:
+    """Where ``value`` (a scorecard's :func:`headline_value`) would rank among the rows of
+    ``track`` on ``board`` (a board dict or a ``leaderboard.json``; default the committed
+    snapshot), ranked as the board ranks them: "would rank k of n on <track>, between A (a) and
+    B (b)" (n counts the new entry; first place: "above A", last: "below A", equal to rows:
+    "tied with A (a)"). ValueError when the board cannot be read or has no such track (or holds
+    another ``version`` of it)."""
+    if not isinstance(board, dict):
+        path = Path(board) if board is not None else snapshot_path()
+        try:
+            board = json.loads(path.read_text())
+        except (OSError, ValueError) as err:
+            raise ValueError(f"no leaderboard to place it on: {display_path(path)} ({type(err).__name__}: {err})") from None
+    entry = board.get("tracks", {}).get(track)
+    if entry is None:
+        raise ValueError(f"the leaderboard has no track {track!r}")
+    if version is not None and entry.get("version", version) != version:
+        raise ValueError(f"the leaderboard ranks {track} version {entry['version']}, the score is of version {version}")
+    protocol = TRACKS[track].protocol if track in TRACKS else None
+    show = lambda r: f"{r['row']} ({format_score(protocol, r['score'])})"  # noqa: E731
+    rows = sorted(entry["rows"], key=lambda r: (-r["score"], r["row"]))
+    v = round(float(value), 6)
+    above = [r for r in rows if round(r["score"], 6) > v]
+    tied = [r for r in rows if round(r["score"], 6) == v]
+    below = [r for r in rows if round(r["score"], 6) < v]
+    rank, n = len(above) + 1, len(rows) + 1
+    head = f"would rank {rank} of {n} on {track}"
+    if tied:
+        return f"{head}, tied with " + _and([show(r) for r in tied])
+    if not rows:
+        return f"{head} (the first row on it)"
+    if not above:
+        return f"{head}, above {show(below[0])}"
+    if not below:
+        return f"{head}, below {show(above[-1])}"
+    return f"{head}, between {show(above[-1])} and {show(below[0])}"
+
+
+def _and(items: list[str]) -> str:
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
+
+
+def placement_line(card: dict, board: dict | str | Path | None = None) -> str:
+    """``evaluate.py``'s last line: where the scorecard would rank on the committed board, with
+    the caveat of a limited run; what is missing where it cannot be placed."""
+    name = card["agent"]["name"]
+    try:
+        where = placement(card["track"], headline_value(card), board, card.get("version"))
+    except (KeyError, ValueError) as err:
+        return f"placement: {name} cannot be placed ({err})"
+    caveat = "" if not card.get("limit") else \
+        (f"; but a limited run ({card['limit']} units per opponent or track) is a quick look, not comparable to the full-track "
+         "rows nor a leaderboard entry")
+    return f"placement: {name} {where}{caveat}"
+
+
 def compare(first: Path, second: Path) -> dict:
     """Two agents' scorecards of one track compared unit by unit: every unit of a track is the
     same rack (inning, chain or match) for every agent, so the difference of their per-unit
@@ -405,6 +574,8 @@ def compare(first: Path, second: Path) -> dict:
             "sources": [display_path(pa), display_path(pb)]}
 
 
-__all__ = ["EARLIER", "PROFILE_THRESHOLDS", "REBUILD", "STATUSES", "build", "collect", "draw_figure", "draw_profiles",
-           "check_against_ledger", "compare", "earlier_figure", "leaderboard", "markdown", "record_training"]
+__all__ = ["EARLIER", "OUTSIDE", "PROFILE_THRESHOLDS", "REBUILD", "SOURCES", "STATUSES", "build", "check_against_ledger",
+           "collect", "compare", "draw_figure", "draw_profiles", "earlier_figure", "format_score", "headline_value",
+           "leaderboard", "left_out", "looks_like_path", "markdown", "placement", "placement_line", "record_training",
+           "snapshot_path", "write"]
 

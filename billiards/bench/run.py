@@ -6,9 +6,11 @@ the run's identity (a hash of the track and the agent), so an interrupted evalua
 it finished and the same call continues it; a directory that holds another agent's or another
 track version's evaluation is refused, as is a ledger line that is torn (dropped and played
 again when it is the last), unsealed or foreign. At the end ``scorecard.json`` and
-``scorecard.md`` are written.
+``scorecard.md`` are written there; without an output directory nothing is written and the
+scorecard is only returned. A scorecard claims no status: the leaderboard gives it one.
 
-The agent is timed alone (CPU seconds of its own calls) and its simulations counted.
+The agent is timed alone (CPU seconds of its own calls) and its simulations counted. A failure
+is put on the agent only when it is the agent's (:func:`whose_failure`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,9 @@ from .tracks import Track, get_track
 
 IDENTITY_FILE, LEDGER_FILE = "evaluation.json", "units.jsonl"
 SCORECARD_JSON, SCORECARD_MD = "scorecard.json", "scorecard.md"
+# what a protocol's resumable unit is called: (one, several)
+UNIT_WORDS = {"innings": ("inning block", "inning blocks"), "p1": ("inning block", "inning blocks"), "p3": ("chain", "chains"),
+              "match": ("match", "matches")}
 
 
 class EvaluationError(RuntimeError):
@@ -407,6 +412,65 @@ def claim_directory(out: Path, identity: dict) -> None:
     atomic_write_text(path, json.dumps(identity, indent=2, sort_keys=True) + "\n")
 
 
+# ----------------------------------------------------------------------------- failures
+
+
+def _own_file(cls) -> Path | None:
+    """The source file of an agent's class, or None for the package's own agents (and classes
+    without a file)."""
+    import inspect
+
+    try:
+        path = Path(inspect.getsourcefile(cls) or inspect.getfile(cls)).resolve()
+    except (TypeError, OSError):
+        return None
+    return None if files.PACKAGE in path.parents else path
+
+
+def _in_package(filename: str) -> bool:
+    return not filename.startswith("<") and files.PACKAGE in Path(filename).resolve().parents
+
+
+def whose_failure(err: BaseException, agent: Agent) -> str:
+    """``"agent"`` when ``err`` is the agent's own failure, ``"framework"`` when it is the
+    evaluation's: an import that fails in the package's code (a missing dependency), not in the
+    agent's file, or an exception raised outside the agent's ``act`` and ``reset``."""
+    frames = []
+    tb = err.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame)
+        tb = tb.tb_next
+    frames.reverse()  # the innermost first
+    if isinstance(err, ImportError):
+        mine = _own_file(type(agent))
+        for frame in frames:
+            name = frame.f_code.co_filename
+            if mine is not None and not name.startswith("<") and Path(name).resolve() == mine:
+                return "agent"
+            if _in_package(name):
+                return "framework"
+    codes = {getattr(getattr(type(agent), m, None), "__code__", None) for m in ("act", "reset")} - {None}
+    return "agent" if any(frame.f_code in codes for frame in frames) else "framework"
+
+
+def failure_message(err: Exception, agent: Agent, where: str, kept: str) -> str:
+    """What an evaluation stopped by ``err`` on ``where`` (``"match 3 of match-x5-v1"``) says:
+    the agent's failure names the agent; the framework's (a module it needs that is missing, an
+    error outside the agent's calls) says what failed and, for a module, how to install it."""
+    from .extras import import_name, install_hint
+
+    what = f"{type(err).__name__}: {err}"
+    if whose_failure(err, agent) == "agent":
+        return f"agent {agent.name} failed on {where}: {what} ({kept})"
+    if isinstance(err, ImportError):
+        module = err.name or str(err)
+        needs = (f"it needs {import_name(module)}, which is not installed" if isinstance(err, ModuleNotFoundError)
+                 else f"importing {module} failed (a broken or mismatched install)")
+        return (f"the evaluation cannot play {where}: {needs} ({what}); install it: {install_hint(module)}. "
+                f"Not a failure of agent {agent.name} ({kept})")
+    return f"the evaluation failed on {where}, outside agent {agent.name}'s calls: {what} ({kept})"
+
+
 # ----------------------------------------------------------------------------- evaluate
 
 
@@ -442,7 +506,8 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
 
     ``agent``: any agent :func:`billiards.bench.agents.as_agent` adapts or a spec string of
     :func:`~billiards.bench.agents.resolve_agent`. ``track``: a track name or :class:`Track`.
-    ``out``: a directory for the ledger and the scorecard (resumable; None keeps it in memory).
+    ``out``: a directory for the ledger and the scorecard (resumable); None writes nothing, the
+    scorecard is only returned.
     ``limit``: only the first ``limit`` innings / chains / matches per opponent (a quick look;
     the scorecard says so). ``group``: the leaderboard row this scorecard pools into with others
     (the training seeds of one setting). ``spec``: the spec to record when ``agent`` is already built."""
@@ -470,25 +535,24 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
         done = read_ledger(ledger, run_id)
     n_units = track.n_blocks()
     todo = [u for u in range(n_units) if u not in done]
-    unit_word = {"innings": "inning blocks", "p1": "inning blocks", "p3": "chains", "match": "matches"}[track.protocol]
+    one, several = UNIT_WORDS[track.protocol]
     if progress:
-        print(f"evaluate: {agent.name} on {full.name} ({track.rules()}); {len(done)} of {n_units} {unit_word} done"
+        print(f"evaluate: {agent.name} on {full.name} ({track.rules()}); {len(done)} of {n_units} {several} done"
               + (f"; output {display_path(out)}" if out is not None else ""), flush=True)
-    bar = tqdm(total=n_units, initial=len(done), desc=full.name, unit=unit_word.split()[-1], disable=not progress,
+    bar = tqdm(total=n_units, initial=len(done), desc=full.name, unit=several.split()[-1], disable=not progress,
                mininterval=1.0)
     interrupted = False
     try:
         for unit in todo:
+            kept = f"{len(done)} finished units kept{' in ' + display_path(ledger) if ledger else ''}"
             try:
                 rec = play_unit(agent, track, unit)
             except AgentError as err:
-                raise EvaluationError(f"{err} (on {unit_word[:-1]} {unit} of {full.name}; "
-                                      f"{len(done)} finished units kept{' in ' + display_path(ledger) if ledger else ''})") from err
+                raise EvaluationError(f"{err} (on {one} {unit} of {full.name}; {kept})") from err
             except KeyboardInterrupt:
                 raise
             except Exception as err:
-                raise EvaluationError(f"agent {agent.name} failed on {unit_word[:-1]} {unit} of {full.name}: "
-                                      f"{type(err).__name__}: {err} ({len(done)} finished units kept)") from err
+                raise EvaluationError(failure_message(err, agent, f"{one} {unit} of {full.name}", kept)) from err
             rec = {"unit": unit, **rec}
             if ledger is not None:
                 rec = files.append_record(ledger, rec, run_id)
@@ -501,7 +565,7 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
     records = [done[u] for u in sorted(done)]
     card = {"track": full.name, "version": full.version, "rules": track.rules(), "agent": identity_agent,
             **score_records(track, records), "command": command, "commit": commit, "cpu": _cpu(), "limit": limit,
-            "partial": len(records) < n_units, "verified": True, "run": run_id}
+            "partial": len(records) < n_units, "run": run_id}
     card["track_record"] = full.record()
     card = _ordered(card)
     if out is not None:
@@ -526,6 +590,6 @@ def headline(card: dict) -> str:
     return f"{card['agent']['name']} on {card['track']}: " + "; ".join(parts) + (" (partial)" if card.get("partial") else "")
 
 
-__all__ = ["EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "claim_directory", "evaluate",
-           "figures", "fingerprint", "fingerprint_data", "headline", "play_unit", "read_ledger", "run_identity", "score_records",
-           "scorecard_markdown", "unit_values"]
+__all__ = ["EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "UNIT_WORDS", "claim_directory",
+           "evaluate", "failure_message", "figures", "fingerprint", "fingerprint_data", "headline", "play_unit", "read_ledger",
+           "run_identity", "score_records", "scorecard_markdown", "unit_values", "whose_failure"]

@@ -32,3 +32,15 @@ def test_docs_example_runs_as_written(index, tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     if "out=" in code:  # the example that writes a run dir: its scorecard is there
         assert (tmp_path / "outputs" / "evaluate" / "sac_base" / "scorecard.md").is_file()
+
+
+def test_the_docs_say_what_evaluate_writes_from_python_and_that_a_submission_needs_a_name():
+    """What ``billiards.bench.evaluate`` writes (nothing without ``out=``: tests/bench/test_submission.py
+    checks it), and ``name=`` in the submission section, its command included."""
+    text = " ".join((REPO / "docs" / "benchmark.md").read_text().split())
+    assert "`billiards.bench.evaluate(agent, track)` in Python returns the scorecard (a dict) and writes files only into a " \
+           "directory given as `out=`" in text
+    assert "writes these files only where it is given `out=<dir>` (without it, nothing is written)" in text
+    submitting = text.split("**Submitting an agent.**", 1)[1].split("## ", 1)[0]
+    assert "with `name=`, which is required for a submission" in submitting
+    assert "python evaluate.py track=p1-exact-v1 agent=my_agent.py:act name=my-agent out=" in submitting
