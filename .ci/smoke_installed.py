@@ -23,7 +23,7 @@ def act(obs):
 '''
 
 
-def sagu(*args: str, expect: tuple[str, ...] = (), cwd: Path) -> str:
+def sagu(*args: str, expect: tuple[str, ...] = (), cwd: Path, code: int = 0) -> str:
     exe = shutil.which("sagu", path=str(Path(sys.executable).parent))
     if exe is None:
         raise SystemExit(f"FAIL: no `sagu` command beside {sys.executable}")
@@ -32,7 +32,7 @@ def sagu(*args: str, expect: tuple[str, ...] = (), cwd: Path) -> str:
     out = proc.stdout + proc.stderr
     print(f"$ sagu {' '.join(args)}   ({time.perf_counter() - t0:.1f} s, exit {proc.returncode})", flush=True)
     missing = [e for e in expect if e not in out]
-    if proc.returncode != 0 or missing:
+    if proc.returncode != code or missing:
         raise SystemExit(f"FAIL: exit {proc.returncode}, missing {missing}\n{out[-4000:]}")
     shown = [line for line in out.splitlines() if line.strip() and "%|" not in line]
     print("  " + "\n  ".join(shown[-4:]), flush=True)
@@ -63,7 +63,10 @@ def main() -> None:
                 raise SystemExit(f"FAIL: no scorecard for {name}")
         sagu("search", "protocol=p1", "protocol.n_innings=1", "protocol.shots=2", "progress=false", "hydra.run.dir=runs/search",
              cwd=cwd)
-        sagu("leaderboard", "--out", "board", expect=("looked",), cwd=cwd)
+        # no scorecards of one's own here: it says where it looked, and writes nothing
+        sagu("leaderboard", "--out", "board", expect=(str(cwd / "results" / "bench"), "nothing written"), cwd=cwd, code=1)
+        if (cwd / "board").exists():
+            raise SystemExit("FAIL: sagu leaderboard wrote a board of nothing")
     print("the installed package works from outside the repository")
 
 

@@ -52,8 +52,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m billiards.bench", description="The benchmark's leaderboard tools.")
     sub = parser.add_subparsers(dest="command", required=True)
     lb = sub.add_parser("leaderboard", help="rebuild the leaderboard from the committed scorecards")
-    lb.add_argument("--scorecards", type=Path, default=ROOT / "results" / "bench",
-                    help="the folder of scorecards/, recorded/ and submissions/ (default the repository's results/bench)")
+    lb.add_argument("--scorecards", type=Path, default=ROOT / "results" / "bench" if IN_CHECKOUT else Path.cwd() / "results" / "bench",
+                    help="the folder of scorecards/, recorded/ and submissions/ (default the repository's results/bench; "
+                         "outside a checkout, results/bench in the working directory)")
     lb.add_argument("--out", type=Path, default=None,
                     help="folder for leaderboard.md/.json/.png (default the repository's results/; required outside a checkout)")
     lb.add_argument("--no-figure", action="store_true", help="skip the PNG")
