@@ -119,12 +119,15 @@ def test_an_edited_or_repeated_chain_is_refused(p3_runs, tmp_path):
 def test_a_bare_number_or_a_record_missing_keys_gives_a_sentence(p3_runs, tmp_path):
     run_dir, lines = copy_run(p3_runs, tmp_path)
     ident = json.loads(lines[0])[RUN_KEY]
-    for bad, why in (("42", r"it is a JSON number \(42\), not a record"), ("[1, 2]", r"it is a JSON array"),
-                     (json.dumps(sealed_record({"seed": 2, RUN_KEY: ident})), r"length must be an integer >= 0, got 'nothing'"),
-                     (json.dumps(sealed_record({"seed": 2, "length": True, RUN_KEY: ident})), r"length must be an integer"),
+    for bad, why in (("42", r"it is a JSON number, not a record"), ("[1, 2]", r"it is a JSON array"),
+                     (json.dumps(sealed_record({"seed": 2, RUN_KEY: ident})), r"length must be an integer >= 0, got nothing"),
+                     (json.dumps(sealed_record({"seed": 2, "length": True, RUN_KEY: ident})),
+                      r"length must be an integer >= 0, got a boolean"),
                      (json.dumps(sealed_record({"seed": 2, "length": 1, "decisions": 1, "seconds": 10**400, "last_shots": [],
-                                                RUN_KEY: ident})), r"seconds must be a finite number >= 0, got 1000"),
-                     ("[" * 100_000, r"it is not JSON")):
+                                                RUN_KEY: ident})),
+                      r"seconds must be a finite number >= 0, got an integer beyond any float"),
+                     ("[" * 100_000, r"it is not JSON a ledger reads \(its brackets do not balance\)"),
+                     ("[" * 100 + "]" * 100, r"it is not JSON a ledger reads \(it nests deeper than 64 levels\)")):
         (run_dir / "chains.jsonl").write_text("\n".join(lines[:2]) + "\n" + bad + "\n")
         with pytest.raises(SystemExit, match=r"cannot resume: .*chains.jsonl: line 3 is not an intact P3 chain record: " + why):
             resume(run_dir)
@@ -222,9 +225,9 @@ def test_a_league_ledger_refuses_edits_repeats_other_leagues_and_bad_lines(tmp_p
         league(tmp_path / "a", target=2)
     # unsealed; a bare number; a sealed record missing keys: sentences, no KeyError / TypeError
     unsealed = {k: v for k, v in json.loads(lines[0]).items() if k != SEAL_KEY}
-    for bad, why in ((json.dumps(unsealed), "it carries no seal"), ("7", r"it is a JSON number \(7\), not a record"),
+    for bad, why in ((json.dumps(unsealed), "it carries no seal"), ("7", r"it is a JSON number, not a record"),
                      (json.dumps(sealed_record({"a": "r1", "b": "r2", RUN_KEY: first["run"]})),
-                      "i must be an integer >= 0, got 'nothing'"),
+                      "i must be an integer >= 0, got nothing"),
                      (json.dumps(sealed_record({**unsealed, "scores": 3})), "scores must give white and yellow each a number")):
         path.write_text(bad + "\n" + "\n".join(lines[1:]) + "\n")
         with pytest.raises(LedgerError, match=r"line 1 is not an intact league match record: " + why):
@@ -284,7 +287,7 @@ def test_the_match_app_refuses_a_bad_ledger_with_a_sentence(tmp_path):
     assert (out / "matches.jsonl").read_text().splitlines() == lines
     (out / "matches.jsonl").write_text("3.5\n" + lines[1] + "\n")
     with pytest.raises(SystemExit, match=r"Error: cannot continue the league: .*matches.jsonl: line 1 is not an intact "
-                                         r"league match record: it is a JSON number \(3.5\)"):
+                                         r"league match record: it is a JSON number, not a record"):
         run(cfg, out)
 
 
@@ -325,3 +328,85 @@ def test_every_committed_run_directory_verifies():
     dirs = sorted({p.parent for k in (CHAINS, MATCHES) for p in (ROOT / "results").rglob(k.file)})
     assert len(dirs) > 100
     assert files_main(["verify", *map(str, dirs)]) == 0
+
+
+# ----------------------------------------------------------------------------- summaries recomputed on resume
+
+
+def test_a_results_json_its_chains_do_not_give_is_written_again_on_resume(p3_runs, tmp_path, capsys):
+    """A finished P3's results.json is never trusted: one edited to other values or another mean
+    is not "finished" (resume=, resume=auto), and the resume writes it again from chains.jsonl,
+    playing no chain again."""
+    run_dir, lines = copy_run(p3_runs, tmp_path)
+    original = json.loads((run_dir / "results.json").read_text())
+    assert search_run.resume_state(run_dir, None, True).endswith("is finished (mean %.2f): nothing to do" % original["mean"])
+    (run_dir / "results.json").write_text(json.dumps({**original, "values": [99, 99, 99], "mean": 99.0}))
+    assert search_run.finished_run(run_dir) is None and search_run.resume_state(run_dir, None, True) is None
+    assert files_main(["verify", str(run_dir)]) == 1
+    assert "results.json gives seed 0 the value 99" in capsys.readouterr().out
+    resume(run_dir)
+    out = capsys.readouterr().out
+    assert "resume: 3 of 3 chains already finished" in out
+    assert "note: " in out and "results.json gives seed 0 the value 99" in out and "written again from chains.jsonl" in out
+    again = json.loads((run_dir / "results.json").read_text())
+    assert again["values"] == original["values"] == p3_runs[1] and again["mean"] == original["mean"]
+    assert (run_dir / "chains.jsonl").read_text().splitlines() == lines  # nothing played again
+    assert files_main(["verify", str(run_dir)]) == 0
+    # resume=auto over its own directory: an edited mean alone is enough
+    (run_dir / "results.json").write_text(json.dumps({**original, "mean": original["mean"] + 1}))
+    cfg = tiny_p3()
+    cfg.resume = "auto"
+    assert search_run.run(cfg, run_dir) is not None  # not "finished: nothing to do"
+    assert json.loads((run_dir / "results.json").read_text())["mean"] == original["mean"]
+    assert not (run_dir / ".lock").exists()
+
+
+def test_a_league_json_edited_to_other_elo_values_is_recomputed_on_resume(tmp_path, capsys):
+    """league.json's tables are recomputed from matches.jsonl: verify names an Elo rating or a
+    score rate that its matches do not give, and a league started again over its directory
+    writes them again from the ledger, playing nothing."""
+    first = league(tmp_path)
+    lines = (tmp_path / "matches.jsonl").read_text().splitlines()
+    data = json.loads((tmp_path / "league.json").read_text())
+    data["elo"] = {"r1": 1700.0, "r2": 1300.0}
+    data["pairs"][0]["a_score_rate"] = 0.99
+    (tmp_path / "league.json").write_text(json.dumps(data))
+    assert files_main(["verify", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert f"league.json rates r1 at 1700.0 Elo; its matches give {first['elo']['r1']}" in out
+    assert f"league.json gives r1 vs r2 a_score_rate 0.99; its matches give {first['pairs'][0]['a_score_rate']}" in out
+    again = league(tmp_path)
+    assert "league.json is written again from matches.jsonl" in capsys.readouterr().out
+    assert again["elo"] == first["elo"] and again["pairs"] == first["pairs"]
+    assert json.loads((tmp_path / "league.json").read_text())["elo"] == first["elo"]
+    assert (tmp_path / "matches.jsonl").read_text().splitlines() == lines
+    assert files_main(["verify", str(tmp_path)]) == 0
+
+
+def test_the_match_app_calls_a_league_finished_only_when_league_json_is_its_matches(tmp_path, capsys):
+    """match.py resume= of a finished league: "nothing to do" when league.json is what its
+    matches give; an edited one makes the resume run, and it writes the tables again."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    import billiards.league.config  # noqa: F401  (registers the match app's schema)
+    from billiards.league import resume_state, run
+
+    over = ["+agents.r2={kind: random}", "players=[random,r2]", "matches=1", "target=1", "max_innings=4",
+            "progress=false", "picture=false"]
+    with initialize_config_dir(str(ROOT / "conf"), version_base=None):
+        cfg = compose("match", overrides=over)
+    out = tmp_path / "run"
+    (out / ".hydra").mkdir(parents=True)
+    OmegaConf.save(cfg, out / ".hydra" / "config.yaml")
+    OmegaConf.save(OmegaConf.create(over), out / ".hydra" / "overrides.yaml")
+    first = run(cfg, out)
+    cfg.resume = str(out)
+    assert resume_state(out, cfg, True).endswith("is finished (2 matches, league.json): nothing to do")
+    edited = {**first, "elo": {name: 1500.0 + 300 * (name == "r2") for name in first["elo"]}}
+    (out / "league.json").write_text(json.dumps(edited))
+    assert resume_state(out, cfg, True) is None
+    capsys.readouterr()
+    again = run(cfg, out)
+    assert "written again from matches.jsonl" in capsys.readouterr().out
+    assert again["elo"] == first["elo"] and resume_state(out, cfg, True) is not None

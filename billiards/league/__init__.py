@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import dataclasses
+import io
 from pathlib import Path
 
 def league_settings(cfg):
@@ -14,26 +15,27 @@ def league_settings(cfg):
     the file if they cannot be read); else ``cfg`` itself (overrides None: this invocation's)."""
     from omegaconf import DictConfig, ListConfig, OmegaConf
 
-    from billiards.files import display_path
+    from billiards.files import display_path, read_run_text
 
     from .config import MatchAppConfig
 
     if not cfg.resume:
         return cfg, cfg, None
-    path = Path(cfg.resume) / ".hydra" / "config.yaml"
-    try:
-        saved = OmegaConf.load(path)
+    run_dir = Path(cfg.resume)
+    path = run_dir / ".hydra" / "config.yaml"
+    try:  # read as a run folder's files are (billiards.files.read_run_text: no link, no FIFO, bounded)
+        saved = OmegaConf.load(io.StringIO(read_run_text(path, "config", within=run_dir)))
         if not isinstance(saved, DictConfig):
             raise ValueError("not a mapping")
         for key in MatchAppConfig.RUNTIME:  # the league's own settings, this command line's runtime keys
             saved[key] = cfg[key]
         merged = OmegaConf.merge(OmegaConf.structured(MatchAppConfig), saved)
         path = path.with_name("overrides.yaml")
-        overrides = OmegaConf.load(path)
+        overrides = OmegaConf.load(io.StringIO(read_run_text(path, "config", within=run_dir)))
         if not isinstance(overrides, ListConfig):
             raise ValueError("not a list")
-    except Exception as err:  # missing, not YAML, not a league's settings
-        first = (str(err).strip().splitlines() or [type(err).__name__])[0]
+    except Exception as err:  # missing, refused, not YAML (nested past the stack too), not a league's settings
+        first = "nested too deep" if isinstance(err, RecursionError) else (str(err).strip().splitlines() or [type(err).__name__])[0]
         raise ValueError(f"{display_path(path)} cannot be read as a league's record ({first}); a league continues "
                          f"with the settings Hydra saved there when it started") from None
     return merged, saved, [str(o) for o in overrides]
@@ -57,11 +59,12 @@ def resume_state(run_dir: Path, config, finished: bool) -> str | None:
     """The directory check's look at the league in ``run_dir`` before a resume
     (:class:`billiards.app_config.RunKind`): its saved settings must load (ValueError naming the
     file otherwise); with ``finished``, the line a resume says when every match of the league is
-    in its ledger, none torn, and ``league.json`` written, else None."""
+    in its ledger, none torn, and ``league.json`` holds the tables those matches give
+    (:func:`billiards.files.stale_summary`: an edited one is written again), else None."""
     from omegaconf import OmegaConf
 
     from billiards.app_config import RESUME_AUTO
-    from billiards.files import LEAGUE_FILE, MATCHES, MATCHES_FILE, display_path, read_ledger
+    from billiards.files import LEAGUE_FILE, MATCHES, MATCHES_FILE, display_path, read_ledger, stale_summary
 
     run_dir = Path(run_dir)
     if config.get("resume") == RESUME_AUTO and not (run_dir / MATCHES_FILE).is_file():
@@ -78,8 +81,8 @@ def resume_state(run_dir: Path, config, finished: bool) -> str | None:
         return None
     have = {(r["a"], r["b"], r["i"]) for r in scan.records}
     todo = [(a, b, i) for a in names for b in names if a != b for i in range(matches) if (a, b, i) not in have]
-    if scan.torn is not None or todo:
-        return None
+    if scan.torn is not None or todo or stale_summary(run_dir, MATCHES, scan.records) is not None:
+        return None  # a league.json its matches do not give (edited) is not finished: the resume writes it again
     return f"{display_path(run_dir)} is finished ({len(have)} matches, {LEAGUE_FILE}): nothing to do"
 
 
@@ -88,7 +91,7 @@ def run(cfg, out_dir) -> dict:
     or ``resume=auto`` for a league an earlier attempt of this job started in ``out_dir``)."""
     from billiards.app_config import RESUME_AUTO
     from billiards.device import set_threads
-    from billiards.files import MATCHES_FILE, LedgerError, display_path, recorded_command
+    from billiards.files import MATCHES_FILE, LedgerError, RunLockedError, display_path, recorded_command
     from billiards.physics.config import params_from_config
     from billiards.physics.noise import noise_from_config, noise_record
     from billiards.provenance import git_commit
@@ -128,6 +131,8 @@ def run(cfg, out_dir) -> dict:
         league = run_league(players, out_dir=out_dir, matches=cfg.matches, seed=cfg.seed, noise_name=noise.describe(),
                             record=record, progress=cfg.progress, target=cfg.target, max_innings=cfg.max_innings,
                             start=cfg.start, foul_penalty=cfg.foul_penalty, noise=noise, physics=params, run=run_id)
+    except RunLockedError as err:
+        raise SystemExit(f"Error: {err}") from None
     except LedgerError as err:
         raise SystemExit(f"Error: cannot continue the league: {err}; a league continues only a ledger it wrote, "
                          f"sealed (move {display_path(out_dir / 'matches.jsonl')} aside to play every match again)") from None

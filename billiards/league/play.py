@@ -17,15 +17,15 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 from pathlib import Path
 
-import numpy as np
-
 from billiards.envs import sagu_v0
 from billiards.envs.sagu import AGENTS, shooter_view
-from billiards.files import LEAGUE_FILE, MATCHES, MATCHES_FILE, append_record, atomic_write_text, read_ledger, run_identity
+from billiards.files import (LEAGUE_FILE, MATCHES, MATCHES_FILE, append_record, atomic_write_text, read_ledger, run_identity,
+                             run_lock, stale_summary)
+
+from .table import elo, summarize, wilson
 
 
 def play_match(white, yellow, *, seed: int, first: str = "white", frames: list | None = None, on_shot=None, **game) -> dict:
@@ -93,65 +93,6 @@ def animate_match(frames: list, captions: list[str], path: Path, scale: int = 1,
     return path
 
 
-def wilson(successes: float, n: int, z: float = 1.96) -> list[float]:
-    """The Wilson score interval of a rate ``successes / n``."""
-    if n == 0:
-        return [0.0, 1.0]
-    p = successes / n
-    centre, half = (p + z * z / (2 * n)) / (1 + z * z / n), z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [max(0.0, round(centre - half, 4)), min(1.0, round(centre + half, 4))]
-
-
-def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 2000) -> dict[str, float]:
-    """Bradley-Terry strengths by minorisation-maximisation over ``(a, b, a's score)`` results
-    (1 win, 0.5 draw, 0 loss), as Elo ratings (400 log10 of the strength) with mean 1500. A
-    player that never lost or never won gets a finite rating through one virtual draw against
-    every other player (a weak prior)."""
-    idx = {n: i for i, n in enumerate(names)}
-    k = len(names)
-    wins, games = np.zeros((k, k)), np.zeros((k, k))
-    for a, b, s in results:
-        wins[idx[a], idx[b]] += s
-        wins[idx[b], idx[a]] += 1 - s
-        games[idx[a], idx[b]] += 1
-        games[idx[b], idx[a]] += 1
-    off = ~np.eye(k, dtype=bool)
-    wins, games = wins + 0.5 * off, games + 1.0 * off  # the virtual draws
-    gamma = np.ones(k)
-    for _ in range(iters):
-        denom = (games / (gamma[:, None] + gamma[None, :])).sum(axis=1)
-        gamma = wins.sum(axis=1) / denom
-        gamma /= np.exp(np.log(gamma).mean())
-    rating = 400 * np.log10(gamma)
-    return {n: round(float(1500 + rating[i] - rating.mean()), 1) for n, i in idx.items()}
-
-
-def summarize(records: list[dict], names: list[str], noise: str) -> dict:
-    """``league.json``'s pairs and Elo table from the finished matches."""
-    pairs, results = [], []
-    for a in names:
-        for b in names:
-            if a == b:
-                continue
-            mine = [r for r in records if (r["a"], r["b"]) == (a, b)]
-            if not mine:
-                continue
-            a_wins = sum(r["winner"] == "white" for r in mine)
-            b_wins = sum(r["winner"] == "yellow" for r in mine)
-            draws = len(mine) - a_wins - b_wins
-            turns = {p: sum(r["turns"][p] for r in mine) for p in AGENTS}
-            cpu = {p: sum(r["cpu_s"][p] for r in mine) for p in AGENTS}
-            pairs.append({"a": a, "b": b, "noise": noise, "matches": len(mine), "a_wins": a_wins, "b_wins": b_wins,
-                          "draws": draws, "a_score_rate": round((a_wins + 0.5 * draws) / len(mine), 4),
-                          "ci95": wilson(a_wins + 0.5 * draws, len(mine)),
-                          "a_points": round(float(np.mean([r["scores"]["white"] for r in mine])), 3),
-                          "b_points": round(float(np.mean([r["scores"]["yellow"] for r in mine])), 3),
-                          "a_ms_per_turn": round(1000 * cpu["white"] / max(turns["white"], 1), 2),
-                          "b_ms_per_turn": round(1000 * cpu["yellow"] / max(turns["yellow"], 1), 2)})
-            results += [(a, b, 1.0 if r["winner"] == "white" else 0.0 if r["winner"] == "yellow" else 0.5) for r in mine]
-    return {"pairs": pairs, "elo": elo(names, results) if results else {}}
-
-
 def parse_matches(text: str, name: str = MATCHES_FILE) -> list[dict]:
     """The finished matches of a league's ``matches.jsonl`` text, for a read-only view
     (:func:`billiards.compat.ledger_scan`: every form a ledger was written in): a torn last line
@@ -176,26 +117,38 @@ def league_identity(names: list[str], matches: int, seed: int, settings: dict) -
 
 
 def run_league(players: dict, *, out_dir: Path, matches: int, seed: int, noise_name: str, record: dict,
-               progress: bool = True, run: str | None = None, **game) -> dict:
+               progress: bool = True, run: str | None = None, command: str | None = None, **game) -> dict:
     """Play every missing match of the league among ``players`` (name -> player) into
     ``out_dir`` and write ``league.json`` (with ``record``: the command, commit, settings).
 
     ``run``: the league's identity, which every record of ``matches.jsonl`` carries (the app
     passes a hash of its settings); by default :func:`league_identity` of the arguments (the
     ``record`` less its command and commit, and ``game``). The ledger's records must all be this
-    league's (:class:`billiards.files.LedgerError` otherwise)."""
-    from tqdm import tqdm
-
+    league's (:class:`billiards.files.LedgerError` otherwise). ``league.json`` is always
+    written from the ledger's matches, never kept: one that disagrees with them (edited) is
+    said and written again. The league holds ``out_dir``'s lock while it plays
+    (:func:`billiards.files.run_lock`; ``command`` names it, by default this process's command
+    line): a second league started there
+    meanwhile is refused (:class:`billiards.files.RunLockedError`, naming this one)."""
     names = list(players)
     if run is None:
         run = league_identity(names, matches, seed, {"noise_name": noise_name, **game,
                                                      "record": {k: v for k, v in record.items() if k not in ("command", "commit")}})
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with run_lock(out_dir, command=command, say=lambda line: print(line, flush=True)):
+        return _play_league(players, names, out_dir, matches, seed, noise_name, record, progress, run, game)
+
+
+def _play_league(players: dict, names: list[str], out_dir: Path, matches: int, seed: int, noise_name: str, record: dict,
+                 progress: bool, run: str, game: dict) -> dict:
+    from tqdm import tqdm
+
     ledger = out_dir / MATCHES_FILE
     done = read_ledger(ledger, MATCHES, run, repair=True).records  # a torn last line: cut, its match played again
     have = {(r["a"], r["b"], r["i"]) for r in done}
     todo = [(p, a, b, i) for p, (a, b) in enumerate((a, b) for a in names for b in names if a != b)
             for i in range(matches) if (a, b, i) not in have]
+    if not todo and (out_dir / LEAGUE_FILE).exists() and (why := stale_summary(out_dir, MATCHES, done)) is not None:
+        print(f"note: {why}; {LEAGUE_FILE} is written again from {MATCHES_FILE}", flush=True)
     bar = tqdm(total=len(todo) + len(have), initial=len(have), desc="matches", disable=not progress, unit="match")
     for p, a, b, i in todo:
         result = play_match(players[a], players[b], seed=seed + 1000 * p + i, first="white" if i % 2 == 0 else "yellow",

@@ -51,6 +51,7 @@ import hashlib
 import io
 import logging
 import math
+import os
 import pickle
 import random
 import re
@@ -64,7 +65,7 @@ import numpy as np
 import torch
 
 from billiards import compat
-from billiards.files import atomic_open, key_problem, plain_data_problem, shape_problem, tensor_problem
+from billiards.files import RunFileError, atomic_open, key_problem, open_run_file, plain_data_problem, shape_problem, tensor_problem
 
 from .config import ALGO_SCHEMAS, CHECKPOINT_FILE, MAX_LAYERS, MAX_WIDTH, REPLAY
 
@@ -616,17 +617,21 @@ def _corrupt(path: Path, why: str) -> CheckpointError:
 
 def _payload(path: Path) -> bytes:
     """The verified payload of a format-2 checkpoint file; CheckpointError if it is not one
-    or its checksum does not match."""
-    with path.open("rb") as f:
-        head = f.read(_HEADER_MAX)
-        if (why := compat.checkpoint_format_refusal(head)) is not None:
-            raise CheckpointError(f"cannot resume: {path} {why}; this version loads only format {FORMAT_VERSION}. "
-                                  f"Finish that run with the commit that wrote it, or start a new run")
-        m = _HEADER.match(head)
-        if m is None:
-            raise _corrupt(path, "no billiards checkpoint header")
-        f.seek(m.end())
-        payload = f.read()
+    or its checksum does not match, or if the run folder's reader refuses it (a link, not a
+    regular file, past its bound: :func:`billiards.files.open_run_file`)."""
+    try:
+        with open_run_file(path, "checkpoint") as f:
+            head = f.read(_HEADER_MAX)
+            if (why := compat.checkpoint_format_refusal(head)) is not None:
+                raise CheckpointError(f"cannot resume: {path} {why}; this version loads only format {FORMAT_VERSION}. "
+                                      f"Finish that run with the commit that wrote it, or start a new run")
+            m = _HEADER.match(head)
+            if m is None:
+                raise _corrupt(path, "no billiards checkpoint header")
+            f.seek(m.end())
+            payload = f.read()
+    except RunFileError as err:
+        raise CheckpointError(f"cannot resume: {err}") from None
     digest = hashlib.sha256(m.group(1))
     digest.update(payload)
     if digest.hexdigest() != m.group(3).decode():
@@ -653,7 +658,7 @@ def load_checkpoint(run_dir: str | Path, keep: bool = False) -> dict[str, Any]:
     path = run_dir / CHECKPOINT_FILE
     if not run_dir.is_dir():
         raise CheckpointError(f"cannot resume: {run_dir} is not a directory")
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise CheckpointError(
             f"cannot resume: {path} does not exist (the run was killed before its first checkpoint, "
             f"every budget.checkpoint_every steps); start a new run instead"

@@ -32,7 +32,7 @@ import random
 import signal
 import sys
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,7 +47,7 @@ from tqdm import tqdm
 from billiards import compat
 from billiards.app_config import RESUME_AUTO
 from billiards.device import resolve_device, set_threads
-from billiards.files import CHECKPOINT_FILE, atomic_write_text, display_path
+from billiards.files import CHECKPOINT_FILE, RunLockedError, atomic_write_text, display_path, run_lock
 from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.noise import noise_from_config, noise_record
 from billiards.physics.warmup import warm_up
@@ -647,12 +647,21 @@ def train(cfg: DictConfig, run_dir: str | Path | None = None, loops: dict | None
         loop = {**LOOPS, **(loops or {})}.get(cfg.algo.name)
         if loop is None:
             raise ConfigError(f"algo={cfg.algo.name} has no training loop here: train it with train.py")
-        run = make_run(cfg, run_dir, ckpt)
-        record_start(run_dir, "fresh" if ckpt is None else "resume", run.state.frames,
-                     command=["python", "train.py", *_command_line_overrides()])
     except (CheckpointError, ConfigError) as err:
         raise SystemExit(f"Error: {err}") from None
-    return loop(run)
+    held = ExitStack()
+    try:  # one writer per run folder: a second run started on it meanwhile is refused at once, naming this one
+        held.enter_context(run_lock(run_dir, say=log.warning))
+    except RunLockedError as err:
+        raise SystemExit(f"Error: {err}") from None
+    with held:
+        try:
+            run = make_run(cfg, run_dir, ckpt)
+            record_start(run_dir, "fresh" if ckpt is None else "resume", run.state.frames,
+                         command=["python", "train.py", *_command_line_overrides()])
+        except (CheckpointError, ConfigError) as err:
+            raise SystemExit(f"Error: {err}") from None
+        return loop(run)
 
 
 # algo.name -> its loop (algo=exit's is billiards.exit.train_exit, passed by train.py)

@@ -6,14 +6,17 @@ proposer node ``.build(params)``, a search node ``.actor(proposer, seed, params)
 
 from __future__ import annotations
 
+import io
 import json
+import os
 from pathlib import Path
 
 from omegaconf import OmegaConf
 
 from billiards.app_config import RESUME_AUTO
 from billiards.device import resolve_device, set_threads
-from billiards.files import CHAINS, CONFIG_FILE, RESULTS_FILE, LedgerError, atomic_write_text, display_path, read_ledger, run_identity
+from billiards.files import (CHAINS, CONFIG_FILE, RESULTS_FILE, LedgerError, RunFileError, RunLockedError, atomic_write_text,
+                             display_path, read_ledger, read_run_bytes, read_run_json, read_run_text, run_identity, run_lock, stale_summary)
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.noise import noise_from_config, noise_record
@@ -52,10 +55,29 @@ def search_identity(out_dir: Path) -> str:
     it): a hash of its ``config.yaml`` as written when it started -- the resolved config -- less
     the runtime keys and ``resume``. Read from the file both when the run starts and when it is
     resumed, so the identity does not depend on how today's code would fill in that config."""
-    saved = OmegaConf.to_container(OmegaConf.load(out_dir / CONFIG_FILE), resolve=True)
+    saved = OmegaConf.to_container(_load_config(out_dir), resolve=True)
     if not isinstance(saved, dict):
         raise SystemExit(f"Error: {display_path(out_dir / CONFIG_FILE)} is not a search config")
     return run_identity(saved, runtime=(*RUNTIME_KEYS, "resume"))
+
+
+def _load_config(out_dir: Path):
+    """The search run's ``config.yaml`` as OmegaConf loads it, read as a run folder's files are
+    (:func:`billiards.files.read_run_text`: no link, no FIFO, bounded; RunFileError otherwise)."""
+    path = Path(out_dir) / CONFIG_FILE
+    text = read_run_text(path, "config")
+    try:
+        return OmegaConf.load(io.StringIO(text))
+    except RecursionError:
+        raise RunFileError(f"{display_path(path)} is not a search config: it nests too deep") from None
+
+
+def _saved_config(out_dir: Path):
+    """:func:`billiards.search.config.saved_config`, its file looked at first by the run-folder
+    reader (a link, a FIFO, a file past its bound: RunFileError, never opened by YAML)."""
+    if os.path.lexists(Path(out_dir) / CONFIG_FILE):  # a missing one: saved_config says so
+        read_run_text(Path(out_dir) / CONFIG_FILE, "config")
+    return saved_config(out_dir)
 
 
 def describe(cfg, params, noise) -> str:
@@ -70,7 +92,7 @@ def describe(cfg, params, noise) -> str:
 def resume_config(out_dir: Path, current):
     """A stopped search's own config (in whatever form it was saved), with this command line's
     runtime keys."""
-    saved = saved_config(out_dir)
+    saved = _saved_config(out_dir)
     for key in RUNTIME_KEYS:
         saved[key] = current[key]
     saved.resume = str(out_dir)
@@ -78,25 +100,39 @@ def resume_config(out_dir: Path, current):
 
 
 def finished_run(out_dir: Path) -> dict | None:
-    """The ``results.json`` of a search that finished in ``out_dir`` (not a partial one), or None."""
+    """The ``results.json`` of a search that finished in ``out_dir`` (not a partial one), or
+    None. A P3's must be what its ledger gives (:func:`billiards.files.stale_summary`: every
+    chain, its values, mean and spread): one its chains do not give (edited) is not finished,
+    and its resume writes it again from the ledger."""
+    out_dir = Path(out_dir)
     try:
-        res = json.loads((out_dir / RESULTS_FILE).read_text())
+        res = read_run_json(out_dir / RESULTS_FILE, "summary")
     except (OSError, ValueError):
         return None
     extra = res.get("extra") if isinstance(res, dict) else None
-    return res if isinstance(res, dict) and not (isinstance(extra, dict) and extra.get("partial")) else None
+    if not isinstance(res, dict) or (isinstance(extra, dict) and extra.get("partial")):
+        return None
+    if res.get("protocol") == "p3" or (out_dir / CHAINS_FILE).exists():
+        try:
+            records = read_ledger(out_dir / CHAINS_FILE, CHAINS, search_identity(out_dir)).records
+        except (LedgerError, SystemExit, ValueError, OSError):  # the resume refuses it, naming the line
+            return None
+        if stale_summary(out_dir, CHAINS, records) is not None:
+            return None
+    return res
 
 
 def resume_state(out_dir: Path, config, finished: bool) -> str | None:
     """The directory check's look at the search in ``out_dir`` before a resume
     (:class:`billiards.app_config.RunKind`): its saved config must load (ValueError naming it
     otherwise); with ``finished``, the line a resume says when nothing is left to play there --
-    ``results.json`` final and, for a P3, every chain in its ledger, none torn -- else None."""
+    ``results.json`` final and, for a P3, every chain in its ledger, none torn, and
+    ``results.json`` what those chains give (:func:`finished_run`) -- else None."""
     out_dir = Path(out_dir)
-    if not (out_dir / CONFIG_FILE).is_file():
+    if not os.path.lexists(out_dir / CONFIG_FILE):
         return None  # nothing to continue: validate refuses resume=<dir>, resume=auto starts afresh
     try:
-        saved = saved_config(out_dir)
+        saved = _saved_config(out_dir)
     except ValueError:
         raise
     except Exception as err:  # a config.yaml that is not YAML, cannot be read, ...
@@ -126,7 +162,11 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
 
     Every chain record carries the run's identity (:func:`search_identity`) and a seal; a resume
     refuses a ledger line that is unsealed, edited,
-    of another run or a repeated seed, and cuts a torn last line off (its chain is played again)."""
+    of another run or a repeated seed, and cuts a torn last line off (its chain is played again).
+    ``results.json`` is always written from the ledger's chains (a finished run's that they do
+    not give is not finished: :func:`finished_run`). The run holds ``out_dir``'s lock while it
+    writes there (:func:`billiards.files.run_lock`): a second search started on the folder
+    meanwhile is refused at once, naming this one."""
     commit = git_commit()  # the code that runs (read before anything runs: files may change meanwhile)
     out_dir = Path(out_dir)
     cfg = typed(cfg)
@@ -139,13 +179,27 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
         stopped = (out_dir / CONFIG_FILE).is_file() and (out_dir / CHAINS_FILE).is_file()
         cfg.resume = str(out_dir) if stopped and cfg.protocol.name == "p3" else None
     if cfg.get("resume"):
-        cfg = resume_config(out_dir, cfg)
+        try:
+            cfg = resume_config(out_dir, cfg)
+        except RunFileError as err:
+            raise SystemExit(f"Error: resume={display_path(out_dir)}: {err}") from None
     validate(cfg)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:  # one writer per run folder: a second search started on it meanwhile is refused, naming this one
+        with run_lock(out_dir, say=lambda line: print(line, flush=True)):
+            return _run(cfg, out_dir, commit)
+    except RunLockedError as err:
+        raise SystemExit(f"Error: {err}") from None
+
+
+def _run(cfg, out_dir: Path, commit: str) -> ProtocolResult:
+    """:func:`run`'s work, with the run folder's lock held."""
     if not cfg.get("resume"):
         old = out_dir / CHAINS_FILE
-        if old.exists():  # a fresh run never counts another run's chains (only resume= continues them)
-            kept = sum(1 for line in old.read_text(errors="replace").splitlines() if line.strip())
+        if os.path.lexists(old):  # a fresh run never counts another run's chains (only resume= continues them)
+            try:
+                kept = sum(1 for line in read_run_bytes(old, "ledger").splitlines() if line.strip())
+            except (OSError, ValueError):  # a link, a FIFO, too large: removed unread
+                kept = "the"
             print(f"fresh run: discarding {kept} chains of an earlier run in {display_path(out_dir)} "
                   f"(resume=<dir> continues a stopped one)", flush=True)
             old.unlink()
@@ -163,6 +217,9 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
             print(f"resume: cut the torn last line of {CHAINS_FILE} (a kill mid-append); its chain is played again",
                   flush=True)
         print(f"resume: {len(scan.records)} of {cfg.protocol.seeds} chains already finished", flush=True)
+        if len(scan.records) >= cfg.protocol.seeds and os.path.lexists(out_dir / RESULTS_FILE) \
+                and (why := stale_summary(out_dir, CHAINS, scan.records)) is not None:
+            print(f"note: {why}; {RESULTS_FILE} is written again from {CHAINS_FILE}", flush=True)
     if cfg.threads is not None:
         set_threads(cfg.threads)
     params = params_from_config(cfg.physics)

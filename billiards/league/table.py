@@ -1,0 +1,141 @@
+"""A league's tables from its matches: the pairs (wins, draws, the Wilson interval of the score
+rate, points and CPU per turn) and the Elo ratings of a Bradley-Terry fit -- ``league.json``'s
+``pairs`` and ``elo`` -- and the check that a ``league.json`` holds the tables its
+``matches.jsonl`` gives (:func:`summary_problems`: ``python -m billiards.files verify`` and a
+resume run it; a league's tables are never trusted, only recomputed from its ledger).
+
+NumPy only (no simulator, no pettingzoo), so that a ledger is checked wherever the package loads."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+SIDES = ("white", "yellow")  # billiards.envs.sagu.AGENTS: white plays a, yellow b
+_FIGURES = ("a_score_rate", "a_points", "b_points", "a_ms_per_turn", "b_ms_per_turn")
+
+
+def wilson(successes: float, n: int, z: float = 1.96) -> list[float]:
+    """The Wilson score interval of a rate ``successes / n``."""
+    if n == 0:
+        return [0.0, 1.0]
+    p = successes / n
+    centre, half = (p + z * z / (2 * n)) / (1 + z * z / n), z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [max(0.0, round(centre - half, 4)), min(1.0, round(centre + half, 4))]
+
+
+def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 2000) -> dict[str, float]:
+    """Bradley-Terry strengths by minorisation-maximisation over ``(a, b, a's score)`` results
+    (1 win, 0.5 draw, 0 loss), as Elo ratings (400 log10 of the strength) with mean 1500. A
+    player that never lost or never won gets a finite rating through one virtual draw against
+    every other player (a weak prior)."""
+    idx = {n: i for i, n in enumerate(names)}
+    k = len(names)
+    wins, games = np.zeros((k, k)), np.zeros((k, k))
+    for a, b, s in results:
+        wins[idx[a], idx[b]] += s
+        wins[idx[b], idx[a]] += 1 - s
+        games[idx[a], idx[b]] += 1
+        games[idx[b], idx[a]] += 1
+    off = ~np.eye(k, dtype=bool)
+    wins, games = wins + 0.5 * off, games + 1.0 * off  # the virtual draws
+    gamma = np.ones(k)
+    for _ in range(iters):
+        denom = (games / (gamma[:, None] + gamma[None, :])).sum(axis=1)
+        gamma = wins.sum(axis=1) / denom
+        gamma /= np.exp(np.log(gamma).mean())
+    rating = 400 * np.log10(gamma)
+    return {n: round(float(1500 + rating[i] - rating.mean()), 1) for n, i in idx.items()}
+
+
+def summarize(records: list[dict], names: list[str], noise: str) -> dict:
+    """``league.json``'s pairs and Elo table from the finished matches."""
+    pairs, results = [], []
+    for a in names:
+        for b in names:
+            if a == b:
+                continue
+            mine = [r for r in records if (r["a"], r["b"]) == (a, b)]
+            if not mine:
+                continue
+            a_wins = sum(r["winner"] == "white" for r in mine)
+            b_wins = sum(r["winner"] == "yellow" for r in mine)
+            draws = len(mine) - a_wins - b_wins
+            turns = {p: sum(r["turns"][p] for r in mine) for p in SIDES}
+            cpu = {p: sum(r["cpu_s"][p] for r in mine) for p in SIDES}
+            pairs.append({"a": a, "b": b, "noise": noise, "matches": len(mine), "a_wins": a_wins, "b_wins": b_wins,
+                          "draws": draws, "a_score_rate": round((a_wins + 0.5 * draws) / len(mine), 4),
+                          "ci95": wilson(a_wins + 0.5 * draws, len(mine)),
+                          "a_points": round(float(np.mean([r["scores"]["white"] for r in mine])), 3),
+                          "b_points": round(float(np.mean([r["scores"]["yellow"] for r in mine])), 3),
+                          "a_ms_per_turn": round(1000 * cpu["white"] / max(turns["white"], 1), 2),
+                          "b_ms_per_turn": round(1000 * cpu["yellow"] / max(turns["yellow"], 1), 2)})
+            results += [(a, b, 1.0 if r["winner"] == "white" else 0.0 if r["winner"] == "yellow" else 0.5) for r in mine]
+    return {"pairs": pairs, "elo": elo(names, results) if results else {}}
+
+
+def players(records: list[dict]) -> list[str]:
+    """The league's players in its order (the order its matches were played in: the first
+    pair's white, its yellow, then each new name as it appears)."""
+    seen: dict[str, None] = {}
+    for r in records:
+        seen.setdefault(r["a"])
+        seen.setdefault(r["b"])
+    return list(seen)
+
+
+def _close(x, y, tol: float) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and abs(x - y) <= tol
+
+
+def summary_problems(records: list[dict], league: dict, name: str) -> list[str]:
+    """Where a ``league.json`` (``league``, read from the file ``name``) disagrees with the
+    tables its matches (``records``, a ledger's) give: each pair's counts, score rate, interval,
+    points and CPU per turn, and each player's Elo rating (recomputed by :func:`summarize`;
+    a rating within one rounding step), one sentence each; [] when it agrees."""
+    from billiards.files import described, shown_name, shown_number
+
+    pairs = league.get("pairs")
+    if not isinstance(pairs, list) or not all(isinstance(p, dict) for p in pairs):
+        return [f"{name} holds no pairs"]
+    table = summarize(records, players(records), "")
+    theirs = {(p["a"], p["b"]): p for p in table["pairs"]}
+    out = []
+    show = lambda c: f"{c['a_wins']}-{c['b_wins']} with {c['draws']} draws of {c['matches']}"  # noqa: E731
+    for p in pairs:
+        a, b = p.get("a"), p.get("b")
+        what = f"{shown_name(a)} vs {shown_name(b)}"
+        mine = {k: p.get(k) for k in ("matches", "a_wins", "b_wins", "draws")}
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in mine.values()):
+            out.append(f"{name} counts {what} with entries that are no counts")
+            continue
+        got = theirs.pop((a, b), None) if isinstance(a, str) and isinstance(b, str) else None
+        if got is None:
+            out.append(f"{name} counts {what} ({mine['matches']} matches), of which the ledger holds none")
+            continue
+        if mine != {k: got[k] for k in mine}:
+            out.append(f"{name} counts {what} {show(mine)}; the ledger holds {show(got)}")
+            continue
+        for key in _FIGURES:
+            if not _close(p.get(key), got[key], 1e-9 * max(1.0, abs(got[key]))):
+                out.append(f"{name} gives {what} {key} {shown_number(p.get(key))}; its matches give {got[key]}")
+        ci = p.get("ci95")
+        if not (isinstance(ci, list) and len(ci) == 2 and all(_close(x, y, 1e-9) for x, y in zip(ci, got["ci95"]))):
+            shown = f"[{', '.join(map(shown_number, ci))}]" if isinstance(ci, list) and len(ci) <= 4 else described(ci)
+            out.append(f"{name} gives {what} the interval {shown}; its matches give {got['ci95']}")
+    for (a, b), c in theirs.items():
+        out.append(f"the ledger holds {c['matches']} matches of {shown_name(a)} vs {shown_name(b)} that {name} does not count")
+    ratings, expected = league.get("elo"), table["elo"]
+    if not isinstance(ratings, dict):
+        return out + [f"{name} holds no Elo table"]
+    if sorted(map(str, ratings)) != sorted(expected):
+        who = ", ".join(map(shown_name, expected))
+        return out + [f"{name} rates {len(ratings)} players; its matches are played by {len(expected)} ({who})"]
+    for player, rating in expected.items():
+        if not _close(ratings[player], rating, 0.11):  # one rounding step of the table's 0.1
+            out.append(f"{name} rates {shown_name(player)} at {shown_number(ratings[player])} Elo; its matches give {rating}")
+    return out
+
+
+__all__ = ["SIDES", "elo", "players", "summarize", "summary_problems", "wilson"]
