@@ -336,6 +336,12 @@ def upgrade_eval_record(record: Any) -> Any:
     return EVAL_RECORD.upgrade(record)
 
 
+def upgrade_scorecard(card: dict) -> dict:
+    """A scorecard in today's form: older scorecards claimed a status (``"verified": true``);
+    today the folder a scorecard lies in gives it (billiards.bench.leaderboard), so the claim is dropped."""
+    return {k: v for k, v in card.items() if k != "verified"}
+
+
 def upgrade_policy_file(payload: Any) -> Any:
     """An exported policy file's payload in today's form: its ``config`` a training config of
     today's form, its ``eval`` (if any) an evaluation record of today's form."""
@@ -437,7 +443,7 @@ __all__ = ["ARTEFACT_META", "CHAINS", "CHECKPOINT", "Chain", "EVAL_RECORD", "LEG
            "NewerFormError", "RETIRED_KEYS", "SCHEMA_KEY", "SEARCH_CONFIG", "Step", "TRAINING_CONFIG",
            "checkpoint_format_refusal", "ledger_records", "ledger_scan", "main", "seal",
            "upgrade_artefact_meta", "upgrade_checkpoint", "upgrade_config_nodes", "upgrade_eval_record", "upgrade_policy_file",
-           "upgrade_search_config", "upgrade_training_config", "with_noise", "with_noise_scale", "with_physics",
+           "upgrade_scorecard", "upgrade_search_config", "upgrade_training_config", "with_noise", "with_noise_scale", "with_physics",
            "without_retired"]
 
 

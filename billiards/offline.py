@@ -472,7 +472,7 @@ def episodes(out: Path):
 
 def build(out: Path, root: Path | None = None):
     """The Minari dataset of the blocks in ``out`` (every block must be there and sound), under
-    ``root`` (default ``out/minari``); returns it. Nothing is written before every block has
+    ``root`` (default ``out/minari``); returns it. Nothing is written until every block has
     been read and checked."""
     out = Path(out)
     manifest = read_manifest(out)

@@ -1,7 +1,7 @@
 """The leaderboard: every scorecard of ``results/bench/``, one table per track, with intervals.
 
 Sources (all data; nothing here names code). The folder a scorecard lies in gives its status: a
-scorecard claims none (the ``verified`` key of older scorecards is ignored).
+scorecard claims none (:func:`billiards.compat.upgrade_scorecard`).
 
 * ``scorecards/<track>/<slug>/scorecard.json``: evaluations played here by ``evaluate.py``
   (status ``verified``);
@@ -31,9 +31,11 @@ from typing import Callable
 
 import numpy as np
 
+from billiards.compat import upgrade_scorecard
 from billiards.files import atomic_write_text, display_path
 
 from billiards import stats
+from .text import md_text, one_line, plot_label
 from .tracks import TRACKS
 
 STATUSES = ("verified", "recorded", "unverified")
@@ -121,7 +123,7 @@ def _load(path: Path) -> dict:
         raise ValueError(f"{display_path(path)}: not a readable scorecard ({err})") from None
     if not isinstance(card, dict):
         raise ValueError(f"{display_path(path)}: not a scorecard (a JSON object)")
-    card.pop("verified", None)  # older scorecards claimed a status: the board gives it (collect)
+    card = upgrade_scorecard(card)  # the board gives the status (collect)
     for key in ("track", "version", "agent"):
         if key not in card:
             raise ValueError(f"{display_path(path)}: a scorecard needs the key {key!r}")
@@ -160,7 +162,10 @@ def _check_names(path: Path, card: dict) -> None:
 def collect(root: Path, report: Callable[[str], None] | None = None) -> list[dict]:
     """Every scorecard under ``root`` with its status and source path. Partial and limited ones
     are left out, each reported to ``report`` (a line naming the file and why); a played one
-    whose agent is named after a path, or that its ledger does not give, is refused (ValueError)."""
+    whose agent is named after a path, or whose claims its ledger does not give, is refused
+    (ValueError). A played scorecard's figures are those its ledger gives (:func:`derive`), a
+    recorded one's unit scores checked against the track's rules: the board reads no figure a
+    card only claims."""
     cards = []
     for status, pattern in SOURCES:
         for path in sorted(Path(root).glob(pattern)):
@@ -172,30 +177,100 @@ def collect(root: Path, report: Callable[[str], None] | None = None) -> list[dic
                 continue
             if status != "recorded":
                 _check_names(path, card)
-                check_against_ledger(path, card)
+                card.update(derive(path, card))
+            else:
+                check_recorded(path, card)
             card["status"] = status
             card["source"] = display_path(path)
             cards.append(card)
     return cards
 
 
-def check_against_ledger(path: Path, card: dict) -> None:
-    """A played scorecard must agree with the sealed ledger beside it: every unit there, of this
-    run, and the scorecard's per-unit scores recomputed from it."""
-    from .run import LEDGER_FILE, EvaluationError, read_ledger, unit_values
+# what a played scorecard claims that its ledger gives (every key of billiards.bench.run.score_records)
+DERIVED = ("units_done", "decisions", "ms_per_decision", "sims_per_decision", "success_per_shot", "foul_per_shot",
+           "points_per_inning", "chain", "match", "elo", "elo_ci95", "values")
+COMPUTE = ("observation", "simulator")
 
+
+def derive(path: Path, card: dict) -> dict:
+    """Every figure of the played scorecard at ``path`` as its sealed ledger (``units.jsonl``
+    beside it) and its track's rules give it -- the one derivation the board ranks by:
+
+    * the ledger: every record sealed, of the scorecard's run, each unit once, every one of the
+      track's units and no other (:func:`billiards.bench.run.read_ledger`), each within the
+      track's rules (:meth:`~billiards.bench.tracks.Track.record_problem`: points per inning in
+      [0, shots], a shot scoring 0 or 1, chains within the cap, match results as the match rules
+      give them, decisions as the protocol asks, simulations within the budget);
+    * the run: the identity its records carry is the one of the track, the agent and the limit
+      the scorecard names (its name, group and class are those it was played under);
+    * the figures (:func:`billiards.bench.run.score_records`: the mean, the success and foul
+      rates, the chain and match summaries, the win rate, the Elo, every interval, the per-unit
+      scores, the time and simulations per decision), computed from the records;
+    * the class: ``observation`` or ``simulator``, and an agent that simulated is ``simulator``.
+
+    Returns the figures; a scorecard that claims anything else (a key of :data:`DERIVED` that
+    differs) is refused: ValueError naming the file and what differs."""
+    from .run import LEDGER_FILE, EvaluationError, read_ledger, run_identity, score_records
+
+    track = TRACKS[card["track"]]
     ledger = path.parent / LEDGER_FILE
     if not ledger.is_file():
         raise ValueError(f"{display_path(path)}: no {LEDGER_FILE} beside it (a scorecard is checked against its ledger)")
+    run = card.get("run")
+    if not isinstance(run, str):
+        raise ValueError(f"{display_path(path)}: it names no run (the identity its ledger's records carry)")
     try:
-        records = read_ledger(ledger, card.get("run", ""), repair=False)
+        records = read_ledger(ledger, run, repair=False, track=track)
     except EvaluationError as err:
         raise ValueError(str(err)) from None
-    track = TRACKS[card["track"]]
     if len(records) != track.n_blocks():
         raise ValueError(f"{display_path(ledger)}: {len(records)} units, the track has {track.n_blocks()}")
-    if unit_values(track, [records[u] for u in sorted(records)]) != card.get("values"):
-        raise ValueError(f"{display_path(path)}: its scores differ from those its ledger gives")
+    if not isinstance(card["agent"], dict) or run_identity(track, card["agent"], card.get("limit")) != run:
+        raise ValueError(f"{display_path(path)}: its agent or limit is not the one its ledger was played with (the run "
+                         f"identity of {track.name}, its agent and its limit is not {run})")
+    derived = json.loads(json.dumps(score_records(track, [records[u] for u in sorted(records)])))
+    for key in DERIVED:
+        if key in derived and key in card and card[key] != derived[key]:  # a figure it leaves out is not a claim
+            raise ValueError(f"{display_path(path)}: its {key} ({_short(card.get(key))}) differs from what its ledger gives "
+                             f"({_short(derived[key])}); the board takes every figure from {display_path(ledger)}")
+        if key not in derived and card.get(key) is not None:
+            raise ValueError(f"{display_path(path)}: it claims a {key}, which no scorecard of {track.name} has")
+    compute = card["agent"].get("compute", "observation")
+    if compute not in COMPUTE:
+        raise ValueError(f"{display_path(path)}: its agent's class {_short(compute)} is none of {', '.join(COMPUTE)}")
+    if compute == "observation" and derived["sims_per_decision"] > 0:
+        raise ValueError(f"{display_path(path)}: its agent claims to use the observation only, but its ledger counts "
+                         f"{derived['sims_per_decision']} simulations per decision (class simulator)")
+    return derived
+
+
+def _short(value) -> str:
+    """A claimed value in a sentence: one line, at most 60 characters."""
+    text = one_line(json.dumps(value) if not isinstance(value, str) else repr(value))
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def check_against_ledger(path: Path, card: dict) -> dict:
+    """A played scorecard must agree with the sealed ledger beside it (:func:`derive`); returns
+    the figures the ledger gives."""
+    return derive(path, card)
+
+
+def check_recorded(path: Path, card: dict) -> None:
+    """A recorded scorecard (a training setting's own evaluations, no ledger): one list of unit
+    scores per training seed, each a whole evaluation of its track within the track's rules
+    (:meth:`~billiards.bench.tracks.Track.values_problem`: 100 innings of 0 to 10 points on
+    ``innings-v1``), and no figure of its own."""
+    track = TRACKS[card["track"]]
+    runs = card.get("runs")
+    if not (isinstance(runs, list) and runs and all(isinstance(r, dict) for r in runs)):
+        raise ValueError(f"{display_path(path)}: a recorded scorecard holds runs, one list of unit scores per training seed")
+    for k, r in enumerate(runs):
+        if why := track.values_problem(r.get("values"), track.n_values()):
+            raise ValueError(f"{display_path(path)}: run {k}: {why}")
+    for key in DERIVED:
+        if card.get(key) is not None:
+            raise ValueError(f"{display_path(path)}: a recorded scorecard claims no {key} (its figures come from its runs)")
 
 
 def _runs(cards: list[dict]) -> list[list[float]]:
@@ -348,8 +423,8 @@ def markdown(board: dict) -> str:
                 earlier = f"{fmt(e['value'])} [{fmt(e['ci95'][0])}, {fmt(e['ci95'][1])}], {verdict} ({e['protocol']})"
             above = "" if "p_above_next" not in r else \
                 f"{r['p_above_next']['p']:.2f} [{r['p_above_next']['ci95'][0]:.2f}, {r['p_above_next']['ci95'][1]:.2f}]"
-            lines.append(f"| {i} | {r['row']} | {main} | {more} | {above} | {r['seeds']} | {cost} | {r['compute']} | {r['status']} "
-                         f"| {earlier} |")
+            lines.append(f"| {i} | {md_text(r['row'])} | {main} | {more} | {above} | {r['seeds']} | {cost} | {md_text(r['compute'])} "
+                         f"| {r['status']} | {earlier} |")
         lines.append("")
     lines += ["P(above the next): the probability that a unit (inning, chain) of the row scores above one of the row "
               "below it, ties counting half (rliable's probability of improvement, stratified bootstrap interval); 0.5 "
@@ -386,7 +461,7 @@ def draw_figure(board: dict, path: Path) -> Path:
             ax.scatter(score, y, c=colors, zorder=3)
         else:
             ax.barh(y, score, xerr=[lo, hi], color=colors, capsize=2)
-        ax.set_yticks(y, [r["row"] if len(r["row"]) <= 48 else r["row"][:46] + "..." for r in rows], fontsize=6)
+        ax.set_yticks(y, [plot_label(r["row"], 48, 46) for r in rows], fontsize=6)
         ax.set_title(f"{name}: {board['tracks'][name]['metric'].replace('_', ' ')}" + (" (%)" if scale == 100 else ""), fontsize=8)
         ax.tick_params(axis="x", labelsize=6)
     from matplotlib.patches import Patch
@@ -431,7 +506,7 @@ def draw_profiles(board: dict, path: Path) -> Path:
         prof = board["tracks"][name]["profiles"]
         x = np.arange(len(prof["thresholds"]))
         for row, fractions in prof["rows"].items():
-            ax.plot(x, fractions, marker=".", linewidth=1, label=row[:40])
+            ax.plot(x, fractions, marker=".", linewidth=1, label=plot_label(row, 40, 40, ""))
         ax.set_xticks(x, [str(t) for t in prof["thresholds"]], fontsize=6)
         ax.set_title(f"{name}: share of units above tau", fontsize=8)
         ax.set_ylim(-0.02, 1.02)
@@ -506,7 +581,7 @@ def placement(track: str, value: float, board: dict | str | Path | None = None, 
     if version is not None and entry.get("version", version) != version:
         raise ValueError(f"the leaderboard ranks {track} version {entry['version']}, the score is of version {version}")
     protocol = TRACKS[track].protocol if track in TRACKS else None
-    show = lambda r: f"{r['row']} ({format_score(protocol, r['score'])})"  # noqa: E731
+    show = lambda r: f"{one_line(r['row'])} ({format_score(protocol, r['score'])})"  # noqa: E731
     rows = sorted(entry["rows"], key=lambda r: (-r["score"], r["row"]))
     v = round(float(value), 6)
     above = [r for r in rows if round(r["score"], 6) > v]
@@ -532,7 +607,7 @@ def _and(items: list[str]) -> str:
 def placement_line(card: dict, board: dict | str | Path | None = None) -> str:
     """``evaluate.py``'s last line: where the scorecard would rank on the committed board, with
     the caveat of a limited run; what is missing where it cannot be placed."""
-    name = card["agent"]["name"]
+    name = one_line(card["agent"]["name"])
     try:
         where = placement(card["track"], headline_value(card), board, card.get("version"))
     except (KeyError, ValueError) as err:
@@ -549,13 +624,24 @@ def compare(first: Path, second: Path) -> dict:
     scores (a scorecard's ``values``: per shot for innings and P1, chain lengths for P3, match
     scores) is paired, and its bootstrap interval is narrower than the two scorecards'
     intervals side by side. ``first``, ``second``: scorecard files or their folders, complete
-    (not partial nor limited) and of the same track and version. ValueError says what differs."""
+    (not partial nor limited) and of the same track and version. A scorecard with its ledger
+    beside it is compared by the scores its ledger gives (:func:`derive`; one that claims others
+    is refused); one without, by its own, each within the track's rules. ValueError says what
+    differs or why the two cannot be compared (never a NaN)."""
+    from .run import LEDGER_FILE
+
     cards = []
     for path in (Path(first), Path(second)):
         path = path / "scorecard.json" if path.is_dir() else path
         card = _load(path)
         if card.get("partial") or card.get("limit"):
             raise ValueError(f"{display_path(path)}: a partial or limited scorecard (play the whole track first)")
+        if (path.parent / LEDGER_FILE).is_file():
+            card.update(derive(path, card))
+        elif why := TRACKS[card["track"]].values_problem(card.get("values")):
+            raise ValueError(f"{display_path(path)}: {why}; it cannot be compared")
+        if not isinstance(card["agent"], dict):
+            card["agent"] = {}
         cards.append((path, card))
     (pa, a), (pb, b) = cards
     if a["track"] != b["track"]:
@@ -564,18 +650,21 @@ def compare(first: Path, second: Path) -> dict:
     if va.shape != vb.shape:
         raise ValueError(f"{display_path(pa)} has {va.size} units, {display_path(pb)} {vb.size}")
     track = TRACKS[a["track"]]
+    if va.size != track.n_values():
+        raise ValueError(f"{display_path(pa)} and {display_path(pb)} hold {va.size} unit scores each, but a whole evaluation "
+                         f"of {track.name} has {track.n_values()}: they cannot be compared")
     unit, scale = {"innings": ("success per shot", 1.0 / track.shots), "p1": ("success per shot", 1.0),
                    "p3": ("chain length", 1.0)}.get(track.protocol, ("match score", 1.0))
     diff = (va - vb) * scale
-    return {"track": a["track"], "unit": unit, "first": a["agent"]["name"], "second": b["agent"]["name"],
+    name = lambda c: one_line(c["agent"].get("name", "?"))  # noqa: E731
+    return {"track": a["track"], "unit": unit, "first": name(a), "second": name(b),
             "first_mean": round(float(va.mean() * scale), 6), "second_mean": round(float(vb.mean() * scale), 6),
             "difference": round(float(diff.mean()), 6), "ci95": stats.bootstrap_ci(diff), "units": int(diff.size),
             "first_better": int((diff > 0).sum()), "second_better": int((diff < 0).sum()),
             "sources": [display_path(pa), display_path(pb)]}
 
 
-__all__ = ["EARLIER", "OUTSIDE", "PROFILE_THRESHOLDS", "REBUILD", "SOURCES", "STATUSES", "build", "check_against_ledger",
-           "collect", "compare", "draw_figure", "draw_profiles", "earlier_figure", "format_score", "headline_value",
-           "leaderboard", "left_out", "looks_like_path", "markdown", "placement", "placement_line", "record_training",
-           "snapshot_path", "write"]
-
+__all__ = ["COMPUTE", "DERIVED", "EARLIER", "OUTSIDE", "PROFILE_THRESHOLDS", "REBUILD", "SOURCES", "STATUSES", "build",
+           "check_against_ledger", "check_recorded", "collect", "compare", "derive", "draw_figure", "draw_profiles",
+           "earlier_figure", "format_score", "headline_value", "leaderboard", "left_out", "looks_like_path", "markdown",
+           "placement", "placement_line", "record_training", "snapshot_path", "write"]
