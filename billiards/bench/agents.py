@@ -54,7 +54,8 @@ class Agent:
     positions, at full precision); ``levels`` (B,) float64 or None, the shots' noise levels where
     the track tells them. Returns the raw shots (B, 4) float64 (theta, p, a, b).
     ``reset(seed)`` before every inning block, chain and match (the agent's own randomness).
-    ``sims``: simulations used so far (agents that search; 0 for the others)."""
+    ``sims``: simulations used so far (agents that search; 0 for the others): a whole number that
+    never goes down, within the track's budget per decision (the evaluation checks both)."""
 
     kind = "agent"
     compute = "observation"  # or "simulator": searches with the simulator (its budget counted)
@@ -73,12 +74,50 @@ class Agent:
         return {"name": self.name, "kind": self.kind, "compute": self.compute}
 
 
-def _checked(action, batch: int, name: str) -> np.ndarray:
-    """The agent's answer as a (B, 4) float64 array, or an AgentError saying what was wrong."""
-    try:
-        arr = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise AgentError(f"agent {name} returned {type(action).__name__}, not an array of numbers ({err})") from None
+_KINDS = {"b": "booleans", "c": "complex numbers", "O": "Python objects", "U": "text", "S": "bytes", "V": "records",
+          "M": "dates", "m": "time spans"}
+
+
+def _element_problem(x) -> str | None:
+    """What a single element of an answer is, where it is not a real number."""
+    if isinstance(x, (bool, np.bool_)):
+        return "booleans"
+    if isinstance(x, (complex, np.complexfloating)):
+        return "complex numbers"
+    if not isinstance(x, (int, float, np.integer, np.floating)):
+        return f"{type(x).__name__} objects"
+    return None
+
+
+def checked_action(action, batch: int, name: str) -> np.ndarray:
+    """The one check of every answer an agent gives: a (B, 4) float64 array of real, finite
+    numbers (or, for one table, (4,)); anything else -- complex numbers (never played as their
+    real part), booleans, objects, text, NaN or infinity, another shape -- is an AgentError that
+    names the agent and what it returned. Applied to what an adapted callable answers (before its
+    normalised action is mapped to a shot) and to the shots every agent returns
+    (:class:`billiards.bench.run`'s clock)."""
+    def bad(what: str) -> AgentError:
+        return AgentError(f"agent {name} returned {what}; an action is 4 real, finite numbers per table")
+
+    if not isinstance(action, np.ndarray):
+        if isinstance(action, (list, tuple)):  # a mix hides in a float array: [True, 0.5, 0, 0] -> [1.0, 0.5, 0, 0]
+            try:
+                items = np.asarray(action, dtype=object).reshape(-1)
+            except (TypeError, ValueError):
+                items = ()  # ragged: the conversion below says so
+            for x in items:
+                if not isinstance(x, (list, tuple, np.ndarray)) and (why := _element_problem(x)) is not None:
+                    raise bad(why)
+        elif not hasattr(action, "__array__") and (why := _element_problem(action)) is not None:
+            raise bad(f"{type(action).__name__}, not an array of numbers" if why.endswith("objects") else why)
+        try:
+            action = np.asarray(action)
+        except (TypeError, ValueError, RuntimeError) as err:
+            raise bad(f"{type(action).__name__}, not an array of numbers ({err})") from None
+    kind = action.dtype.kind
+    if kind not in "iuf":
+        raise bad(_KINDS.get(kind, f"values of dtype {action.dtype}") + f" (dtype {action.dtype})")
+    arr = action.astype(np.float64, copy=False)
     if arr.shape == (domain.ACTION_DIM,) and batch == 1:
         arr = arr[None]
     if arr.shape != (batch, domain.ACTION_DIM):
@@ -87,6 +126,7 @@ def _checked(action, batch: int, name: str) -> np.ndarray:
     if not np.isfinite(arr).all():
         raise AgentError(f"agent {name} returned a non-finite action: {arr[~np.isfinite(arr).all(axis=1)][0].tolist()}")
     return arr
+
 
 
 def to_raw(action: np.ndarray, name: str, normalized: bool) -> np.ndarray:
@@ -140,20 +180,20 @@ class CallableAgent(Agent):
                 shape = np.shape(out)
             except AgentError as err:
                 error = err
-            except ValueError:  # a ragged answer: _checked says what is wrong with it
+            except ValueError:  # a ragged answer: checked_action says what is wrong with it
                 pass
             if error is None and (shape == (B, domain.ACTION_DIM) or (B == 1 and shape == (domain.ACTION_DIM,))):
                 self.batched = self.batched or B > 1
-                return to_raw(_checked(out, B, self.name), self.name, self.normalized)
+                return to_raw(checked_action(out, B, self.name), self.name, self.normalized)
             # a function written for one table may fail on (or misread) the batch it is first given:
             # asked about the first table alone, it answers (4,)
             first = None if self.batched else self._probe_one(obs)
             if first is None and not (B > 1 and shape == (domain.ACTION_DIM,)):
                 if error is not None:
                     raise error
-                return to_raw(_checked(out, B, self.name), self.name, self.normalized)  # says what is wrong
+                return to_raw(checked_action(out, B, self.name), self.name, self.normalized)  # says what is wrong
             self.one_at_a_time = True  # written for one table: one call per table from now on
-        rows = [_checked(first if i == 0 and first is not None else self._call(obs[i]), 1, self.name)[0] for i in range(B)]
+        rows = [checked_action(first if i == 0 and first is not None else self._call(obs[i]), 1, self.name)[0] for i in range(B)]
         return to_raw(np.stack(rows), self.name, self.normalized)
 
     def describe(self) -> dict:
@@ -216,7 +256,7 @@ class ProjectPolicy(Agent):
 
                 raise AgentError(level_input_error(self.name, "this track tells no level (its noise is not variable)"))
             x = with_levels(x, levels)
-        action = _checked(self.act_fn(x), len(tables), self.name)
+        action = checked_action(self.act_fn(x), len(tables), self.name)
         return domain.raw_action(action, tables, self.R, self.constrain_aim)
 
     def describe(self) -> dict:
@@ -322,7 +362,7 @@ class LeagueAgent(Agent):
     def act(self, obs, tables, levels):
         out = [self.player.act(tables[i]) if levels is None else self.player.act(tables[i], float(levels[i]))
                for i in range(len(tables))]
-        return to_raw(_checked(np.stack(out), len(tables), self.name), self.name, True)
+        return to_raw(checked_action(np.stack(out), len(tables), self.name), self.name, True)
 
     def describe(self) -> dict:
         return {**super().describe(), "config": self.config}
@@ -537,5 +577,5 @@ def spec_kind(spec: str) -> str:
 
 
 __all__ = ["Agent", "AgentError", "BASELINES", "CallableAgent", "LeagueAgent", "NearestRedAgent", "ProjectPolicy",
-           "RandomAgent", "RandomAimAgent", "SearchActorAgent", "as_agent", "league_player", "league_players",
+           "RandomAgent", "RandomAimAgent", "SearchActorAgent", "as_agent", "checked_action", "league_player", "league_players",
            "resolve_agent", "spec_kind", "spec_name", "to_raw"]

@@ -45,7 +45,7 @@ def build_agent(cfg):
 def errors(cfg) -> list[str]:
     """Every problem of an evaluate config, each a sentence naming its key."""
     from .agents import AgentError
-    from .run import EvaluationError, IDENTITY_FILE
+    from .run import IDENTITY_FILE, EvaluationError, out_problem, read_identity
     from .tracks import TRACKS
 
     errs = numeric_bound_errors(cfg) if isinstance(cfg, DictConfig) else []
@@ -58,19 +58,25 @@ def errors(cfg) -> list[str]:
         errs.append(f"limit must lie in 1..{TRACKS[cfg.track].units} for {cfg.track}, got {cfg.limit}")
     if cfg.threads is not None and not 1 <= cfg.threads <= 256:
         errs.append(f"threads must lie in 1..256, got {cfg.threads}")
+    out = cfg.get("out")
+    if out and not errs:  # before anything is built (the agent's code imported) or written
+        path = Path(out)
+        why = out_problem(out)
+        if why is not None:
+            errs.append(why)
+        elif path.is_dir() and (path / IDENTITY_FILE).is_file():
+            try:
+                read_identity(path)
+            except EvaluationError as err:
+                errs.append(f"out={out}: {err}")
+        elif path.is_dir() and any(path.iterdir()):
+            errs.append(f"out={out}: not empty and holds no evaluation; choose an empty or new directory")
     if errs:
         return errs
     try:
         build_agent(cfg)
     except (AgentError, EvaluationError) as err:
         return [str(err)]
-    out = cfg.get("out")
-    if out:
-        path = Path(out)
-        if path.exists() and not path.is_dir():
-            errs.append(f"out={out}: is a file, not a directory")
-        elif path.is_dir() and any(path.iterdir()) and not (path / IDENTITY_FILE).is_file():
-            errs.append(f"out={out}: not empty and holds no evaluation; choose an empty or new directory")
     return errs
 
 

@@ -11,6 +11,10 @@ scorecard claims none (:func:`billiards.compat.upgrade_scorecard`).
 * ``submissions/<track>/<slug>/scorecard.json``: outside entries, by pull request (status
   ``unverified`` until the same command is run here and its scorecard moves to ``scorecards/``).
 
+A played scorecard's figures are never read from it: :func:`derive` computes every one from its
+sealed ledger and its track's rules, and refuses a card that claims otherwise. Every outside
+string is written inert (:mod:`billiards.bench.text`).
+
 Scorecards sharing an agent ``group`` (a policy's training seeds) pool into one row: the mean
 and the interquartile mean over every (seed, unit) score with stratified bootstrap intervals
 (:func:`billiards.stats.aggregate`). Partial and limited scorecards are left out, each reported
@@ -186,9 +190,6 @@ def collect(root: Path, report: Callable[[str], None] | None = None) -> list[dic
     return cards
 
 
-# what a played scorecard claims that its ledger gives (every key of billiards.bench.run.score_records)
-DERIVED = ("units_done", "decisions", "ms_per_decision", "sims_per_decision", "success_per_shot", "foul_per_shot",
-           "points_per_inning", "chain", "match", "elo", "elo_ci95", "values")
 COMPUTE = ("observation", "simulator")
 
 
@@ -203,14 +204,15 @@ def derive(path: Path, card: dict) -> dict:
       give them, decisions as the protocol asks, simulations within the budget);
     * the run: the identity its records carry is the one of the track, the agent and the limit
       the scorecard names (its name, group and class are those it was played under);
-    * the figures (:func:`billiards.bench.run.score_records`: the mean, the success and foul
+    * the figures (:func:`billiards.bench.run.ledger_figures`: the mean, the success and foul
       rates, the chain and match summaries, the win rate, the Elo, every interval, the per-unit
       scores, the time and simulations per decision), computed from the records;
     * the class: ``observation`` or ``simulator``, and an agent that simulated is ``simulator``.
 
-    Returns the figures; a scorecard that claims anything else (a key of :data:`DERIVED` that
-    differs) is refused: ValueError naming the file and what differs."""
-    from .run import LEDGER_FILE, EvaluationError, read_ledger, run_identity, score_records
+    Returns the figures; a scorecard that claims anything else (:data:`billiards.bench.run.DERIVED`,
+    :func:`~billiards.bench.run.claim_problems`) is refused: ValueError naming the file and what
+    differs."""
+    from .run import LEDGER_FILE, EvaluationError, claim_problems, ledger_figures, read_ledger, run_identity
 
     track = TRACKS[card["track"]]
     ledger = path.parent / LEDGER_FILE
@@ -228,26 +230,17 @@ def derive(path: Path, card: dict) -> dict:
     if not isinstance(card["agent"], dict) or run_identity(track, card["agent"], card.get("limit")) != run:
         raise ValueError(f"{display_path(path)}: its agent or limit is not the one its ledger was played with (the run "
                          f"identity of {track.name}, its agent and its limit is not {run})")
-    derived = json.loads(json.dumps(score_records(track, [records[u] for u in sorted(records)])))
-    for key in DERIVED:
-        if key in derived and key in card and card[key] != derived[key]:  # a figure it leaves out is not a claim
-            raise ValueError(f"{display_path(path)}: its {key} ({_short(card.get(key))}) differs from what its ledger gives "
-                             f"({_short(derived[key])}); the board takes every figure from {display_path(ledger)}")
-        if key not in derived and card.get(key) is not None:
-            raise ValueError(f"{display_path(path)}: it claims a {key}, which no scorecard of {track.name} has")
+    derived = ledger_figures(track, list(records.values()))
+    if problems := claim_problems(card, derived, display_path(path)):
+        raise ValueError(f"{problems[0]}; the board takes every figure from {display_path(ledger)}")
     compute = card["agent"].get("compute", "observation")
     if compute not in COMPUTE:
-        raise ValueError(f"{display_path(path)}: its agent's class {_short(compute)} is none of {', '.join(COMPUTE)}")
+        raise ValueError(f"{display_path(path)}: its agent's class {one_line(repr(compute))[:60]} is none of "
+                         f"{', '.join(COMPUTE)}")
     if compute == "observation" and derived["sims_per_decision"] > 0:
         raise ValueError(f"{display_path(path)}: its agent claims to use the observation only, but its ledger counts "
                          f"{derived['sims_per_decision']} simulations per decision (class simulator)")
     return derived
-
-
-def _short(value) -> str:
-    """A claimed value in a sentence: one line, at most 60 characters."""
-    text = one_line(json.dumps(value) if not isinstance(value, str) else repr(value))
-    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def check_against_ledger(path: Path, card: dict) -> dict:
@@ -268,6 +261,8 @@ def check_recorded(path: Path, card: dict) -> None:
     for k, r in enumerate(runs):
         if why := track.values_problem(r.get("values"), track.n_values()):
             raise ValueError(f"{display_path(path)}: run {k}: {why}")
+    from .run import DERIVED
+
     for key in DERIVED:
         if card.get(key) is not None:
             raise ValueError(f"{display_path(path)}: a recorded scorecard claims no {key} (its figures come from its runs)")
@@ -664,7 +659,7 @@ def compare(first: Path, second: Path) -> dict:
             "sources": [display_path(pa), display_path(pb)]}
 
 
-__all__ = ["COMPUTE", "DERIVED", "EARLIER", "OUTSIDE", "PROFILE_THRESHOLDS", "REBUILD", "SOURCES", "STATUSES", "build",
+__all__ = ["COMPUTE", "EARLIER", "OUTSIDE", "PROFILE_THRESHOLDS", "REBUILD", "SOURCES", "STATUSES", "build",
            "check_against_ledger", "check_recorded", "collect", "compare", "derive", "draw_figure", "draw_profiles",
            "earlier_figure", "format_score", "headline_value", "leaderboard", "left_out", "looks_like_path", "markdown",
            "placement", "placement_line", "record_training", "snapshot_path", "write"]

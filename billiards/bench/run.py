@@ -9,14 +9,18 @@ again when it is the last), unsealed or foreign. At the end ``scorecard.json`` a
 ``scorecard.md`` are written there; without an output directory nothing is written and the
 scorecard is only returned. A scorecard claims no status: the leaderboard gives it one.
 
-The agent is timed alone (CPU seconds of its own calls) and its simulations counted. A failure
-is put on the agent only when it is the agent's (:func:`whose_failure`).
+The agent is timed alone (CPU seconds of its own calls) and its simulations counted; its every
+answer is checked (real, finite numbers of the right shape) and its counter must never go down.
+Every ledger record is held to the track's rules (:meth:`Track.record_problem`) when it is
+written and when it is read back. A failure is put on the agent only when it is the agent's
+(:func:`whose_failure`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 import time
 from pathlib import Path
 
@@ -26,7 +30,8 @@ from billiards import domain, files
 from billiards.files import LedgerKind, atomic_write_text, display_path
 
 from billiards import stats
-from .agents import Agent, AgentError, resolve_agent
+from .agents import Agent, AgentError, checked_action, resolve_agent
+from .text import md_code, md_text, one_line
 from .tracks import Track, get_track
 
 IDENTITY_FILE, LEDGER_FILE = "evaluation.json", "units.jsonl"
@@ -53,23 +58,41 @@ def _params_noise(track: Track):
 
 class _Clock:
     """The agent's own cost: seconds of its calls (wall clock, on the one thread it runs on;
-    the CPU clock costs tens of microseconds a read on some machines), decisions, simulations."""
+    the CPU clock costs tens of microseconds a read on some machines), decisions, simulations.
+    Every answer of every agent passes here: its shots checked (:func:`checked_action`: real,
+    finite numbers of the right shape) and its simulation counter read, which must be a whole
+    number that never goes down."""
 
     def __init__(self, agent: Agent):
         self.agent, self.cpu, self.decisions = agent, 0.0, 0
-        self.sims0 = agent.sims
+        self.sims0 = self.sims = _sims(agent, None)
 
     def act(self, obs, tables, levels):
         t0 = time.perf_counter()
         raw = self.agent.act(obs, tables, levels)
         self.cpu += time.perf_counter() - t0
         self.decisions += len(tables)
-        if not (isinstance(raw, np.ndarray) and raw.shape == (len(tables), 4) and np.isfinite(raw).all()):
-            raise AgentError(f"agent {self.agent.name} returned an unusable shot: {np.asarray(raw).tolist()[:1]}")
-        return raw
+        shots = checked_action(raw, len(tables), self.agent.name)
+        self.sims = _sims(self.agent, self.sims)
+        return shots
 
     def record(self) -> dict:
-        return {"decisions": self.decisions, "cpu_s": round(self.cpu, 6), "sims": int(self.agent.sims - self.sims0)}
+        return {"decisions": self.decisions, "cpu_s": round(self.cpu, 6), "sims": int(self.sims - self.sims0)}
+
+
+def _sims(agent: Agent, before: int | None) -> int:
+    """The agent's simulation counter (``agent.sims``: simulations used so far), checked: a whole
+    number >= 0, never below ``before`` (what it said after its previous call); an AgentError
+    naming the agent otherwise."""
+    sims = getattr(agent, "sims", 0)
+    whole = isinstance(sims, (int, np.integer)) and not isinstance(sims, (bool, np.bool_))
+    if not whole or sims < 0:
+        raise AgentError(f"agent {agent.name}'s simulation counter (sims) is {str(sims)[:40]!r}, not a whole number >= 0: "
+                         f"it counts the simulations the agent has used so far")
+    if before is not None and sims < before:
+        raise AgentError(f"agent {agent.name}'s simulation counter (sims) went down from {before} to {sims}: it counts "
+                         f"the simulations the agent has used so far and never goes down")
+    return int(sims)
 
 
 def _levels(env) -> np.ndarray | None:
@@ -337,11 +360,11 @@ def figures(card: dict) -> list[tuple[str, str, str]]:
 def scorecard_markdown(card: dict) -> str:
     """``scorecard.md``: the scorecard as a short page."""
     t = card["track_record"]
-    lines = [f"# {card['agent']['name']} on {t['name']}", "", f"{t['description']}. Rules: {card['rules']}.", "",
+    lines = [f"# {md_text(card['agent']['name'])} on {t['name']}", "", f"{t['description']}. Rules: {card['rules']}.", "",
              "| figure | value | 95 % interval |", "|---|---|---|"]
     lines += [f"| {what} | {value} | {interval} |" for what, value, interval in figures(card)]
-    lines += ["", f"Agent: `{json.dumps(card['agent'], sort_keys=True)}`", "",
-              f"Command: `{card['command']}` at commit `{card['commit']}`"
+    lines += ["", f"Agent: {md_code(json.dumps(card['agent'], sort_keys=True))}", "",
+              f"Command: {md_code(card['command'])} at commit {md_code(card['commit'])}"
               + (" (partial: not every unit finished)" if card.get("partial") else "")
               + (f" (limited to {card['limit']} units per opponent/track: not a leaderboard entry)" if card.get("limit") else ""),
               ""]
@@ -370,22 +393,167 @@ def _unit_problem(rec: dict) -> str | None:
     return None
 
 
+# what a scorecard claims that its ledger gives (every key of score_records)
+DERIVED = ("units_done", "decisions", "ms_per_decision", "sims_per_decision", "success_per_shot", "foul_per_shot",
+           "points_per_inning", "chain", "match", "elo", "elo_ci95", "values")
+
+
+def ledger_figures(track: Track, records: list[dict]) -> dict:
+    """Every figure of a scorecard as the ledger's records give it (:func:`score_records`, in
+    the form a scorecard file holds: through JSON)."""
+    return json.loads(json.dumps(score_records(track, sorted(records, key=lambda r: r["unit"]))))
+
+
+def claim_problems(card: dict, derived: dict, name: str) -> list[str]:
+    """Where the scorecard ``card`` (read from the file ``name``) claims a figure its ledger does
+    not give (``derived``: :func:`ledger_figures`), one sentence each naming the file and the
+    first entry that differs (``match.win_rate``). A figure the card leaves out is no claim."""
+    out = []
+    for key in DERIVED:
+        if key in derived and key in card and card[key] != derived[key]:
+            where, claimed, given = _difference(key, card[key], derived[key])
+            out.append(f"{name}: its {where} ({_short(claimed)}) differs from what its ledger gives ({_short(given)})")
+        elif key not in derived and card.get(key) is not None:
+            out.append(f"{name}: it claims a {key}, which no scorecard of its track has")
+    return out
+
+
+def _difference(key: str, claimed, derived) -> tuple[str, object, object]:
+    """The first place a claimed figure differs from the derived one: (``match.win_rate``, the
+    claimed value, the derived value)."""
+    if isinstance(claimed, dict) and isinstance(derived, dict):
+        for k in [*derived, *(k for k in claimed if k not in derived)]:
+            if claimed.get(k) != derived.get(k):
+                return _difference(f"{key}.{k}", claimed.get(k), derived.get(k))
+    return key, claimed, derived
+
+
+def _short(value) -> str:
+    """A claimed value in a sentence: one line, at most 60 characters."""
+    text = one_line(json.dumps(value) if not isinstance(value, str) else repr(value))
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def scorecard_problems(records: list[dict], card: dict, name: str) -> list[str]:
+    """``scorecard.json`` checked against its ``units.jsonl`` (``billiards.files verify``, the
+    kind's check): every record within the rules of the track the scorecard names (cut to its
+    limit), whether it is partial, and every figure it claims (:func:`claim_problems`) --
+    the leaderboard's derivation (:func:`billiards.bench.leaderboard.derive`) on one folder."""
+    from .tracks import TRACKS
+
+    if card.get("track") not in TRACKS or card.get("version") != TRACKS[card["track"]].version:
+        return [f"{name}: its track {_short(card.get('track'))} (version {_short(card.get('version'))}) is not one of this "
+                f"version's tracks"]
+    track, limit = TRACKS[card["track"]], card.get("limit")
+    if limit is not None:
+        if not (isinstance(limit, int) and not isinstance(limit, bool) and 1 <= limit <= track.units):
+            return [f"{name}: its limit {_short(limit)} is not a whole number in 1..{track.units}"]
+        track = track.scaled(limit)
+    out = [f"{name}: unit {r['unit']} of its ledger breaks the rules of {track.name}: {why}"
+           for r in records if (why := track.record_problem(r)) is not None]
+    if out:
+        return out
+    if "partial" in card and card["partial"] != (len(records) < track.n_blocks()):
+        out.append(f"{name}: it says partial={card['partial']}, but its ledger holds {len(records)} of the "
+                   f"{track.n_blocks()} units")
+    return out + claim_problems(card, ledger_figures(track, records), name)
+
+
 # the benchmark's ledger, on the one mechanism every ledger of the project uses (billiards.files)
 UNITS = LedgerKind(LEDGER_FILE, "evaluation unit record", lambda r: r["unit"], lambda r: f"unit {r['unit']}", _unit_problem,
-                   SCORECARD_JSON)
+                   SCORECARD_JSON, scorecard_problems)
 
 
-def read_ledger(path: Path, run_id: str, repair: bool = True) -> dict[int, dict]:
+def read_ledger(path: Path, run_id: str, repair: bool = True, track: Track | None = None) -> dict[int, dict]:
     """The finished units of a ledger by index (:func:`billiards.files.read_ledger`): every record
     sealed, of this run, each unit once; a torn last line (a kill mid-append) is cut off the file
-    (``repair``; else left out) so its unit is played again; anything else is refused by name."""
+    (``repair``; else left out) so its unit is played again; anything else is refused by name.
+    With ``track``, every record is held to the track's rules too (:meth:`Track.record_problem`:
+    a unit index in range, outcomes the protocol allows): a record that breaks them is refused
+    naming the file and the unit, never counted."""
     try:
         scan = files.read_ledger(path, UNITS, run_id, repair=repair)
     except files.LedgerError as err:
         raise EvaluationError(f"{err} (move the directory aside to start the evaluation again)") from None
     if scan.torn is not None and not repair:
         raise EvaluationError(f"{display_path(path)}: its last line is torn (an interrupted append): resume the evaluation")
+    if track is not None:
+        for rec in scan.records:
+            if (why := track.record_problem(rec)) is not None:
+                raise EvaluationError(f"{display_path(path)}: unit {rec['unit']} breaks the rules of {track.name}: {why}")
     return {r["unit"]: r for r in scan.records}
+
+
+def out_problem(out) -> str | None:
+    """Why no evaluation can be written at ``out``, or None, looking only (nothing is created):
+    :func:`billiards.app_config.path_problem` (a file, under a file, a directory this user cannot
+    write, a name too long), or a directory of the system (``/proc``, ``/sys``, ``/dev``, ``/etc``,
+    ``/usr`` ...: kernel and device file systems, installed software) or on a read-only file
+    system, which even a superuser cannot or should not write into."""
+    from billiards.app_config import path_problem
+
+    where = f"out={out}"
+    if Path(out).exists() and not Path(out).is_dir():
+        return f"{where}: is a file, not a directory; choose an empty or new directory"
+    given = Path(os.path.abspath(os.path.expanduser(str(out))))
+    absolute = Path(os.path.realpath(given))
+    under = lambda path, dirs: any(path == d or d in path.parents for d in map(Path, dirs))  # noqa: E731
+    if any(under(p, _SYSTEM_DIRS) and not under(p, _SYSTEM_SCRATCH) for p in (given, absolute)):
+        return f"{where}: lies in a system directory ({given}); choose a directory of your own (outputs/evaluate/...)"
+    if why := path_problem(str(out), where):
+        return why
+    existing = absolute
+    while not existing.exists() and existing.parent != existing:
+        existing = existing.parent
+    fs = _file_system(existing)
+    if fs in _PSEUDO_FILE_SYSTEMS:
+        return f"{where}: lies on the kernel's {fs} file system ({existing}), which holds no files of ours; choose another directory"
+    try:
+        read_only = bool(os.statvfs(existing).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        read_only = False
+    if read_only:
+        return f"{where}: lies on a read-only file system ({existing}); choose a directory that can be written"
+    return None
+
+
+_SYSTEM_DIRS = ("/proc", "/sys", "/dev", "/boot", "/etc", "/bin", "/sbin", "/lib", "/lib32", "/lib64", "/usr")
+_SYSTEM_SCRATCH = ("/dev/shm", "/usr/local", "/usr/src")  # under a system directory, yet where people keep their files
+_PSEUDO_FILE_SYSTEMS = ("proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2", "debugfs", "tracefs", "securityfs",
+                        "configfs", "bpf", "pstore", "efivarfs", "mqueue", "hugetlbfs", "fusectl", "binfmt_misc", "autofs")
+
+
+def _file_system(path: Path) -> str | None:
+    """The type of the file system ``path`` lies on (Linux's /proc/self/mountinfo), or None where
+    it cannot be read."""
+    try:
+        lines = Path("/proc/self/mountinfo").read_text().splitlines()
+    except OSError:
+        return None
+    best, kind = "", None
+    for line in lines:
+        left, _, right = line.partition(" - ")
+        fields = left.split()
+        if len(fields) < 5 or not right:
+            continue
+        mount = fields[4].replace("\\040", " ")
+        if (str(path) == mount or str(path).startswith(mount.rstrip("/") + "/")) and len(mount) >= len(best):
+            best, kind = mount, right.split()[0]
+    return kind
+
+
+def read_identity(out: Path) -> dict:
+    """The ``evaluation.json`` of the directory ``out``: a JSON object, or an EvaluationError
+    naming the file (damaged, not JSON, not an object)."""
+    path = Path(out) / IDENTITY_FILE
+    try:
+        mine = json.loads(path.read_text())
+    except (OSError, ValueError, RecursionError):
+        raise EvaluationError(f"{display_path(path)} is damaged; move the directory aside") from None
+    if not isinstance(mine, dict):
+        raise EvaluationError(f"{display_path(path)} is not an evaluation's identity (a JSON object, not "
+                              f"{type(mine).__name__}); move the directory aside")
+    return mine
 
 
 def claim_directory(out: Path, identity: dict) -> None:
@@ -395,21 +563,22 @@ def claim_directory(out: Path, identity: dict) -> None:
     if out.exists() and not out.is_dir():
         raise EvaluationError(f"{display_path(out)} is a file, not a directory; choose an empty or new directory")
     if path.is_file():
-        try:
-            mine = json.loads(path.read_text())
-        except ValueError:
-            raise EvaluationError(f"{display_path(path)} is damaged; move the directory aside") from None
+        mine = read_identity(out)
         if mine.get("run") != identity["run"]:
+            name = lambda key: (mine.get(key) if isinstance(mine.get(key), dict) else {}).get("name")  # noqa: E731
             raise EvaluationError(
-                f"{display_path(out)} holds the evaluation of {mine.get('agent', {}).get('name')!r} on "
-                f"{mine.get('track', {}).get('name')!r} (limit {mine.get('limit')}); this one is {identity['agent']['name']!r} on "
-                f"{identity['track']['name']!r} (limit {identity['limit']}): one directory holds one agent on one track "
-                f"version; choose another directory")
+                f"{display_path(out)} holds the evaluation of {one_line(repr(name('agent')))[:80]} on "
+                f"{one_line(repr(name('track')))[:80]} (limit {one_line(str(mine.get('limit')))[:20]}); this one is "
+                f"{identity['agent']['name']!r} on {identity['track']['name']!r} (limit {identity['limit']}): one directory "
+                f"holds one agent on one track version; choose another directory")
         return
-    if out.exists() and any(out.iterdir()):
-        raise EvaluationError(f"{display_path(out)} is not empty and holds no evaluation; choose an empty or new directory")
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, json.dumps(identity, indent=2, sort_keys=True) + "\n")
+    try:
+        if out.exists() and any(out.iterdir()):
+            raise EvaluationError(f"{display_path(out)} is not empty and holds no evaluation; choose an empty or new directory")
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(path, json.dumps(identity, indent=2, sort_keys=True) + "\n")
+    except OSError as err:
+        raise EvaluationError(f"out={out}: cannot be written ({err.strerror or err}); choose a directory of your own") from None
 
 
 # ----------------------------------------------------------------------------- failures
@@ -513,6 +682,8 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
     (the training seeds of one setting). ``spec``: the spec to record when ``agent`` is already built."""
     from tqdm.auto import tqdm
 
+    if out is not None and (why := out_problem(out)) is not None:  # before anything is built or written
+        raise EvaluationError(why)
     commit = _commit()
     full = get_track(track)
     track = full.scaled(limit) if limit is not None else full
@@ -532,7 +703,7 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
         out = Path(out)
         claim_directory(out, identity)
         ledger = out / LEDGER_FILE
-        done = read_ledger(ledger, run_id)
+        done = read_ledger(ledger, run_id, track=track)
     n_units = track.n_blocks()
     todo = [u for u in range(n_units) if u not in done]
     one, several = UNIT_WORDS[track.protocol]
@@ -554,6 +725,8 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
             except Exception as err:
                 raise EvaluationError(failure_message(err, agent, f"{one} {unit} of {full.name}", kept)) from err
             rec = {"unit": unit, **rec}
+            if (why := track.record_problem(rec)) is not None:  # what the reader would refuse is never written
+                raise EvaluationError(f"agent {agent.name} broke the rules of {full.name} on {one} {unit}: {why} ({kept})")
             if ledger is not None:
                 rec = files.append_record(ledger, rec, run_id)
             done[unit] = rec
@@ -569,8 +742,12 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
     card["track_record"] = full.record()
     card = _ordered(card)
     if out is not None:
-        atomic_write_text(out / SCORECARD_JSON, json.dumps(card, indent=2) + "\n")
-        atomic_write_text(out / SCORECARD_MD, scorecard_markdown(card))
+        try:
+            atomic_write_text(out / SCORECARD_JSON, json.dumps(card, indent=2) + "\n")
+            atomic_write_text(out / SCORECARD_MD, scorecard_markdown(card))
+        except OSError as err:
+            raise EvaluationError(f"out={out}: the scorecard cannot be written ({err.strerror or err}); the finished units "
+                                  f"are kept in {display_path(ledger)}") from None
     if progress:
         print(headline(card) + (f"\nscorecard: {display_path(out / SCORECARD_JSON)}" if out is not None else ""), flush=True)
     if interrupted:
@@ -587,9 +764,10 @@ def _ordered(card: dict) -> dict:
 def headline(card: dict) -> str:
     """The scorecard in one line."""
     parts = [f"{what} {value}" + (f" [{interval}]" if interval else "") for what, value, interval in figures(card)]
-    return f"{card['agent']['name']} on {card['track']}: " + "; ".join(parts) + (" (partial)" if card.get("partial") else "")
+    return f"{one_line(card['agent']['name'])} on {card['track']}: " + "; ".join(parts) + (" (partial)" if card.get("partial") else "")
 
 
-__all__ = ["EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "UNIT_WORDS", "claim_directory",
-           "evaluate", "failure_message", "figures", "fingerprint", "fingerprint_data", "headline", "play_unit", "read_ledger",
-           "run_identity", "score_records", "scorecard_markdown", "unit_values", "whose_failure"]
+__all__ = ["DERIVED", "EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "UNITS", "UNIT_WORDS",
+           "claim_directory", "claim_problems", "evaluate", "failure_message", "figures", "fingerprint", "fingerprint_data",
+           "headline", "ledger_figures", "out_problem", "play_unit", "read_identity", "read_ledger", "run_identity",
+           "score_records", "scorecard_markdown", "scorecard_problems", "unit_values", "whose_failure"]
