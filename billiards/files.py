@@ -1281,4 +1281,8 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    # `python -m billiards.files` runs this file as __main__: run the package's own module, whose
+    # ledger registry (LedgerKind) is the one every provider registers into
+    from billiards.files import main as _main
+
+    raise SystemExit(_main())

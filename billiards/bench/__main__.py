@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-from billiards.files import IN_CHECKOUT, ROOT
+from billiards.files import IN_CHECKOUT, ROOT, read_run_json
 
 SCORECARDS = Path("results/bench/scorecards")
 
@@ -41,7 +41,7 @@ def campaign(only: str | None, tracks: list[str] | None, progress: bool) -> None
     for i, (entry, track) in enumerate(jobs, 1):
         out = SCORECARDS / track / entry.slug
         card = ROOT / out / SCORECARD_JSON
-        if card.is_file() and not json.loads(card.read_text()).get("partial"):
+        if card.is_file() and not read_run_json(card).get("partial"):
             continue
         command = f"python evaluate.py track={track} agent={entry.spec} name={entry.slug} \"group='{entry.row}'\" out={out}"
         print(f"[{i}/{len(jobs)}] {command}", flush=True)

@@ -4,6 +4,7 @@ a spec on the command line), the output directory is free or holds this very eva
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -11,6 +12,7 @@ from typing import Optional
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.app_config import ValidatingCallback, numeric_bound_errors, register_app
+from billiards.files import LOCK_FILE
 
 
 @dataclass
@@ -64,12 +66,12 @@ def errors(cfg) -> list[str]:
         why = out_problem(out)
         if why is not None:
             errs.append(why)
-        elif path.is_dir() and (path / IDENTITY_FILE).is_file():
+        elif path.is_dir() and os.path.lexists(path / IDENTITY_FILE):  # read_identity refuses a link, a FIFO ...
             try:
                 read_identity(path)
             except EvaluationError as err:
                 errs.append(f"out={out}: {err}")
-        elif path.is_dir() and any(path.iterdir()):
+        elif path.is_dir() and any(p.name != LOCK_FILE for p in path.iterdir()):
             errs.append(f"out={out}: not empty and holds no evaluation; choose an empty or new directory")
     if errs:
         return errs

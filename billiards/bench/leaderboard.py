@@ -29,6 +29,7 @@ the committed snapshot (``results/leaderboard.json``).
 from __future__ import annotations
 
 import json
+import os
 import re
 from pathlib import Path
 from typing import Callable
@@ -36,7 +37,7 @@ from typing import Callable
 import numpy as np
 
 from billiards.compat import upgrade_scorecard
-from billiards.files import atomic_write_text, display_path
+from billiards.files import RunFileError, atomic_write_text, display_path, read_run_json
 
 from billiards import stats
 from .text import md_text, one_line, plot_label
@@ -122,9 +123,11 @@ def looks_like_path(name: str) -> bool:
 
 def _load(path: Path) -> dict:
     try:
-        card = json.loads(path.read_text())
-    except (OSError, ValueError) as err:
-        raise ValueError(f"{display_path(path)}: not a readable scorecard ({err})") from None
+        card = read_run_json(path)  # no link followed, a regular file of bounded size and depth
+    except RunFileError as err:
+        raise ValueError(f"not a readable scorecard: {err}") from None
+    except OSError as err:
+        raise ValueError(f"{display_path(path)}: not a readable scorecard ({err.strerror or type(err).__name__})") from None
     if not isinstance(card, dict):
         raise ValueError(f"{display_path(path)}: not a scorecard (a JSON object)")
     card = upgrade_scorecard(card)  # the board gives the status (collect)
@@ -216,7 +219,7 @@ def derive(path: Path, card: dict) -> dict:
 
     track = TRACKS[card["track"]]
     ledger = path.parent / LEDGER_FILE
-    if not ledger.is_file():
+    if not os.path.lexists(ledger):
         raise ValueError(f"{display_path(path)}: no {LEDGER_FILE} beside it (a scorecard is checked against its ledger)")
     run = card.get("run")
     if not isinstance(run, str):
@@ -631,7 +634,7 @@ def compare(first: Path, second: Path) -> dict:
         card = _load(path)
         if card.get("partial") or card.get("limit"):
             raise ValueError(f"{display_path(path)}: a partial or limited scorecard (play the whole track first)")
-        if (path.parent / LEDGER_FILE).is_file():
+        if os.path.lexists(path.parent / LEDGER_FILE):
             card.update(derive(path, card))
         elif why := TRACKS[card["track"]].values_problem(card.get("values")):
             raise ValueError(f"{display_path(path)}: {why}; it cannot be compared")

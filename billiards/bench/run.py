@@ -18,6 +18,7 @@ written and when it is read back. A failure is put on the agent only when it is 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -547,8 +548,10 @@ def read_identity(out: Path) -> dict:
     naming the file (damaged, not JSON, not an object)."""
     path = Path(out) / IDENTITY_FILE
     try:
-        mine = json.loads(path.read_text())
-    except (OSError, ValueError, RecursionError):
+        mine = files.read_run_json(path)  # no link followed, a regular file of bounded size and depth
+    except files.RunFileError as err:
+        raise EvaluationError(f"{err}; move the directory aside") from None
+    except OSError:
         raise EvaluationError(f"{display_path(path)} is damaged; move the directory aside") from None
     if not isinstance(mine, dict):
         raise EvaluationError(f"{display_path(path)} is not an evaluation's identity (a JSON object, not "
@@ -562,7 +565,7 @@ def claim_directory(out: Path, identity: dict) -> None:
     path = out / IDENTITY_FILE
     if out.exists() and not out.is_dir():
         raise EvaluationError(f"{display_path(out)} is a file, not a directory; choose an empty or new directory")
-    if path.is_file():
+    if os.path.lexists(path):  # whatever it is (a link, a FIFO), read_identity refuses what it may not read
         mine = read_identity(out)
         if mine.get("run") != identity["run"]:
             name = lambda key: (mine.get(key) if isinstance(mine.get(key), dict) else {}).get("name")  # noqa: E731
@@ -573,7 +576,7 @@ def claim_directory(out: Path, identity: dict) -> None:
                 f"holds one agent on one track version; choose another directory")
         return
     try:
-        if out.exists() and any(out.iterdir()):
+        if out.exists() and any(p.name != files.LOCK_FILE for p in out.iterdir()):
             raise EvaluationError(f"{display_path(out)} is not empty and holds no evaluation; choose an empty or new directory")
         out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, json.dumps(identity, indent=2, sort_keys=True) + "\n")
@@ -679,9 +682,8 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
     scorecard is only returned.
     ``limit``: only the first ``limit`` innings / chains / matches per opponent (a quick look;
     the scorecard says so). ``group``: the leaderboard row this scorecard pools into with others
-    (the training seeds of one setting). ``spec``: the spec to record when ``agent`` is already built."""
-    from tqdm.auto import tqdm
-
+    (the training seeds of one setting). ``spec``: the spec to record when ``agent`` is already built.
+    One process writes ``out`` at a time (:func:`billiards.files.run_lock`)."""
     if out is not None and (why := out_problem(out)) is not None:  # before anything is built or written
         raise EvaluationError(why)
     commit = _commit()
@@ -699,11 +701,25 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
     identity = {"run": run_id, "track": full.record(), "agent": identity_agent, "limit": limit}
     done: dict[int, dict] = {}
     ledger = None
+    lock = contextlib.ExitStack()
     if out is not None:
         out = Path(out)
         claim_directory(out, identity)
+        try:  # one writer per run folder, until the scorecard is written
+            lock.enter_context(files.run_lock(out, command=command))
+        except files.RunLockedError as err:
+            raise EvaluationError(str(err)) from None
         ledger = out / LEDGER_FILE
-        done = read_ledger(ledger, run_id, track=track)
+    with lock:
+        if ledger is not None:
+            done = read_ledger(ledger, run_id, track=track)
+        return _play(agent, track, full, out, ledger, done, identity_agent, run_id, command, commit, limit, progress)
+
+
+def _play(agent, track, full, out, ledger, done, identity_agent, run_id, command, commit, limit, progress) -> dict:
+    """The units still to play, then the scorecard (:func:`evaluate`'s body, under the run folder's lock)."""
+    from tqdm.auto import tqdm
+
     n_units = track.n_blocks()
     todo = [u for u in range(n_units) if u not in done]
     one, several = UNIT_WORDS[track.protocol]
