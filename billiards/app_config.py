@@ -335,11 +335,8 @@ def _has(name: str) -> Callable[[Path], bool]:
 
 def _final_results(d: Path) -> bool:
     """A search's results.json that is not marked partial."""
-    import json
-
-    try:
-        with open(d / files.RESULTS_FILE, "rb") as f:
-            res = json.loads(f.read(READ_LIMIT))
+    try:  # the one reader of run-folder files: no link, no FIFO, bounded size and depth
+        res = files.read_run_json(d / files.RESULTS_FILE)
     except (OSError, ValueError):
         return False
     extra = res.get("extra") if isinstance(res, dict) else None
@@ -401,10 +398,10 @@ def _yaml_head(path: Path):
     """The YAML document at ``path`` (its first READ_LIMIT bytes), or None if it cannot be read."""
     import yaml
 
-    try:
-        with open(path, "rb") as f:
+    try:  # the one reader of run-folder files: no link, no FIFO, bounded size
+        with files.open_run_file(path, "config") as f:
             return yaml.safe_load(f.read(READ_LIMIT))
-    except Exception:  # unreadable, not YAML, cut short: it says nothing
+    except Exception:  # unreadable, refused, not YAML, cut short: it says nothing
         return None
 
 

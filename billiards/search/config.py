@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, List, Optional
@@ -50,7 +51,7 @@ from billiards.tables import paper_tables
 from billiards.app_config import (AppConfig, RESUME_AUTO, ValidatingCallback, numeric_bound_errors, register_app, resolved_config,
                                   upper_bound_errors)
 from billiards.device import device_error, threads_error
-from billiards.files import CONFIG_FILE, repo_path
+from billiards.files import CONFIG_FILE, read_run_text, repo_path
 from billiards.physics.config import physics_errors
 from billiards.physics.noise import noise_errors, noise_from_config
 
@@ -496,9 +497,13 @@ def saved_config(run_dir: str | Path) -> DictConfig:
     """The typed config a search run saved (``<run_dir>/config.yaml``), in any form a run ever
     wrote; :class:`SearchConfigError` if there is none or it does not fit the schema."""
     path = Path(run_dir) / CONFIG_FILE
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise SearchConfigError(f"resume={run_dir}: no {CONFIG_FILE} there (not a search run directory)")
-    saved = OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+    try:  # the one reader of run-folder files: no link, no FIFO, bounded size
+        text = read_run_text(path, "config")
+    except (OSError, ValueError) as err:
+        raise SearchConfigError(f"resume={run_dir}: {err}") from None
+    saved = OmegaConf.to_container(OmegaConf.create(text), resolve=False) if text.strip() else None
     if not isinstance(saved, dict):
         raise SearchConfigError(f"{path} is not a search config")
     return typed(upgrade(saved))

@@ -362,3 +362,29 @@ def test_hydra_never_writes_its_records_over_another_run(app, tmp_path):
     assert f"Error: {done} holds a finished " in proc.stderr and "resume=" in proc.stderr, proc.stderr[-3000:]
     assert "Traceback" not in proc.stderr + proc.stdout
     assert files(tmp_path) == before
+
+
+def test_telling_whose_a_directory_is_never_blocks_on_a_fifo_or_follows_a_link(tmp_path):
+    """The directory checks read a run folder's files through the one reader (billiards.files):
+    a FIFO in place of results.json or of Hydra's record is refused unread, never waited on, and
+    a link to a file elsewhere is not followed."""
+    import os
+    import threading
+
+    from billiards import app_config
+
+    run = tmp_path / "run"
+    (run / ".hydra").mkdir(parents=True)
+    os.mkfifo(run / "results.json")
+    os.mkfifo(run / ".hydra" / "hydra.yaml")
+    elsewhere = tmp_path / "elsewhere.yaml"
+    elsewhere.write_text("hydra:\n  job:\n    config_name: search\n")
+    os.symlink(elsewhere, run / "config.yaml")
+    answers = {}
+    worker = threading.Thread(target=lambda: answers.update(
+        results=app_config._final_results(run), hydra=app_config._yaml_head(run / ".hydra" / "hydra.yaml"),
+        linked=app_config._yaml_head(run / "config.yaml")), daemon=True)
+    worker.start()
+    worker.join(timeout=20)
+    assert not worker.is_alive(), "a FIFO in a run folder blocked the directory check"
+    assert answers == {"results": False, "hydra": None, "linked": None}
