@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
+from billiards import files
 from billiards.files import SUMMARY_FILE, atomic_write_text
 from billiards.provenance import STARTS_FILE
 from billiards.tables import Table, paper_tables
@@ -61,7 +62,7 @@ def _round(x):
 
 def read_json(path: Path) -> dict | None:
     try:
-        data = json.loads(path.read_text())
+        data = files.read_run_json(path)  # the one reader of run-folder files (no link, no FIFO, bounded)
     except (OSError, ValueError):
         return None
     return data if isinstance(data, dict) else None
@@ -107,7 +108,7 @@ def train_state(run_dir: Path) -> TrainState:
     summary = read_json(run_dir / SUMMARY_FILE) or {}
     commits: list[str] = []
     if (starts := run_dir / STARTS).is_file():
-        records = [json.loads(line) for line in starts.read_text().splitlines() if line.strip()]
+        records = [json.loads(line) for line in files.read_run_text(starts, "ledger").splitlines() if line.strip()]
         commits = list(dict.fromkeys(r["commit"] for r in records if r.get("commit")))
     return TrainState(bool(summary) and (run_dir / "eval.json").is_file(), float(summary.get("cpu_seconds", 0.0)),
                       int(summary.get("frames", 0)), commits)

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from billiards import compat
+from billiards import compat, files
 from billiards.files import CHECKPOINT_FILE, CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE, SUMMARY_FILE
 
 @dataclass
@@ -142,9 +142,9 @@ def run_dirs(d: Path) -> list[Path]:
 
 def _json_object(path: Path) -> dict:
     try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise ValueError(f"{path.name} is not valid JSON ({err})") from None
+        data = files.read_run_json(path)  # the one reader of run-folder files (no link, no FIFO, bounded)
+    except files.RunFileError as err:
+        raise ValueError(str(err)) from None
     if not isinstance(data, dict):
         raise ValueError(f"{path.name} is not a JSON object")
     return data
@@ -157,7 +157,7 @@ def read_config(run_dir: Path) -> dict:
     if not path.is_file():
         raise ValueError("no config.yaml (the run's settings)")
     try:
-        config = yaml.safe_load(path.read_text())
+        config = yaml.safe_load(files.read_run_text(path, "config"))
     except yaml.YAMLError as err:
         raise ValueError(f"config.yaml is not valid YAML ({err})") from None
     if not isinstance(config, dict) or not isinstance(config.get("seed"), int):
@@ -275,7 +275,7 @@ def read_curve(run_dir: Path) -> Curve | None:
     if not hist.is_file():
         return None
     try:
-        rows = [json.loads(line) for line in hist.read_text().splitlines() if line.strip()]
+        rows = [json.loads(line) for line in files.read_run_text(hist, "ledger").splitlines() if line.strip()]
     except json.JSONDecodeError as err:
         raise ValueError(f"{EVAL_HISTORY_FILE} has a line that is not JSON ({err})") from None
     if not rows:
