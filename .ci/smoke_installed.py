@@ -15,11 +15,22 @@ import time
 from pathlib import Path
 
 AGENT = '''import numpy as np
+import torch
+from tensordict.nn import TensorDictModule
 
 
 def act(obs):
     """A full-power shot straight along the table's long axis, whatever the table."""
     return np.tile(np.array([0.5, 1.0, 0.0, 0.0], dtype=np.float32), (len(obs), 1))
+
+
+class Straight(torch.nn.Module):
+    def forward(self, obs):
+        return torch.tensor([0.5, 1.0, 0.0, 0.0]).expand(obs.shape[0], 4)
+
+
+net = Straight()  # a plain torch module: observation tensor -> action tensor
+module = TensorDictModule(Straight(), in_keys=["observation"], out_keys=["action"])  # a TorchRL module
 '''
 
 
@@ -54,13 +65,19 @@ def main() -> None:
         for command in ("evaluate", "train", "search", "match", "view", "leaderboard"):
             sagu(command, "--help", cwd=cwd)
         limited = ("limit=1",)
-        runs = [("p1-exact-v1", "my_agent.py:act", "smoke-numpy"), ("p1-exact-v1", "search:h2", "smoke-h2"),
+        runs = [("p1-exact-v1", "my_agent.py:act", "smoke-numpy"), ("innings-v1", "my_agent.py:net", "smoke-torch"),
+                ("p1-x5-v1", "my_agent.py:module", "smoke-torchrl"), ("p1-exact-v1", "search:h2", "smoke-h2"),
                 ("innings-v1", "results/policies/base/seed0.pt", "smoke-policy"), ("match-x5-v1", "league:greedy", "smoke-league")]
         for track, spec, name in runs:
             sagu("evaluate", f"track={track}", f"agent={spec}", f"name={name}", *limited, f"out=runs/{name}",
                  expect=("scorecard", "would rank"), cwd=cwd)
             if not (cwd / "runs" / name / "scorecard.json").is_file():
                 raise SystemExit(f"FAIL: no scorecard for {name}")
+        # an optional extra not installed: the sentence says what to install, and blames no agent
+        said = sagu("evaluate", "track=p1-exact-v1", "agent=sb3:sac:model.zip", "name=smoke-sb3", *limited, cwd=cwd, code=1,
+                    expect=('pip install "sagu-bench[sb3]"',))
+        if "failed" in said:
+            raise SystemExit(f"FAIL: a missing extra was blamed on the agent:\n{said}")
         sagu("search", "protocol=p1", "protocol.n_innings=1", "protocol.shots=2", "progress=false", "hydra.run.dir=runs/search",
              cwd=cwd)
         # no scorecards of one's own here: it says where it looked, and writes nothing
