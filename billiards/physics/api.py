@@ -25,6 +25,10 @@ natural and adversarial shots). A shot the event loop cannot finish (``params.ma
 reached, e.g. a ball pressed against a rail or a wedged cluster by its own friction, which an
 impulse model can only answer with ever more collisions) is stopped where it is and flagged
 ``truncated``.
+
+The first use on a machine compiles the kernels (numba; cached afterwards): before a kernel's
+first call in a process that will compile it, one line on stderr says so with the expected
+time (:mod:`billiards.physics.warmup`).
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import core
+from . import core, warmup
 from .checks import ContractError, finite_number, generator, integer, real_array
 from .params import DEFAULT_PARAMS, PhysicsParams, get_params
 from .rules import carom_outcome
@@ -310,7 +314,10 @@ def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> 
     params = get_params(params)  # a preset's name is accepted wherever parameters are
     pos = real_array(positions, "positions", (4, 2), note=POSITIONS_NOTE)
     act = real_array(action, "action", (4,), note=ACTION_NOTE)
-    ok, raw = core.checked_shot(np.ascontiguousarray(pos), np.ascontiguousarray(act), params.array, POSITION_TOL)
+    args = (np.ascontiguousarray(pos), np.ascontiguousarray(act), params.array, POSITION_TOL)
+    if core.checked_shot not in warmup.CHECKED:  # its first call here: say so if it compiles
+        warmup.before_first_call(core.checked_shot, *args)
+    ok, raw = core.checked_shot(*args)
     if not ok:
         check_actions(act[None])  # raise with the message
         check_positions(pos[None], params)
@@ -330,10 +337,12 @@ def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -
     out_pos = np.empty((n, 4, 2))
     out_int = np.empty((n, core.N_OUT_INT), dtype=np.int64)
     out_float = np.empty((n, core.N_OUT_FLOAT))
-    if n >= PARALLEL_MIN_BATCH:
-        core.run_batch(pos, act, params.array, out_pos, out_int, out_float)
-    elif n:
-        core.run_batch_serial(pos, act, params.array, out_pos, out_int, out_float)
+    if n:
+        kernel = core.run_batch if n >= PARALLEL_MIN_BATCH else core.run_batch_serial
+        args = (pos, act, params.array, out_pos, out_int, out_float)
+        if kernel not in warmup.CHECKED:  # its first call here: say so if it compiles
+            warmup.before_first_call(kernel, *args)
+        kernel(*args)
     hits = out_int[:, core.O_HIT1:core.O_HIT3 + 1] != 0
     score, foul, miss = carom_outcome(hits[:, 0], hits[:, 1], hits[:, 2])
     return BatchResult(

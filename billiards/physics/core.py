@@ -27,6 +27,23 @@ kernel they call) would be pure overhead: with it, this split of the loop ran 35
 the single loop it replaced; without it, a third faster. A helper that allocated an array
 would not compile under the flag.
 
+Compile time: numba compiles every kernel on its first call, once per argument types, and
+caches it (:mod:`billiards.physics.warmup` says so before it happens). Three habits cut that
+first compilation from 30-34 s to 14-15 s on a two-core machine (measured as warmup.py says)
+and change no result (the kernels compute the same operations in the same order):
+
+* numba compiles a kernel again for each *constant* it is passed (typed ``Literal[int](-1)``,
+  ``Literal[bool](False)``), so a constant argument of a kernel that elsewhere takes runtime
+  values is passed as ``np.int64(...)`` (typed like them), and each kernel compiles once
+  (``tests/physics/test_first_use.py``); save the event loop and :func:`_halt`, which the batch
+  kernels call with the constant ``record=False`` on purpose: that copy has no log code (2-3 %
+  faster than with a runtime flag);
+* no array is assigned to a slice of another (``a[n] = b``): for that numba compiles a
+  shape-mismatch error message, string formatting included, for each pair of dimensions
+  (several seconds); the loops copy element by element;
+* the per-shot wrappers of the batch kernels (:func:`run_action`, :func:`_store`) are inlined
+  (``inline="always"``), not compiled and linked as kernels of their own.
+
 Detection differs from pooltool in one deliberate way: instead of a general quartic solver we
 isolate the earliest root inside the *validity horizon* of the two trajectories (the earliest
 transition or cushion time of either ball). Any root beyond that horizon would be invalidated
@@ -718,13 +735,13 @@ def resolve_cushion(st, lab, i, w, p):
     moved = False
     if abs(shift) <= 5.0 * md:
         x, y = st[i, X] - shift * st[i, VX] / vn, st[i, Y] - shift * st[i, VY] / vn
-        moved = _clear(st, i, x, y, p, -1)
+        moved = _clear(st, i, x, y, p, np.int64(-1))
     for scale in (1.0, 0.5, 0.25, 0.125):  # along the normal; blocked: part of the spacer
         if not moved:
             x, y = st[i, X] - scale * need * nx, st[i, Y] - scale * need * ny
-            moved = _clear(st, i, x, y, p, -1)
+            moved = _clear(st, i, x, y, p, np.int64(-1))
     if not moved:  # wedged: slide along what blocks the push, if that still leaves the rail
-        dx, dy = _free_move(st, i, -need * nx, -need * ny, p, -1)
+        dx, dy = _free_move(st, i, -need * nx, -need * ny, p, np.int64(-1))
         x, y = st[i, X] + dx, st[i, Y] + dy
         moved = dx * nx + dy * ny < 0.0
     if moved:
@@ -817,8 +834,8 @@ def _carom_approach(st, poly, lab, out_int, out_float, dt):
     it has not touched (the exact minimum, where the swept boxes can beat the best so far)."""
     for r in range(2):
         if out_int[O_HIT2 + r] == 0 and (lab[WHITE] > SPINNING or lab[RED1 + r] > SPINNING):
-            if _box_gap(st, poly, WHITE, RED1 + r, dt) < out_float[OF_CLOSE2 + r]:
-                out_float[OF_CLOSE2 + r] = min(out_float[OF_CLOSE2 + r], min_separation(st, poly, lab, WHITE, RED1 + r, dt))
+            if _box_gap(st, poly, np.int64(WHITE), RED1 + r, dt) < out_float[OF_CLOSE2 + r]:
+                out_float[OF_CLOSE2 + r] = min(out_float[OF_CLOSE2 + r], min_separation(st, poly, lab, np.int64(WHITE), RED1 + r, dt))
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -858,25 +875,34 @@ def _new_log(cap):
 
 
 @njit(cache=True, error_model="numpy")
-def _grow(arr, n):
-    out = np.empty((2 * arr.shape[0],) + arr.shape[1:], dtype=arr.dtype)
-    out[:n] = arr[:n]
-    return out
+def _grow(log, n):
+    """The log with twice its room and its n entries (copied element by element)."""
+    times, info, states = log
+    out_times, out_info, out_states = _new_log(2 * times.shape[0])
+    for e in range(n):
+        out_times[e] = times[e]
+        for c in range(N_INFO):
+            out_info[e, c] = info[e, c]
+        for k in range(N_BALLS):
+            for c in range(N_STATE + 1):
+                out_states[e, k, c] = states[e, k, c]
+    return out_times, out_info, out_states
 
 
 @njit(cache=True, error_model="numpy")
 def _record(log, n, t, kind, who, other, st, lab):
     """Append one event and every ball's state after it to the log (n entries so far), growing
     it if full; returns the log and its new length."""
+    if n >= log[0].shape[0]:
+        log = _grow(log, n)
     times, info, states = log
-    if n >= times.shape[0]:
-        times, info, states = _grow(times, n), _grow(info, n), _grow(states, n)
     times[n] = t
     info[n, INFO_KIND], info[n, INFO_BALL], info[n, INFO_OTHER] = kind, who, other
     for k in range(N_BALLS):
-        states[n, k, :N_STATE] = st[k]
+        for c in range(N_STATE):
+            states[n, k, c] = st[k, c]
         states[n, k, LABEL] = lab[k]
-    return (times, info, states), n + 1
+    return log, n + 1
 
 
 # ----------------------------------------------------------------------------- event loop
@@ -887,10 +913,10 @@ def _halt(st, lab, out_int, flag, record, log, n, t):
     """Stop the shot: every ball rests where it is, ``out_int[flag]`` says why (the shot-time
     limit or the event cap), and the log records the stop. Returns the log and its length."""
     for k in range(N_BALLS):
-        resolve_transition(st, lab, k, STATIONARY)
+        resolve_transition(st, lab, k, np.int64(STATIONARY))
     out_int[flag] = 1
     if record:
-        return _record(log, n, t, EV_STOP, -1, -1, st, lab)
+        return _record(log, n, t, np.int64(EV_STOP), np.int64(-1), np.int64(-1), st, lab)
     return log, n
 
 
@@ -916,11 +942,11 @@ def run_shot(positions, V0, phi, a, b, p, record):
     out_float = np.zeros(N_OUT_FLOAT)
     _carom_begin(st, out_int, out_float)
     log = _new_log(64 if record else 1)
-    n_rec = 0
+    n_rec = np.int64(0)
 
     strike(st, lab, V0, phi, a, b, p)
     if record:
-        log, n_rec = _record(log, n_rec, 0.0, EV_STRIKE, WHITE, -1, st, lab)
+        log, n_rec = _record(log, n_rec, 0.0, np.int64(EV_STRIKE), np.int64(WHITE), np.int64(-1), st, lab)
 
     t = 0.0
     n_ev = 0
@@ -943,7 +969,7 @@ def run_shot(positions, V0, phi, a, b, p, record):
         _evolve_all(st, lab, dt, p)
         t = t_next
         if timeout:
-            log, n_rec = _halt(st, lab, out_int, O_TIMEOUT, record, log, n_rec, t)
+            log, n_rec = _halt(st, lab, out_int, np.int64(O_TIMEOUT), record, log, n_rec, t)
             break
         _resolve(st, lab, kind, who, other, p, dirty)
         _carom_event(kind, who, other, out_int, out_float, p[P_R])
@@ -951,7 +977,7 @@ def run_shot(positions, V0, phi, a, b, p, record):
         if record:
             log, n_rec = _record(log, n_rec, t, kind, who, other, st, lab)
         if n_ev >= max_events:  # safety net
-            log, n_rec = _halt(st, lab, out_int, O_TRUNC, record, log, n_rec, t)
+            log, n_rec = _halt(st, lab, out_int, np.int64(O_TRUNC), record, log, n_rec, t)
             break
     out_int[O_NEVENTS] = n_ev
     _carom_end(out_float, p[P_R])
@@ -960,14 +986,17 @@ def run_shot(positions, V0, phi, a, b, p, record):
     return st, out_int, out_float, times[:n_rec], info[:n_rec], states[:n_rec]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _store(n, positions, actions, p, out_pos, out_int, out_float):
+    # record: the constant False, so the batch kernels' event loop is compiled without the log
     st, oi, of, _, _, _ = run_action(positions[n], actions[n], p, False)
     for k in range(N_BALLS):
         out_pos[n, k, 0] = st[k, X]
         out_pos[n, k, 1] = st[k, Y]
-    out_int[n] = oi
-    out_float[n] = of
+    for k in range(N_OUT_INT):
+        out_int[n, k] = oi[k]
+    for k in range(N_OUT_FLOAT):
+        out_float[n, k] = of[k]
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
@@ -1035,7 +1064,7 @@ def actions_to_cue(actions, p):
     return out
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def run_action(positions, action, p, record):
     """run_shot for one validated (theta, p, a, b) action."""
     V0, phi, a, b = action_to_cue(action[0], action[1], action[2], action[3], p)
@@ -1047,10 +1076,10 @@ def checked_shot(positions, action, p, tol):
     """Validate one (4, 2) rack and (4,) action, then simulate it with the event log.
 
     One compiled call for the whole single-shot path. Returns (ok, run_action's result); on
-    invalid input ok is False and nothing is simulated (the caller builds the message).
+    invalid input ok is False and a shot without a cue speed stands in (the caller builds the
+    message). ``ok`` is also the log flag: a runtime value, so this compiles one event loop.
     """
-    bad = check_positions(positions.reshape(1, N_BALLS, 2), p, tol)[0] != ERR_OK
-    bad = bad or check_actions(action.reshape(1, 4))[0] != ERR_OK
-    if bad:
-        return False, run_shot(positions, 0.0, 0.0, 0.0, 0.0, p, False)
-    return True, run_action(positions, action, p, True)
+    ok = check_positions(positions.reshape(1, N_BALLS, 2), p, tol)[0] == ERR_OK
+    ok = ok and check_actions(action.reshape(1, 4))[0] == ERR_OK
+    V0, phi, a, b = action_to_cue(action[0], action[1], action[2], action[3], p) if ok else (0.0, 0.0, 0.0, 0.0)
+    return ok, run_shot(positions, V0, phi, a, b, p, ok)
