@@ -69,7 +69,7 @@ def build_board(root: Path, out: Path, report=None) -> tuple[dict, str]:
 
 @pytest.mark.parametrize("spec, name", [
     ("agents/mine.py:act", "mine:act"),
-    ("/home/someone/agents/mine.py:policy", "mine:policy"),
+    ("/srv/someone/agents/mine.py:policy", "mine:policy"),
     ("mine.py:act", "mine:act"),
     ("results/policies/base/seed0.pt", "seed0"),
     ("/data/runs/outputs/2026-11-26/10-00-00_sac/", "10-00-00_sac"),
@@ -86,7 +86,7 @@ def test_a_spec_gives_a_name_that_is_never_a_path(spec, name):
     assert not looks_like_path(spec_name(spec))
 
 
-@pytest.mark.parametrize("name", ["/home/me/agents/mine.py:act", "agents/mine.py:act", "mine.py:act", "runs/base/seed0.pt",
+@pytest.mark.parametrize("name", ["/srv/me/agents/mine.py:act", "agents/mine.py:act", "mine.py:act", "runs/base/seed0.pt",
                                   "seed0.pt", "~/agents/mine", "./mine", "..\\mine", "C:\\agents\\mine.py:act", "dir/my agent"])
 def test_a_name_that_names_a_file_looks_like_a_path(name):
     from billiards.bench.leaderboard import looks_like_path
@@ -134,8 +134,8 @@ def test_a_path_given_as_the_group_is_refused_too(board_root, tmp_path):
     from billiards.bench.leaderboard import build
 
     evaluate("random", P3, out=board_root / "submissions" / P3 / "grouped", progress=False, name="mine",
-             group="/home/me/runs/sac")
-    with pytest.raises(ValueError, match=r"its agent's group '/home/me/runs/sac' is a path.*again with group=<the row's name>"):
+             group="/srv/me/runs/sac")
+    with pytest.raises(ValueError, match=r"its agent's group '/srv/me/runs/sac' is a path.*again with group=<the row's name>"):
         build(board_root, tmp_path / "out", figure=False)
 
 
