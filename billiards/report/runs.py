@@ -144,7 +144,7 @@ def _json_object(path: Path) -> dict:
     try:
         data = files.read_run_json(path)  # the one reader of run-folder files (no link, no FIFO, bounded)
     except files.RunFileError as err:
-        raise ValueError(str(err)) from None
+        raise ValueError(f"{path.name} is not valid JSON, or not a file the report reads ({err})") from None
     if not isinstance(data, dict):
         raise ValueError(f"{path.name} is not a JSON object")
     return data

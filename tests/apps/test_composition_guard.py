@@ -222,7 +222,9 @@ def test_each_app_checks_what_its_options_compose_to(app, tmp_path):
     name passes the command-line check, and the composed config is refused before its callback
     is built; the untouched option still runs (--cfg)."""
     shutil.copytree(CONF, tmp_path / "conf")
-    shutil.copy(REPO / f"{app}.py", tmp_path / f"{app}.py")
+    # the app as shipped, composing this copy of conf/ (billiards.files.CONF_DIR, read when the app is imported)
+    (tmp_path / f"{app}.py").write_text(f"import pathlib\nimport billiards.files\n\nbilliards.files.CONF_DIR = "
+                                        f"pathlib.Path({str(tmp_path / 'conf')!r})\nfrom billiards.apps.{app} import main\n\nmain()\n")
     marker = tmp_path / "marker"
     (tmp_path / "conf" / "physics" / "international.yaml").write_text(evil_yaml(marker))
     work = tmp_path / "work"
