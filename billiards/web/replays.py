@@ -27,7 +27,6 @@ the commanded and the played shot, the outcome and, under variable noise, the sh
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +36,16 @@ MAX_P1_SHOTS = 20_000  # a P1 run is played again whole: larger ones are refused
 
 class ReplayRefused(ValueError):
     """A run that cannot be played again, with the sentence that says why."""
+
+
+def _run_json(path: Path):
+    """A run folder's JSON file through the one reader (no link, no FIFO, bounded); ReplayRefused naming it otherwise."""
+    from billiards.files import RunFileError, read_run_json
+
+    try:
+        return read_run_json(path)
+    except RunFileError as err:
+        raise ReplayRefused(str(err)) from None
 
 
 # ----------------------------------------------------------------------------- one shot
@@ -99,7 +108,7 @@ def read_scorecard(d: Path) -> tuple[dict, object, str | None]:
     played again or None)."""
     from billiards.bench.tracks import get_track
 
-    ev = json.loads((d / "evaluation.json").read_text())
+    ev = _run_json(d / "evaluation.json")
     rec = ev.get("track") or {}
     try:
         track = get_track(rec.get("name"))
@@ -286,7 +295,7 @@ def replay_p1(d: Path, max_shots: int = MAX_P1_SHOTS) -> dict:
     if n * shots > max_shots:
         raise ReplayRefused(f"its {n} innings of {shots} shots ({n * shots:,} shots, all stepped together with one search "
                             f"generator) would have to be played again whole; the viewer plays at most {max_shots:,}")
-    results = json.loads((d / "results.json").read_text())
+    results = _run_json(d / "results.json")
     params = params_from_config(cfg.physics)
     noise = noise_from_config(cfg.noise)
     actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
@@ -352,7 +361,7 @@ def replay_training(d: Path, policy: Path) -> dict:
 
     from billiards import compat
 
-    ev = compat.upgrade_eval_record(json.loads((d / "eval.json").read_text()))
+    ev = compat.upgrade_eval_record(_run_json(d / "eval.json"))
     try:
         module, cfg = load_policy(policy)
     except (CheckpointError, OSError, ValueError) as err:

@@ -35,7 +35,6 @@ checked).
 
 from __future__ import annotations
 
-import json
 import os
 import threading
 from collections import OrderedDict
@@ -45,7 +44,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from billiards import compat
-from billiards.files import CHAINS, CHAINS_FILE, EVAL_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT, LedgerError
+from billiards.files import (CHAINS, CHAINS_FILE, EVAL_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT, LedgerError,
+                             read_run_bytes, read_run_json, read_run_text)
 
 from . import replays
 from .replays import ReplayRefused, match_shot
@@ -150,8 +150,7 @@ class RunStore:
 
     def _p3_entry(self, d: Path) -> dict:
         physics, noise = self._p3_settings(d)
-        with open(d / CHAINS_FILE, "rb") as f:
-            chains = sum(1 for line in f if line.strip())
+        chains = _count_lines(d / CHAINS_FILE)
         return {"path": self.display(d), "kind": "p3", "label": f"P3 chains ({chains}): {self.display(d)}",
                 "units": chains, "physics": physics, "noise": noise, "replayable": True}
 
@@ -196,8 +195,7 @@ class RunStore:
     def _league_entry(self, d: Path) -> dict:
         league = _read_json(d / LEAGUE_FILE) or {}
         web = league.get("app") == WEB_APP
-        with open(d / MATCHES_FILE, "rb") as f:
-            matches = sum(1 for line in f if line.strip())
+        matches = _count_lines(d / MATCHES_FILE)
         kind = "web" if web else "league"
         label = ("viewer match" if web else f"league ({matches} matches)") + f": {self.display(d)}"
         return {"path": self.display(d), "kind": kind, "label": label, "units": matches,
@@ -219,8 +217,7 @@ class RunStore:
         track, agent = ev["track"], ev["agent"]
         spec = agent.get("spec")
         refusal = replays.scorecard_refusal(spec, self.root)
-        with open(d / UNITS_FILE, "rb") as f:
-            units = sum(1 for line in f if line.strip())
+        units = _count_lines(d / UNITS_FILE)
         return {"path": self.display(d), "kind": "scorecard", "label": f"scorecard {track.get('name')}: {agent.get('name')} ({spec})",
                 "units": units, "physics": track.get("physics"), "noise": track.get("noise"), "replayable": refusal is None,
                 "why_not": refusal, "track": track.get("name"), "agent": spec}
@@ -255,8 +252,8 @@ class RunStore:
         if key in self._settings:
             return self._settings[key]
         try:
-            cfg = yaml.load(path.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)) or {}
-        except (OSError, yaml.YAMLError):
+            cfg = yaml.load(read_run_text(path, "config"), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)) or {}
+        except (OSError, ValueError, yaml.YAMLError):  # refused by the one reader (a link, a FIFO, too large), unreadable
             cfg = {}
         self._settings[key] = out = self._settings_of(compat.upgrade_config_nodes(cfg) if isinstance(cfg, dict) and cfg else {})
         return out
@@ -507,10 +504,18 @@ _NO_WEIGHTS = ("no weights of this run were shipped (no policy under results/pol
 
 
 def _read_json(path: Path):
-    try:
-        return json.loads(path.read_text())
+    try:  # the one reader of run-folder files: no link, no FIFO, bounded size and depth
+        return read_run_json(path)
     except (OSError, ValueError):
         return None
+
+
+def _count_lines(path: Path) -> int:
+    """The records of a ledger (its non-empty lines), read through the one reader; 0 for a file it refuses."""
+    try:
+        return sum(1 for line in read_run_bytes(path, "ledger").splitlines() if line.strip())
+    except (OSError, ValueError):
+        return 0
 
 
 def _league_noise(league: dict):
