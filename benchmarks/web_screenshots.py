@@ -99,7 +99,9 @@ def main(argv=None) -> int:
         pg.select_option("#lab-noise", "fastfiz_x5")
         pg.select_option("#agent-select", "search:default")
         pg.evaluate("window.billiards.lab.shots = 0")
-        pg.click("#btn-ask")
+        pg.click("#btn-ask")  # the agent's shot stands beside the player's; playing it is a second click
+        wait(pg, "window.billiards.lab.agent !== null && window.billiards.busy === 0")
+        pg.click("#btn-agent-play")
         wait(pg, "window.billiards.lab.shots > 0")
         time.sleep(0.3)
         pg.screenshot(path=str(args.out / "viewer_lab.png"))
@@ -119,6 +121,7 @@ def main(argv=None) -> int:
             pg.evaluate("window.billiards.lab.agent = null")
             pg.click("#btn-hint")
             wait(pg, "window.billiards.lab.agent !== null && window.billiards.busy === 0")
+            pg.click("#btn-hint-take")  # the hint drawn beside the player's aim, taken
             pg.click("#btn-shoot")
             time.sleep(0.2)
             while pg.evaluate("window.billiards.match.pending"):

@@ -792,7 +792,7 @@ MATCHES = LedgerKind(MATCHES_FILE, "league match record", lambda r: (r["a"], r["
 # its module may also register it itself at import time, with its own summary check.
 
 _KINDS: dict[str, LedgerKind] = {}
-LEDGER_PROVIDERS = ["billiards.bench.run:UNITS"]  # kinds defined above this layer, imported when listed
+LEDGER_PROVIDERS = ["billiards.bench.run:UNITS", "billiards.web.match:SHOTS"]  # kinds defined above this layer, imported when listed
 _UNAVAILABLE: dict[str, str] = {}  # provider -> why it could not be imported
 
 

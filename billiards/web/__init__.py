@@ -7,7 +7,8 @@
 * :mod:`.runs` -- the recorded runs it replays, and the folders it may read;
 * :mod:`.replays` -- runs whose records hold scores, not shots, played again shot by shot
   (benchmark scorecards' units, search runs' P1 innings, training runs' evaluations);
-* :mod:`.match` -- matches between the person and a league player, saved as league ledgers;
+* :mod:`.match` -- matches between the person and a league player, kept on disk from their start
+  (a sealed ledger of shots, resumed after a reload or a restart) and saved as league ledgers at their end;
 * ``static/`` -- the page (HTML, one script, one stylesheet; nothing from elsewhere).
 """
 

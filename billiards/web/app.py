@@ -6,7 +6,8 @@ agent or a league replay does not hold up the other requests. Bad input is a 4xx
 ``error`` says what is wrong (:data:`STATUS`): Bad Request for a body that is not JSON,
 Unprocessable Content for a value out of its range (balls overlapping or off the table, an
 action outside the box, an unknown preset or agent), Forbidden for a path outside the folders
-the viewer reads, Not Found for what does not exist, Conflict for a shot in a match that is over.
+the viewer reads, Not Found for what does not exist, Conflict for a shot in a match that is over
+or for a turn that is not the match's current one (a repeated or stale request).
 Every error, FastAPI's and Starlette's own included (an unknown route, a method a route does not
 take), has that one shape, ``{"error": "<one sentence>"}``; a bug is a 500 with a generic sentence.
 :class:`.guard.Guard` answers only the viewer's own host names and refuses writes from other
@@ -15,7 +16,10 @@ origins (docs/reliability.md).
 
 from __future__ import annotations
 
+import atexit
+import sys
 import threading
+import time
 from collections.abc import Iterable
 from http import HTTPStatus
 from pathlib import Path
@@ -26,20 +30,20 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
 from starlette.exceptions import HTTPException
 
-from billiards.files import OUTPUTS, ROOT, LedgerError
+from billiards.files import OUTPUTS, ROOT, LedgerError, RunLockedError, display_path
 
 from . import agents as web_agents
 from . import sim
 from .guard import Guard, error, host_names
-from .match import HUMAN, Matches, MatchError, MatchOver
+from .match import HUMAN, Matches, MatchError, MatchMoved
 from .models import AgentRequest, ConsideredRequest, MatchRequest, MatchShotRequest, ShotRequest
 from .runs import PathRefused, ReplayRefused, RunNotFound, RunStore
 
 # the answers' statuses, by name (HTTP's numbers)
 BAD, REFUSED, MISSING, CONFLICT = HTTPStatus.BAD_REQUEST, HTTPStatus.FORBIDDEN, HTTPStatus.NOT_FOUND, HTTPStatus.CONFLICT
 INVALID, FAILED, ELSEWHERE = HTTPStatus.UNPROCESSABLE_ENTITY, HTTPStatus.INTERNAL_SERVER_ERROR, HTTPStatus.MISDIRECTED_REQUEST
-STATUS = {"bad_json": BAD, "invalid": INVALID, "outside": REFUSED, "not_found": MISSING, "match_over": CONFLICT, "bug": FAILED,
-          "other_host": ELSEWHERE, "other_origin": REFUSED}  # the last two: Guard's
+STATUS = {"bad_json": BAD, "invalid": INVALID, "outside": REFUSED, "not_found": MISSING, "match_over": CONFLICT, "stale_turn": CONFLICT,
+          "bug": FAILED, "other_host": ELSEWHERE, "other_origin": REFUSED}  # the last two: Guard's
 STATIC = Path(__file__).resolve().parent / "static"
 STATIC_FILES = {"app.js": "text/javascript", "style.css": "text/css"}
 DEFAULT_OUT = OUTPUTS / "web"
@@ -85,6 +89,58 @@ def _quietly(fn) -> None:
         pass
 
 
+_BACKGROUND: list[threading.Thread] = []  # the apps' threads that work on the side, joined at exit
+
+
+def _join_background(timeout_s: float = 120.0) -> None:
+    """Let the side threads end before the interpreter does: one killed inside torch's or numba's
+    native code as the process exits aborts it (``terminate called without an active exception``)."""
+    deadline = time.monotonic() + timeout_s
+    for t in list(_BACKGROUND):
+        t.join(max(0.0, deadline - time.monotonic()))
+
+
+atexit.register(_join_background)
+
+
+def _on_the_side(fn, name: str) -> None:
+    _BACKGROUND[:] = [t for t in _BACKGROUND if t.is_alive()]
+    t = threading.Thread(target=_quietly, args=(fn,), daemon=True, name=name)
+    _BACKGROUND.append(t)
+    t.start()
+
+
+class Simulator:
+    """Whether numba's kernels of the simulator were cached when the app started, and the warm-up
+    that compiles (or loads) them in a thread of its own, so that the page can say it prepares
+    the simulator (first use on a machine: :data:`billiards.physics.warmup.WARM_UP_SECONDS`,
+    about 15 s on two cores) instead of sitting silent."""
+
+    def __init__(self):
+        from billiards.physics import warmup
+
+        self.expected_s = int(getattr(warmup, "WARM_UP_SECONDS", 60))
+        self.cached = warmup.kernels_cached()
+        self.ready = self.cached  # cached: numba loads each kernel on its first call, in well under a second
+        self.started = time.monotonic()
+        self.seconds: float | None = None
+        self.error: str | None = None
+
+    def warm(self) -> None:
+        from billiards.physics.warmup import warm_up
+
+        try:
+            self.seconds = warm_up(log=lambda line: print(line, file=sys.stderr, flush=True))  # the server's console says so too
+        except Exception as err:  # noqa: BLE001 - the requests that need the simulator say what is wrong
+            self.error = f"{type(err).__name__}: {err}"
+        self.ready = True
+
+    def state(self) -> dict:
+        elapsed = 0.0 if self.cached else self.seconds if self.seconds is not None else time.monotonic() - self.started
+        return {"cached": self.cached, "ready": self.ready, "expected_s": 0 if self.cached else self.expected_s,
+                "elapsed_s": round(elapsed, 1), "error": self.error}
+
+
 def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path = ROOT, hosts: Iterable[str] = ()) -> FastAPI:
     """The viewer's app: runs read from ``root/results``, ``out_dir`` (where played matches are
     saved; None: not saved) and ``run_dirs``. It answers the loopback names (localhost,
@@ -97,10 +153,13 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
     out = Path(out_dir) if out_dir is not None else None
     store = RunStore(root, run_dirs, out)
     matches = Matches(out)
-    app.state.store, app.state.matches = store, matches
+    simulator = Simulator()
+    app.state.store, app.state.matches, app.state.simulator = store, matches, simulator
+    if not simulator.ready:  # first use on this machine: the simulator's kernels compiled on the side (about 15 s)
+        _on_the_side(simulator.warm, "viewer-warm-up")
     # which training runs have shipped weights: read from the policy files (torch loads them) on the side, so the
     # page's first GET /api/runs does not wait for it
-    threading.Thread(target=_quietly, args=(store.policy_sources,), daemon=True, name="viewer-policies").start()
+    _on_the_side(store.policy_sources, "viewer-policies")
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError):
@@ -226,41 +285,71 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
         except (LedgerError, ValueError) as err:
             return _error(INVALID, str(err))
 
+    @app.get("/api/simulator")
+    def simulator_state():
+        """Whether the simulator's kernels were cached at start (else they compile: about 15 s) and whether they are ready."""
+        return JSONResponse(simulator.state())
+
+    def _no_match(match_id: str) -> JSONResponse:
+        where = display_path(matches.out_dir / "matches") if matches.out_dir is not None else None
+        return _error(MISSING, f"no match {match_id!r}" + (f" (the matches played here are saved under {where})" if where else
+                                                           " (this viewer keeps its matches in memory only)"))
+
+    def _held(match_id: str):
+        """The match, or the error that answers for it."""
+        try:
+            return matches.get(match_id)
+        except KeyError:
+            return _no_match(match_id)
+        except RunLockedError as err:
+            return _error(CONFLICT, f"match {match_id} is being written by another process: {err}")
+        except LedgerError as err:
+            return _error(INVALID, f"match {match_id} cannot be resumed: {err}")
+
     @app.post("/api/match")
     def new_match(body: MatchRequest):
-        """Start a match against a league player; the player's opening turns if it breaks."""
+        """Start a match against a league player; the player's opening turns if it breaks. A
+        repeated ``key`` answers the match it started (no second match)."""
         from billiards.bench.agents import AgentError
 
         name, players = body.opponent.removeprefix("league:"), web_agents.league_names(root)
         if name not in players:
             return _error(INVALID, f"opponent: no league player {body.opponent!r}; players: {', '.join(players)}")
         try:
-            m = matches.new(opponent=name, noise=body.noise, physics=body.physics, target=body.target, seed=body.seed,
-                            first=body.first, max_innings=body.max_innings)
-            shots = m.start()
+            m, shots, repeated = matches.new(key=body.key, opponent=name, noise=body.noise, physics=body.physics, target=body.target,
+                                             seed=body.seed, first=body.first, max_innings=body.max_innings)
         except (AgentError, ValueError) as err:
             return _error(INVALID, f"cannot start the match: {err}")
-        return JSONResponse({"state": m.state(), "shots": shots, "human": HUMAN})
+        return JSONResponse({"state": m.state(), "shots": shots, "human": HUMAN, "repeated": repeated})
+
+    @app.get("/api/matches")
+    def list_matches():
+        """The matches saved in the out folder, the most recent first (to resume one)."""
+        return JSONResponse({"matches": matches.listed()})
 
     @app.get("/api/match/{match_id}")
     def get_match(match_id: str):
-        try:
-            return JSONResponse({"state": matches.get(match_id).state()})
-        except KeyError:
-            return _error(MISSING, f"no match {match_id!r} (matches live as long as the server)")
+        """A match's state (read back from its folder if the server does not hold it) and its last exchange of shots."""
+        m = _held(match_id)
+        if isinstance(m, JSONResponse):
+            return m
+        with m.lock:
+            return JSONResponse({"state": m.state(), "shots": m.recent(), "human": HUMAN})
 
     @app.post("/api/match/{match_id}/shot")
     def match_shot(match_id: str, body: MatchShotRequest):
-        """The person's shot (the server applies the noise), then the league player's turns."""
+        """The person's shot for the turn it names (the server applies the noise), then the league player's turns."""
+        m = _held(match_id)
+        if isinstance(m, JSONResponse):
+            return m
         try:
-            m = matches.get(match_id)
-        except KeyError:
-            return _error(MISSING, f"no match {match_id!r} (matches live as long as the server)")
-        try:
-            shots = m.human_shot(body.action)
-        except MatchOver as err:
+            shots = m.human_shot(body.action, body.turn)
+        except MatchMoved as err:
+            matches.forget(match_id)  # read again from its folder on the next request
             return _error(CONFLICT, str(err))
-        except MatchError as err:
+        except RunLockedError as err:
+            return _error(CONFLICT, f"match {match_id} is being written by another process: {err}")
+        except MatchError as err:  # over, or a turn that is not the current one
             return _error(CONFLICT, str(err))
         except ValueError as err:
             return _error(INVALID, f"action: {err}")

@@ -31,12 +31,14 @@ def launch(playwright):
 
 
 @contextlib.contextmanager
-def serving(app, host: str = "127.0.0.1"):
-    """``app`` served by uvicorn in a daemon thread on a free port; yields its URL."""
+def serving(app, host: str = "127.0.0.1", port: int = 0):
+    """``app`` served by uvicorn in a daemon thread on ``port`` (0: a free one); yields its URL.
+    The same port may be served again once the block ends (a server restart under an open page)."""
     import uvicorn
 
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM, socket.IPPROTO_TCP)  # TCP: asyncio sets TCP_NODELAY
-    sock.bind((host, 0))
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind((host, port))
     sock.listen(128)
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)

@@ -93,10 +93,15 @@ class MatchRequest(_Table):
     seed: Seed = 0
     first: Literal["human", "agent"] = "human"
     max_innings: Annotated[int, Field(strict=True, ge=1, le=1000)] = 200
+    key: Optional[Annotated[str, Field(pattern=r"^[A-Za-z0-9_-]{8,64}$")]] = Field(
+        None, description="the page's key for this start: the same key again answers the match it started (a repeated click)")
 
 
 class MatchShotRequest(_Body):
+    """The person's shot and the turn it answers (the state's ``turn``: the shots played so far)."""
+
     action: Action
+    turn: Annotated[int, Field(strict=True, ge=0, le=10**6)]
 
 
 __all__ = ["AgentRequest", "ConsideredRequest", "MatchRequest", "MatchShotRequest", "ShotRequest"]

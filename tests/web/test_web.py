@@ -29,7 +29,7 @@ pytest.importorskip("httpx")  # FastAPI's TestClient
 from fastapi.testclient import TestClient  # noqa: E402
 
 from billiards.envs.sagu import shooter_view  # noqa: E402
-from billiards.files import ROOT, verify  # noqa: E402
+from billiards.files import ROOT, display_path, verify  # noqa: E402
 from billiards.physics import canonical_rack, get_params, simulate_shot  # noqa: E402
 from billiards.physics.noise import get_noise  # noqa: E402
 from billiards.web import create_app  # noqa: E402
@@ -126,7 +126,10 @@ BAD = [  # (id, method, url, json body or raw bytes, status, words the message h
     ("agent-table", "POST", "/api/agent", {"positions": [[0.0, 0.0], *RACK[1:]], "agent": "random"}, 422, "off the table"),
     ("opponent", "POST", "/api/match", {"opponent": "nobody"}, 422, "no league player"),
     ("target", "POST", "/api/match", {"opponent": "random", "target": 0}, 422, "target"),
-    ("no-match", "POST", "/api/match/abc/shot", {"action": [1.0, 0.5, 0.0, 0.0]}, 404, "no match"),
+    ("no-match", "POST", "/api/match/abc/shot", {"action": [1.0, 0.5, 0.0, 0.0], "turn": 0}, 404, "no match"),
+    ("no-turn", "POST", "/api/match/abc/shot", {"action": [1.0, 0.5, 0.0, 0.0]}, 422, "turn: Field required"),
+    ("turn-negative", "POST", "/api/match/abc/shot", {"action": [1.0, 0.5, 0.0, 0.0], "turn": -1}, 422, "turn"),
+    ("start-key", "POST", "/api/match", {"opponent": "random", "key": "../x"}, 422, "key"),
     ("dotdot", "GET", "/api/run?path=results/../pyproject.toml", None, 403, "'..'"),
     ("absolute", "GET", "/api/run?path=/etc/passwd", None, 403, "outside"),
     ("repo-file", "GET", "/api/run?path=pyproject.toml", None, 403, "outside"),
@@ -303,8 +306,8 @@ def test_a_shot_in_a_match_that_is_over_is_409_with_a_sentence(client):
     assert start.status_code == 200, start.text
     state = start.json()["state"]
     client.app.state.matches.get(state["id"]).over = True  # ended (the full match is test_a_match_against_random_...)
-    r = client.post(f"/api/match/{state['id']}/shot", json={"action": [1.0, 0.5, 0.0, 0.0]})
-    scores = ", ".join(f"{who} {n}" for who, n in state["scores"].items())
+    r = client.post(f"/api/match/{state['id']}/shot", json={"action": [1.0, 0.5, 0.0, 0.0], "turn": 0})
+    scores = ", ".join(f"{who} {n:g}" for who, n in state["scores"].items())
     _only_error(r, 409, f"match {state['id']} is over ({scores}); start another")
 
 
@@ -312,7 +315,7 @@ def test_a_bug_is_a_500_with_a_generic_sentence_logged_with_its_traceback(client
     from billiards.web.guard import BUG
 
     def broken():
-        raise RuntimeError("secret detail /home/someone/.ssh")
+        raise RuntimeError("secret detail /srv/someone/.ssh")
 
     monkeypatch.setattr(client.app.state.store, "list_runs", broken)
     with caplog.at_level("ERROR", logger="billiards.web"):
@@ -574,7 +577,7 @@ def test_a_match_against_random_to_one_point_plays_to_its_end_and_is_saved(clien
         if state["over"]:
             break
         hint = client.post("/api/agent", json={"positions": state["positions"], "agent": "search:h2"}).json()
-        r = client.post(f"/api/match/{state['id']}/shot", json={"action": hint["action"]})
+        r = client.post(f"/api/match/{state['id']}/shot", json={"action": hint["action"], "turn": state["turn"]})
         assert r.status_code == 200, r.text
         shots, state = r.json()["shots"], r.json()["state"]
         assert shots[0]["who"] == "human" and all(s["paths"]["xy"] for s in shots)
@@ -582,7 +585,7 @@ def test_a_match_against_random_to_one_point_plays_to_its_end_and_is_saved(clien
             res = simulate_shot(shooter_view(np.array(s["positions"]), s["shooter"]), np.array(s["played"]))
             assert shooter_view(res.positions, s["shooter"]).tolist() == s["final"]
     assert state["over"] and max(state["scores"].values()) == 1
-    assert client.post(f"/api/match/{state['id']}/shot", json={"action": [1.0, 0.5, 0.0, 0.0]}).status_code == 409
+    assert client.post(f"/api/match/{state['id']}/shot", json={"action": [1.0, 0.5, 0.0, 0.0], "turn": state["turn"]}).status_code == 409
     saved = Path(state["saved"]) if Path(state["saved"]).is_absolute() else ROOT / state["saved"]
     assert saved.is_relative_to(out_dir)
     problems, _ = verify(saved)
@@ -591,6 +594,174 @@ def test_a_match_against_random_to_one_point_plays_to_its_end_and_is_saved(clien
     assert listed
     run = client.get("/api/run", params={"path": listed[0]["path"]}).json()
     assert run["kind"] == "web" and run["units"][0]["shots"][-1]["scores"] == [state["scores"]["human"], state["scores"]["random"]]
+
+
+def _ledger(folder: Path) -> list[dict]:
+    return [json.loads(line) for line in (folder / "shots.jsonl").read_text().splitlines() if line.strip()]
+
+
+def _folder(out_dir: Path, match_id: str) -> Path:
+    return out_dir / "matches" / match_id
+
+
+def _start(client, **settings) -> dict:
+    r = client.post("/api/match", json={"opponent": "random", "noise": "fastfiz_x5", "target": 5, "seed": 3, **settings})
+    assert r.status_code == 200, r.text
+    return r.json()["state"]
+
+
+def _shoot(client, state: dict, action, turn: int | None = None):
+    return client.post(f"/api/match/{state['id']}/shot", json={"action": action, "turn": state["turn"] if turn is None else turn})
+
+
+SHOTS = [[1.0, 0.55, 0.1, 0.0], [2.2, 0.7, -0.2, 0.3], [4.0, 0.45, 0.0, -0.4], [0.3, 0.9, 0.5, 0.5], [5.5, 0.6, 0.0, 0.0]]
+
+
+def test_a_shot_names_its_turn_and_a_stale_or_repeated_one_is_refused(client, out_dir):
+    state = _start(client)
+    assert state["turn"] == 0 and state["to_play"] == "human"
+    folder = _folder(out_dir, state["id"])
+    r = _shoot(client, state, SHOTS[0])
+    assert r.status_code == 200, r.text
+    after = r.json()["state"]
+    assert after["turn"] == len(r.json()["shots"]) and [s["turn"] for s in r.json()["shots"]] == list(range(after["turn"]))
+    lines = (folder / "shots.jsonl").read_bytes()
+    again = _shoot(client, state, SHOTS[0])  # the same request again: a second click, a retry
+    _only_error(again, 409, f"turn 0 of match {state['id']} was played already: the match is at turn {after['turn']}")
+    _only_error(_shoot(client, after, SHOTS[1], turn=after["turn"] + 1), 409, "has not come")
+    assert (folder / "shots.jsonl").read_bytes() == lines  # nothing played, nothing written
+    assert client.get(f"/api/match/{state['id']}").json()["state"] == after
+
+
+def test_identical_shot_requests_sent_at_once_play_once(client, out_dir):
+    state = _start(client, seed=4)
+    barrier, answers = threading.Barrier(4), []
+
+    def send():
+        barrier.wait()
+        answers.append(_shoot(client, state, SHOTS[1]))
+
+    threads = [threading.Thread(target=send) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(600)
+    assert sorted(a.status_code for a in answers) == [200, 409, 409, 409]
+    played = next(a for a in answers if a.status_code == 200).json()
+    records = _ledger(_folder(out_dir, state["id"]))
+    assert [r["who"] for r in records].count("human") == 1 and len(records) == played["state"]["turn"]
+    assert all("was played already" in a.json()["error"] for a in answers if a.status_code == 409)
+
+
+def test_a_start_repeated_with_its_key_starts_one_match(client, out_dir):
+    before = set(p.name for p in (out_dir / "matches").iterdir()) if (out_dir / "matches").is_dir() else set()
+    body = {"opponent": "random", "noise": "none", "target": 2, "seed": 8, "key": "page-start-0001"}
+    answers = [client.post("/api/match", json=body).json() for _ in range(3)]
+    assert len({a["state"]["id"] for a in answers}) == 1 and [a["repeated"] for a in answers] == [False, True, True]
+    assert set(p.name for p in (out_dir / "matches").iterdir()) - before == {answers[0]["state"]["id"]}
+    other = client.post("/api/match", json={**body, "key": "page-start-0002"}).json()
+    assert other["state"]["id"] != answers[0]["state"]["id"]
+
+
+def test_a_match_is_on_disk_from_its_start_and_a_restarted_server_plays_on_as_if_none_had_been(out_dir):
+    """Two matches of the same settings and shots: one played straight through, the other read
+    back by a new app over the same folder between its shots; they end on the same table with
+    the same scores (the noise's generator and the league player's seeds come from the ledger)."""
+    settings = {"opponent": "random", "noise": "fastfiz_x5", "target": 10, "seed": 21}
+    first = viewer(create_app(out_dir=out_dir))
+    straight, resumed = _start(first, **settings), _start(first, **settings)
+    for state in (straight, resumed):  # on disk before any shot: verify accepts the folder
+        folder = _folder(out_dir, state["id"])
+        assert sorted(p.name for p in folder.iterdir()) == ["match.json", "shots.jsonl"]
+        assert verify(folder) == ([], [f"{display_path(folder / 'shots.jsonl')}: 0 sealed records"])
+    for k, action in enumerate(SHOTS):
+        r = _shoot(first, straight, action)
+        assert r.status_code == 200, r.text
+        straight = r.json()["state"]
+    for k, action in enumerate(SHOTS):
+        client = viewer(create_app(out_dir=out_dir))  # a server restart before every shot
+        got = client.get(f"/api/match/{resumed['id']}")
+        assert got.status_code == 200, got.text
+        assert got.json()["state"] == resumed
+        r = _shoot(client, resumed, action)
+        assert r.status_code == 200, r.text
+        resumed = r.json()["state"]
+    same = ("positions", "scores", "turn", "innings", "to_play", "over")
+    assert {k: resumed[k] for k in same} == {k: straight[k] for k in same}
+    assert [r["final"] for r in _ledger(_folder(out_dir, resumed["id"]))] == [r["final"] for r in _ledger(_folder(out_dir, straight["id"]))]
+    folder = _folder(out_dir, resumed["id"])  # abandoned here, unfinished: saved and verifiable as it stands
+    problems, notes = verify(folder)
+    assert problems == [] and f"{len(_ledger(folder))} sealed records" in notes[0]
+    summary = json.loads((folder / "match.json").read_text())
+    assert summary["turn"] == resumed["turn"] and summary["over"] is False and summary["settings"]["seed"] == 21
+    listed = {m["id"]: m for m in viewer(create_app(out_dir=out_dir)).get("/api/matches").json()["matches"]}
+    assert listed[resumed["id"]]["turn"] == resumed["turn"] and listed[resumed["id"]]["over"] is False
+
+
+def test_python_m_billiards_files_verify_accepts_an_unfinished_match(client, out_dir):
+    from billiards import files
+
+    if "billiards.web.match:SHOTS" not in files.LEDGER_PROVIDERS:
+        pytest.skip("billiards.files.LEDGER_PROVIDERS does not name billiards.web.match:SHOTS: the verify command does not "
+                    "know the viewer's match ledger (shots.jsonl) yet")
+    state = _start(client, seed=30)
+    _shoot(client, state, SHOTS[0])
+    out = subprocess.run([sys.executable, "-m", "billiards.files", "verify", str(_folder(out_dir, state["id"]))], cwd=ROOT,
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0 and "ledger and summary agree" in out.stdout, out.stdout + out.stderr
+
+
+def test_a_damaged_ledger_is_refused_and_a_torn_line_is_cut(out_dir):
+    client = viewer(create_app(out_dir=out_dir))
+    state = _start(client, seed=40)
+    state = _shoot(client, state, SHOTS[2]).json()["state"]
+    folder = _folder(out_dir, state["id"])
+    ledger = folder / "shots.jsonl"
+    whole = ledger.read_bytes()
+    ledger.write_bytes(whole + b'{"turn": 99, "who"')  # a kill mid-append
+    restarted = viewer(create_app(out_dir=out_dir))
+    got = restarted.get(f"/api/match/{state['id']}")
+    assert got.status_code == 200 and got.json()["state"] == state and ledger.read_bytes() == whole
+    ledger.write_bytes(whole.replace(b'"scored": false', b'"scored": true', 1))  # an edited record
+    _only_error(viewer(create_app(out_dir=out_dir)).get(f"/api/match/{state['id']}"), 422,
+                f"match {state['id']} cannot be resumed: ")
+    problems, _ = verify(folder)
+    assert problems and "does not match its seal" in problems[0]
+
+
+def test_a_match_played_on_by_another_server_is_refused_here_and_read_again(out_dir):
+    one, two = viewer(create_app(out_dir=out_dir)), viewer(create_app(out_dir=out_dir))
+    state = _start(one, seed=50)
+    assert two.get(f"/api/match/{state['id']}").json()["state"] == state
+    played = _shoot(two, state, SHOTS[3]).json()["state"]
+    _only_error(_shoot(one, state, SHOTS[4]), 409, "was played on elsewhere")
+    assert one.get(f"/api/match/{state['id']}").json()["state"] == played  # read back from the folder
+    assert _shoot(one, played, SHOTS[4]).status_code == 200
+
+
+def test_the_page_is_told_whether_the_simulator_is_being_prepared(monkeypatch):
+    import billiards.physics.warmup as warmup
+
+    compiling, done = threading.Event(), threading.Event()
+
+    def slow_warm_up(log=print):
+        compiling.set()
+        done.wait(600)
+        return 42.0
+
+    monkeypatch.setattr(warmup, "kernels_cached", lambda: False)
+    monkeypatch.setattr(warmup, "warm_up", slow_warm_up)
+    client = viewer(create_app(out_dir=None))
+    assert compiling.wait(600)
+    r = client.get("/api/simulator").json()
+    assert r["cached"] is False and r["ready"] is False and r["expected_s"] == warmup.WARM_UP_SECONDS and r["error"] is None
+    done.set()
+    for _ in range(600):
+        if client.get("/api/simulator").json()["ready"]:
+            break
+        time.sleep(0.05)
+    assert client.get("/api/simulator").json() == {"cached": False, "ready": True, "expected_s": warmup.WARM_UP_SECONDS,
+                                                   "elapsed_s": 42.0, "error": None}
 
 
 # ----------------------------------------------------------------------------- the server process
@@ -674,3 +845,24 @@ def test_python_m_billiards_web_prints_its_url_and_serves(out_dir):
     finally:
         proc.terminate()
         proc.wait(30)
+
+
+def test_the_run_listing_reads_through_the_one_reader_and_never_blocks_on_a_fifo(tmp_path):
+    """A FIFO in place of a ledger or a summary in a run folder the viewer lists is refused unread
+    (billiards.files' one reader): the listing answers, the run counts no units."""
+    import os
+    import threading
+
+    from billiards.web.runs import RunStore
+
+    run = tmp_path / "results" / "search" / "p3run"
+    run.mkdir(parents=True)
+    os.mkfifo(run / "chains.jsonl")
+    (run / "config.yaml").write_text("seed: 0\n")
+    listing = {}
+    worker = threading.Thread(target=lambda: listing.update(runs=RunStore(root=tmp_path).list_runs()), daemon=True)
+    worker.start()
+    worker.join(timeout=20)
+    assert not worker.is_alive(), "a FIFO in a run folder blocked the viewer's listing"
+    (entry,) = [r for r in listing["runs"] if r["path"].endswith("p3run")]
+    assert entry["units"] == 0
