@@ -1,6 +1,7 @@
 """The installed package, used from outside the repository (.ci/run runs it with the python of a
 fresh environment holding only the wheel, in an empty folder): each agent kind on a tiny limit,
-the placement line, the other commands' help. Exits non-zero on the first thing that fails.
+the placement line, a search over a shipped ensemble, a Hydra multirun on the joblib launcher,
+the other commands' help. Exits non-zero on the first thing that fails.
 
     python .ci/smoke_installed.py            # with the environment's python, from any folder
 """
@@ -78,8 +79,12 @@ def main() -> None:
                     expect=('pip install "sagu-bench[sb3]"',))
         if "failed" in said:
             raise SystemExit(f"FAIL: a missing extra was blamed on the agent:\n{said}")
-        sagu("search", "protocol=p1", "protocol.n_innings=1", "protocol.shots=2", "progress=false", "hydra.run.dir=runs/search",
-             cwd=cwd)
+        sagu("search", "proposer=near_miss", "protocol=p1", "protocol.n_innings=1", "protocol.shots=2", "progress=false",
+             "hydra.run.dir=runs/search", expect=("results",), cwd=cwd)  # a shipped ensemble
+        sagu("train", "-m", "budget=smoke", "seed=0,1", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", "logger=none",
+             "progress=false", "hydra.sweep.dir=runs/sweep", cwd=cwd)  # a Hydra multirun on a launcher
+        if len(list((cwd / "runs" / "sweep").glob("*/summary.json"))) != 2:
+            raise SystemExit("FAIL: the multirun did not finish both jobs")
         # no scorecards of one's own here: it says where it looked, and writes nothing
         sagu("leaderboard", "--out", "board", expect=(str(cwd / "results" / "bench"), "nothing written"), cwd=cwd, code=1)
         if (cwd / "board").exists():
