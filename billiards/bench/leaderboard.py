@@ -346,9 +346,14 @@ def leaderboard(root: Path, report: Callable[[str], None] | None = None) -> dict
         ranked = sorted(((_row(track, g), _runs(g)) for g in groups.values()), key=lambda rr: (-rr[0]["score"], rr[0]["row"]))
         entry = {"rules": track.rules(), "description": track.description, "version": track.version,
                  "metric": track.metric, "rows": [r for r, _ in ranked]}
+        # the no-simulator division: the agents that act from the observation alone, ranked among themselves
+        division = [(row, runs) for row, runs in ranked if row["compute"] == "observation"]
+        entry["no_simulator"] = {"rows": [row["row"] for row, _ in division]}
         if track.protocol != "match" and ranked:
             for (row, runs), (_, below) in zip(ranked, ranked[1:]):  # is each row really above the next?
                 row["p_above_next"] = stats.probability_of_improvement(runs, below)
+            entry["no_simulator"]["p_above_next"] = {row["row"]: stats.probability_of_improvement(runs, below)
+                                                     for (row, runs), (_, below) in zip(division, division[1:])}
             thresholds = PROFILE_THRESHOLDS[track.protocol]
             entry["profiles"] = {"thresholds": list(thresholds),
                                  "rows": {row["row"]: stats.performance_profile(runs, thresholds) for row, runs in ranked}}
@@ -381,6 +386,39 @@ def format_score(protocol: str, value: float) -> str:
     return f"{value:.0f}" if protocol == "match" else f"{value:.2f}"
 
 
+METRIC_NAMES = {"innings": "points per inning", "p1": "success per shot", "p3": "chain length (mean)", "match": "Elo"}
+
+
+def _division_markdown(name: str, track, t: dict) -> list[str]:
+    """A track's no-simulator division: its observation-only rows ranked among themselves, with
+    the probability that each is above the next one of the division."""
+    division = t.get("no_simulator", {})
+    by_name = {r["row"]: r for r in t["rows"]}
+    rows = [by_name[name] for name in division.get("rows", [])]
+    if not rows:
+        return []
+    fmt = lambda v: format_score(track.protocol, v)  # noqa: E731
+    lines = [f"### {name}: the no-simulator division", "",
+             "The agents that act from the observation alone (no simulator at decision time: learned policies and "
+             "baselines), ranked among themselves.", "",
+             f"| # | agent | {METRIC_NAMES[track.protocol]} [95 %] | "
+             + ("win rate [95 %]" if track.protocol == "match" else "P(above the next) [95 %]")
+             + " | ms / decision | overall # | status |", "|---|---|---|---|---|---|---|"]
+    overall = {r["row"]: i for i, r in enumerate(t["rows"], 1)}
+    above = division.get("p_above_next", {})
+    for i, r in enumerate(rows, 1):
+        if track.protocol == "match":
+            main = f"{fmt(r['score'])} [{fmt(r['elo_ci95'][0])}, {fmt(r['elo_ci95'][1])}]"
+            second = f"{100 * r['win_rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}]"
+        else:
+            main = f"{fmt(r['score'])} [{fmt(r['ci95'][0])}, {fmt(r['ci95'][1])}]"
+            p = above.get(r["row"])
+            second = "" if p is None else f"{p['p']:.2f} [{p['ci95'][0]:.2f}, {p['ci95'][1]:.2f}]"
+        cost = "—" if r["ms_per_decision"] is None else f"{r['ms_per_decision']:.2f}"
+        lines.append(f"| {i} | {md_text(r['row'])} | {main} | {second} | {cost} | {overall[r['row']]} | {r['status']} |")
+    return lines + [""]
+
+
 def markdown(board: dict) -> str:
     """``leaderboard.md``."""
     outside = board.get("outside")
@@ -399,8 +437,7 @@ def markdown(board: dict) -> str:
              "racks, no weights in the repository); **unverified** an outside submission not yet re-run.", ""]
     for name, t in board["tracks"].items():
         track = TRACKS[name]
-        metric = {"innings": "points per inning", "p1": "success per shot", "p3": "chain length (mean)",
-                  "match": "Elo"}[track.protocol]
+        metric = METRIC_NAMES[track.protocol]
         lines += [f"## {name}", "", f"{t['description']}: {t['rules']}.", ""]
         if not t["rows"]:
             lines += ["(no scorecards yet)", ""]
@@ -428,6 +465,7 @@ def markdown(board: dict) -> str:
             lines.append(f"| {i} | {md_text(r['row'])} | {main} | {more} | {above} | {r['seeds']} | {cost} | {md_text(r['compute'])} "
                          f"| {r['status']} | {earlier} |")
         lines.append("")
+        lines += _division_markdown(name, track, t)
     lines += ["P(above the next): the probability that a unit (inning, chain) of the row scores above one of the row "
               "below it, ties counting half (rliable's probability of improvement, stratified bootstrap interval); 0.5 "
               "means the two rows cannot be told apart. `leaderboard.json` also holds each track's performance profiles "

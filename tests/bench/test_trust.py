@@ -68,9 +68,11 @@ def board_of(root: Path, out: Path) -> tuple[dict, str]:
     return json.loads(paths[0].read_text()), paths[1].read_text()
 
 
-def table_lines(md: str, track: str) -> list[str]:
+def table_lines(md: str, track: str, division: bool = False) -> list[str]:
+    """The lines of a track's overall table (``division``: of its no-simulator division's table)."""
     section = md.split(f"## {track}\n", 1)[1].split("\n## ", 1)[0]
-    return [line for line in section.splitlines() if line.startswith("|")]
+    overall, _, rest = section.partition(f"\n### {track}: the no-simulator division")
+    return [line for line in (rest if division else overall).splitlines() if line.startswith("|")]
 
 
 def cells(line: str) -> list[str]:
@@ -123,6 +125,8 @@ def test_an_outside_name_adds_no_row_and_no_markup_to_the_board(tmp_path):
     assert all(len(cells(line)) == 10 for line in lines), lines
     assert [c.strip() for line in lines[2:] for c in cells(line)[8:9]].count("verified") == 2
     assert not any(line.startswith("| 1 | fake row") for line in md.splitlines())
+    division = table_lines(md, P3, division=True)  # the observation agents again, as inert
+    assert len(division) == 2 + len(rows) and all(len(cells(line)) == 7 for line in division), division
     mark = next(line for line in lines if "onerror" in line)
     assert not re.search(r"(?<!\\)[<>\[\]`*$~!&|]", cells(mark)[1].replace("\\\\", "")), mark
     assert {r["row"] for r in rows} >= {"evil\n" + FAKE_ROW + "\n", MARKUP}  # the data keeps the strings as given
@@ -130,7 +134,7 @@ def test_an_outside_name_adds_no_row_and_no_markup_to_the_board(tmp_path):
     markdown_it = pytest.importorskip("markdown_it")
     html = markdown_it.MarkdownIt("commonmark", {"html": True}).enable(["table", "strikethrough"]).render(md)
     section = html.split('<h2>p3-exact-v1</h2>', 1)[1].split("<h2>", 1)[0]
-    assert section.count("<tr>") == 1 + len(rows)  # the header and the four rows
+    assert section.count("<tr>") == 2 * (1 + len(rows))  # each table: the header and the four rows (all observation agents)
     for tag in ("<img", "<a ", "<b>", "<strong>", "<em>", "<code>", "<s>", "<del>"):
         assert tag not in section, tag
     assert "fake row" in section and "onerror=alert(1)" in section  # shown as text
