@@ -602,13 +602,15 @@ def headline_value(card: dict) -> float:
     return float(card["chain"]["mean"]) if protocol == "p3" else float(card["elo"])
 
 
-def placement(track: str, value: float, board: dict | str | Path | None = None, version: int | None = None) -> str:
+def placement(track: str, value: float, board: dict | str | Path | None = None, version: int | None = None,
+              division: bool = False) -> str:
     """Where ``value`` (a scorecard's :func:`headline_value`) would rank among the rows of
     ``track`` on ``board`` (a board dict or a ``leaderboard.json``; default the committed
     snapshot), ranked as the board ranks them: "would rank k of n on <track>, between A (a) and
     B (b)" (n counts the new entry; first place: "above A", last: "below A", equal to rows:
-    "tied with A (a)"). ValueError when the board cannot be read or has no such track (or holds
-    another ``version`` of it)."""
+    "tied with A (a)"). ``division``: among the track's no-simulator division alone ("would rank k
+    of n in the no-simulator division of <track>, ..."). ValueError when the board cannot be read or
+    has no such track (or holds another ``version`` of it)."""
     if not isinstance(board, dict):
         path = Path(board) if board is not None else snapshot_path()
         try:
@@ -622,13 +624,17 @@ def placement(track: str, value: float, board: dict | str | Path | None = None, 
         raise ValueError(f"the leaderboard ranks {track} version {entry['version']}, the score is of version {version}")
     protocol = TRACKS[track].protocol if track in TRACKS else None
     show = lambda r: f"{one_line(r['row'])} ({format_score(protocol, r['score'])})"  # noqa: E731
-    rows = sorted(entry["rows"], key=lambda r: (-r["score"], r["row"]))
+    rows = entry["rows"]
+    if division:
+        members = set(entry.get("no_simulator", {}).get("rows", []))
+        rows = [r for r in rows if r["row"] in members]
+    rows = sorted(rows, key=lambda r: (-r["score"], r["row"]))
     v = round(float(value), 6)
     above = [r for r in rows if round(r["score"], 6) > v]
     tied = [r for r in rows if round(r["score"], 6) == v]
     below = [r for r in rows if round(r["score"], 6) < v]
     rank, n = len(above) + 1, len(rows) + 1
-    head = f"would rank {rank} of {n} on {track}"
+    head = f"would rank {rank} of {n} " + (f"in the no-simulator division of {track}" if division else f"on {track}")
     if tied:
         return f"{head}, tied with " + _and([show(r) for r in tied])
     if not rows:
@@ -650,6 +656,8 @@ def placement_line(card: dict, board: dict | str | Path | None = None) -> str:
     name = one_line(card["agent"]["name"])
     try:
         where = placement(card["track"], headline_value(card), board, card.get("version"))
+        if card["agent"].get("compute", "observation") == "observation":  # it competes in the division too
+            where += "; it " + placement(card["track"], headline_value(card), board, card.get("version"), division=True)
     except (KeyError, ValueError) as err:
         return f"placement: {name} cannot be placed ({err})"
     caveat = "" if not card.get("limit") else \

@@ -46,3 +46,19 @@ def test_the_markdown_shows_the_division_after_each_track():
         listed = [line.split(" | ")[1] for line in section.splitlines() if line.startswith("| ") and line[2].isdigit()]
         assert len(listed) == len(t["no_simulator"]["rows"]), name
         assert not any(r["compute"] == "simulator" and r["row"] in listed for r in t["rows"]), name
+
+
+def test_an_observation_agent_is_placed_overall_and_in_the_division():
+    from billiards.bench.leaderboard import placement, placement_line
+
+    t = BOARD["tracks"]["p1-exact-v1"]
+    division = [r for r in t["rows"] if r["compute"] == "observation"]
+    first = division[0]["score"] + 0.001  # just above the division's best, below every search
+    overall = placement("p1-exact-v1", first, BOARD)
+    assert overall.startswith(f"would rank {len(t['rows']) - len(division) + 1} of {len(t['rows']) + 1} on p1-exact-v1")
+    inside = placement("p1-exact-v1", first, BOARD, division=True)
+    assert inside.startswith(f"would rank 1 of {len(division) + 1} in the no-simulator division of p1-exact-v1, above ")
+    card = {"track": "p1-exact-v1", "version": t["version"], "agent": {"name": "mine", "compute": "observation"},
+            "success_per_shot": {"mean": first}}
+    search = {**card, "agent": {"name": "mine", "compute": "simulator"}}
+    assert "division" in placement_line(card, BOARD) and "division" not in placement_line(search, BOARD)

@@ -324,8 +324,10 @@ def test_evaluate_py_ends_with_the_placement_line(tmp_path, capsys):
 
     card = run(_evaluate_cfg(agent="random", track=P3, name="my-random"), str(tmp_path / "full"))
     out = capsys.readouterr().out.splitlines()
-    assert out[-1] == f"placement: my-random {placement(P3, headline_value(card))}"
-    assert "would rank" in out[-1] and "limited" not in out[-1]
+    # an observation agent: its overall place, then its place in the no-simulator division
+    assert out[-1] == (f"placement: my-random {placement(P3, headline_value(card))}; it "
+                       f"{placement(P3, headline_value(card), division=True)}")
+    assert "would rank" in out[-1] and "in the no-simulator division of p3-exact-v1" in out[-1] and "limited" not in out[-1]
     run(_evaluate_cfg(agent="nearest", track=P3, limit=2), str(tmp_path / "quick"))
     out = capsys.readouterr().out.splitlines()
     assert out[-2].startswith("placement: nearest would rank ")
