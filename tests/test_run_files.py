@@ -167,6 +167,7 @@ def test_a_bad_ledger_line_is_named_never_quoted(tmp_path, capsys):
     assert "SECRET" not in out and "wJalr" not in out
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 @needs_fifo
 def test_a_fifo_in_place_of_a_run_file_is_refused_at_once(tmp_path):
     """A named pipe for results.json (or the ledger) used to block verify forever: refused

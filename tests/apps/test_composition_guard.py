@@ -238,6 +238,7 @@ def test_each_app_checks_what_its_options_compose_to(app, tmp_path):
     assert shown.returncode == 0 and "JoblibLauncher" in shown.stdout, shown.stderr[-3000:]
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_a_config_group_is_listed_as_hydra_lists_it_without_copying_the_repository(monkeypatch):
     """The entry points' loader answers a plain ``get_group_options`` (no primary config, no
     overrides: what ``--help`` asks for each group) from its own repository: the same answer as

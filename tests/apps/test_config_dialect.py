@@ -198,6 +198,7 @@ def test_geometric_proposer_and_a_missing_checkpoint():
     assert OmegaConf.get_type(mine.proposer) is search_config.PolicyProposerConfig and mine.proposer.command is None
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_a_mixed_proposer_shares_the_candidates_between_a_policy_and_a_ranker():
     """proposer=mixed: its policy and ranker nodes are the policy and ranked options' own
     schemas (checked alike), the share lies in [0, 1], and it builds the mixture the config

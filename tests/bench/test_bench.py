@@ -849,6 +849,7 @@ def test_the_committed_leaderboard_regenerates_byte_for_byte(tmp_path):
     assert board["agents"] >= 15
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_two_scorecards_of_one_track_are_compared_unit_by_unit(tmp_path):
     """python -m billiards.bench compare: the paired difference of the per-unit scores (per shot
     on an innings track), its bootstrap interval and the units each is ahead on; a scorecard of

@@ -158,6 +158,7 @@ def test_a_scorecard_claims_no_status_and_the_board_gives_it_one(board_root, tmp
 # ----------------------------------------------------------------------------- 3. what the rebuild leaves out, it says
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_the_rebuild_names_each_partial_or_limited_scorecard_it_leaves_out(board_root, tmp_path):
     evaluate("nearest", P3, out=board_root / "submissions" / P3 / "quick", progress=False, name="quick", limit=3)
     cut = board_root / "submissions" / P3 / "cut"
@@ -197,6 +198,7 @@ def test_the_board_counts_outside_submissions_apart(board_root, tmp_path):
 # ----------------------------------------------------------------------------- 5. where it looked, when it finds nothing
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_the_rebuild_says_where_it_looked_when_it_finds_no_scorecards(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -342,6 +344,7 @@ def test_evaluate_py_ends_with_the_placement_line(tmp_path, capsys):
 # ----------------------------------------------------------------------------- 8. the framework's failures are not the agent's
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_a_missing_dependency_of_the_package_is_named_with_its_install_not_put_on_the_agent():
     """In a fresh interpreter without pettingzoo (a dependency every match plays through)."""
     code = ("import sys\nsys.modules['pettingzoo'] = None  # as if not installed\n"

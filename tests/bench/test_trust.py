@@ -445,6 +445,7 @@ def _compare_cli(a: Path, b: Path) -> subprocess.CompletedProcess:
                           cwd=ROOT, timeout=300)
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_compare_refuses_cards_it_cannot_compare_and_never_says_nan(tmp_path):
     empty = _card(tmp_path, "empty", [])
     with pytest.raises(ValueError, match=r"hold 0 unit scores each, but a whole evaluation of innings-v1 has 100: they cannot be "
@@ -460,6 +461,7 @@ def test_compare_refuses_cards_it_cannot_compare_and_never_says_nan(tmp_path):
     assert proc.returncode == 1 and proc.stderr.startswith("Error: ") and "nan" not in proc.stdout + proc.stderr
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_two_equal_constant_cards_differ_by_zero(tmp_path):
     c = compare(_card(tmp_path, "a", [3] * 100), _card(tmp_path, "b", [3] * 100))
     assert c["difference"] == 0.0 and c["ci95"] == [0.0, 0.0] and c["first_mean"] == 0.3

@@ -90,6 +90,7 @@ def test_a_centred_label_is_a_good_shot_at_the_middle_of_its_good_neighbours_and
     assert tolerance(moved) > tolerance(x) + 0.02, (tolerance(moved), tolerance(x))
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_under_noise_the_label_is_the_default_noisy_searchs_own_choice():
     """The noisy labeller is search.py's default search for the noise (the position-aware robust
     search and the preset's shot ranker) at the run's budget; a label is that search's chosen
@@ -287,6 +288,7 @@ def test_the_trainer_alone_refuses_exit_without_its_loop(tmp_path):
 
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_an_exit_run_can_start_from_a_trained_policy_which_proposes_from_round_0(tmp_path):
     """algo.init_policy: the policy starts from an exported SAC policy's actor (at a learning
     rate too small to move it, the run ends with those weights) and that policy, not the

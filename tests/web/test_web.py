@@ -663,6 +663,7 @@ def test_a_start_repeated_with_its_key_starts_one_match(client, out_dir):
     assert other["state"]["id"] != answers[0]["state"]["id"]
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_a_match_is_on_disk_from_its_start_and_a_restarted_server_plays_on_as_if_none_had_been(out_dir):
     """Two matches of the same settings and shots: one played straight through, the other read
     back by a new app over the same folder between its shots; they end on the same table with
@@ -698,6 +699,7 @@ def test_a_match_is_on_disk_from_its_start_and_a_restarted_server_plays_on_as_if
     assert listed[resumed["id"]]["turn"] == resumed["turn"] and listed[resumed["id"]]["over"] is False
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_python_m_billiards_files_verify_accepts_an_unfinished_match(client, out_dir):
     from billiards import files
 
