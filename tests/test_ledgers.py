@@ -262,14 +262,13 @@ def test_the_verify_command_catches_league_counts_that_disagree(tmp_path, capsys
            f"the ledger holds {p['a_wins'] - 1}-{p['b_wins']} with {p['draws']} draws of {p['matches'] - 1}" in out
 
 
-def test_the_match_app_refuses_a_bad_ledger_with_a_sentence(tmp_path):
-    """The app (billiards.league.run) continues a league with the identity of its settings as it
-    started, whatever the command line's target; a forged line stops it with one sentence."""
+def _tiny_league(tmp_path):
+    """The composed config of a two-player league of one match to one point, and its run folder
+    laid out as Hydra lays it (``.hydra/config.yaml`` and ``overrides.yaml``)."""
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
     import billiards.league.config  # noqa: F401  (registers the match app's schema)
-    from billiards.league import run
 
     over = ["+agents.r2={kind: random}", "players=[random,r2]", "matches=1", "target=1", "max_innings=4",
             "progress=false", "picture=false"]
@@ -279,6 +278,15 @@ def test_the_match_app_refuses_a_bad_ledger_with_a_sentence(tmp_path):
     (out / ".hydra").mkdir(parents=True)
     OmegaConf.save(cfg, out / ".hydra" / "config.yaml")  # what Hydra saves
     OmegaConf.save(OmegaConf.create(over), out / ".hydra" / "overrides.yaml")
+    return cfg, out
+
+
+def test_the_match_app_refuses_a_bad_ledger_with_a_sentence(tmp_path):
+    """The app (billiards.league.run) continues a league with the identity of its settings as it
+    started, whatever the command line's target; a forged line stops it with one sentence."""
+    from billiards.league import run
+
+    cfg, out = _tiny_league(tmp_path)
     first = run(cfg, out)
     lines = (out / "matches.jsonl").read_text().splitlines()
     cfg.resume, cfg.target = str(out), 5
@@ -386,20 +394,9 @@ def test_a_league_json_edited_to_other_elo_values_is_recomputed_on_resume(tmp_pa
 def test_the_match_app_calls_a_league_finished_only_when_league_json_is_its_matches(tmp_path, capsys):
     """match.py resume= of a finished league: "nothing to do" when league.json is what its
     matches give; an edited one makes the resume run, and it writes the tables again."""
-    from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
-
-    import billiards.league.config  # noqa: F401  (registers the match app's schema)
     from billiards.league import resume_state, run
 
-    over = ["+agents.r2={kind: random}", "players=[random,r2]", "matches=1", "target=1", "max_innings=4",
-            "progress=false", "picture=false"]
-    with initialize_config_dir(str(ROOT / "conf"), version_base=None):
-        cfg = compose("match", overrides=over)
-    out = tmp_path / "run"
-    (out / ".hydra").mkdir(parents=True)
-    OmegaConf.save(cfg, out / ".hydra" / "config.yaml")
-    OmegaConf.save(OmegaConf.create(over), out / ".hydra" / "overrides.yaml")
+    cfg, out = _tiny_league(tmp_path)
     first = run(cfg, out)
     cfg.resume = str(out)
     assert resume_state(out, cfg, True).endswith("is finished (2 matches, league.json): nothing to do")
