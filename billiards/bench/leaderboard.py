@@ -121,10 +121,6 @@ def looks_like_path(name: str) -> bool:
     return bool(_FILE_SUFFIX.search(name))
 
 
-def _units(n: int) -> str:
-    return f"{n} unit" if n == 1 else f"{n} units"
-
-
 def _load(path: Path) -> dict:
     try:
         card = read_run_json(path)  # no link followed, a regular file of bounded size and depth
@@ -152,7 +148,7 @@ def left_out(card: dict) -> str | None:
         return (f"partial, {card.get('units_done', 'not all')} units finished: the same command with out=<its directory> "
                 "plays the rest")
     if card.get("limit"):
-        return f"limited to {_units(card['limit'])} per opponent or track (limit=): play the whole track, without limit="
+        return f"limited to {_count(card['limit'], 'unit')} per opponent or track (limit=): play the whole track, without limit="
     return None
 
 
@@ -661,7 +657,7 @@ def placement_line(card: dict, board: dict | str | Path | None = None) -> str:
     except (KeyError, ValueError) as err:
         return f"placement: {name} cannot be placed ({err})"
     caveat = "" if not card.get("limit") else \
-        (f"; but a limited run ({_units(card['limit'])} per opponent or track) is a quick look, not comparable to the full-track "
+        (f"; but a limited run ({_count(card['limit'], 'unit')} per opponent or track) is a quick look, not comparable to the full-track "
          "rows nor a leaderboard entry")
     return f"placement: {name} {where}{caveat}"
 
