@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Evaluate the baseline policies with the unified protocol and record the results.
 
-Protocol (:func:`billiards.evaluation.evaluate`): 100 continue-on-miss innings of 10 shots,
+Protocol (:func:`billiards.evaluation.evaluate_policy`): 100 continue-on-miss innings of 10 shots,
 one batched env, deterministic policy, raw carom score. Writes ``results/baselines.json`` and
 ``results/baselines.md`` (with the command and the git commit), and optionally renders a few
 baseline shots to ``results/img/``.
@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 from billiards.baselines import make_policy
-from billiards.evaluation import evaluate
+from billiards.evaluation import evaluate_policy
 from billiards.physics import DEFAULT_PRESET, PRESETS
 from billiards.provenance import git_commit
 
@@ -48,7 +48,7 @@ def main() -> None:
     commit = git_commit()
     rows = []
     for name, policy, start, constrain_aim in RUNS:
-        result = evaluate(
+        result = evaluate_policy(
             make_policy(policy, constrain_aim=constrain_aim, seed=args.seed),
             n_innings=args.n_innings,
             max_shots=args.max_shots,
@@ -69,7 +69,7 @@ def main() -> None:
         "",
         (
             f"{args.n_innings} continue-on-miss innings of {args.max_shots} shots, rack seed {args.seed}, "
-            "deterministic policy, raw carom score (`billiards.evaluation.evaluate`). mean ± std (population) "
+            "deterministic policy, raw carom score (`billiards.evaluation.evaluate_policy`). mean ± std (population) "
             "points per inning; foul inn. = innings with at least one foul; foul/shot and success/shot over all shots."
         ),
         "",

@@ -5,7 +5,7 @@ to a run's labelled shots and play it.
 
 Reads the labelled shots a run's checkpoint keeps (``algo.buffer_size`` of them: observations
 and targets, ``python train.py algo=exit ...``), holds out 10,000 of them, and trains a policy
-on the rest by the run's own loss (:class:`billiards.rl.agents.ExItAgent`, ``algo.nll_beta``
+on the rest by the run's own loss (:class:`billiards.rl.learners.ExItAgent`, ``algo.nll_beta``
 included) with Adam and a cosine learning rate from ``--lr`` to ``--lr-end``: from the run's
 policy (``--start run``) or from new weights of ``--hidden`` layers (``--start fresh``). Every
 ``--every`` epochs (and before the first) it reports, on 10,000 training rows and on the held-out

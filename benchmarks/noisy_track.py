@@ -5,7 +5,7 @@ Rows are agents, columns noise settings. Each search agent is one ``python searc
 (per-shot success, continue-on-miss from random racks) and once with P3 (chains from the opening
 rack until the first miss); a trained policy (``sac``: the runs of ``--sac``, each seed
 evaluated and the seeds pooled) is evaluated with the same two protocols by
-:func:`billiards.evaluation.evaluate` (P1: random-start innings; P3: innings from the opening
+:func:`billiards.evaluation.evaluate_policy` (P1: random-start innings; P3: innings from the opening
 rack, the points before the first miss, capped at ``--cap``). Two tables:
 
 * ``--table``: the noise presets ``fastfiz``, ``fastfiz_x5`` and ``variable`` (a level drawn per
@@ -107,7 +107,7 @@ def blind(policy):
 
 def sac_cell(noise: str, noise_over: list[str], args) -> dict:
     """The trained policies of ``--sac`` (run dirs), each evaluated; seeds pooled."""
-    from billiards.evaluation import evaluate
+    from billiards.evaluation import evaluate_policy
     from billiards.rl.policy import load_policy
 
     model = noise_of(noise_over)
@@ -117,13 +117,13 @@ def sac_cell(noise: str, noise_over: list[str], args) -> dict:
         if model.is_variable and not cfg.noise.preset == "variable":
             policy = blind(policy)
         kw = dict(constrain_aim=bool(cfg.env.constrain_aim), extra_features=bool(cfg.env.extra_features), noise=model)
-        p1 = evaluate(policy, n_innings=args.innings, max_shots=args.shots, start="random", seed=args.seed, **kw)
-        p3 = evaluate(policy, n_innings=args.chains, max_shots=args.cap, start="canonical", seed=P3_SEEDS + args.seed, **kw)
+        p1 = evaluate_policy(policy, n_innings=args.innings, max_shots=args.shots, start="random", seed=args.seed, **kw)
+        p3 = evaluate_policy(policy, n_innings=args.chains, max_shots=args.cap, start="canonical", seed=P3_SEEDS + args.seed, **kw)
         success.append(p1.success_per_shot_pct / 100.0)
         shots += args.innings * args.shots
         chains += list(p3.first_miss_points)
     return {"success": float(np.mean(success)), "shots": shots, "p3_values": chains, "runs": list(args.sac),
-            "command": f"billiards.evaluation.evaluate(policy of each run, n_innings={args.innings}, max_shots="
+            "command": f"billiards.evaluation.evaluate_policy(policy of each run, n_innings={args.innings}, max_shots="
                        f"{args.shots}, random start, seed={args.seed}) and (n_innings={args.chains}, max_shots={args.cap}, "
                        f"canonical start, seed={P3_SEEDS + args.seed}) under {' '.join(noise_over)}"}
 

@@ -4,7 +4,7 @@ Trains one SB3 algorithm with its default hyper-parameters on the gymnasium env 
 user would make it (``gym.make("Billiards4Ball-v0")``: random racks, continue-on-miss,
 10-shot innings, the normalised [-1, 1]^4 action space, raw carom reward), and evaluates it
 every ``--eval-every`` steps and at the end with the project's protocol
-(:func:`billiards.evaluation.evaluate`: 100 continue-on-miss innings of 10 shots, racks from
+(:func:`billiards.evaluation.evaluate_policy`: 100 continue-on-miss innings of 10 shots, racks from
 seed 0, deterministic actions, raw score) through :func:`billiards.evaluation.numpy_policy`.
 ``--algo random`` evaluates the project's uniform random policy under the same protocol.
 
@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))  # this checkout's billiards, not another installe
 
 import billiards.envs  # noqa: F401, E402  (registers Billiards4Ball-v0)
 from billiards.baselines import random_policy  # noqa: E402
-from billiards.evaluation import evaluate, numpy_policy  # noqa: E402
+from billiards.evaluation import evaluate_policy, numpy_policy  # noqa: E402
 from billiards.provenance import git_commit  # noqa: E402
 
 OUT = ROOT / "results" / "sb3"
@@ -45,7 +45,7 @@ ALGOS = ("ppo", "sac")
 
 def evaluate_model(model, normalized: bool = True) -> dict:
     """The project's protocol on the model's deterministic action."""
-    result = evaluate(numpy_policy(lambda obs: model.predict(obs, deterministic=True)[0], normalized=normalized))
+    result = evaluate_policy(numpy_policy(lambda obs: model.predict(obs, deterministic=True)[0], normalized=normalized))
     return {k: v for k, v in result.__dict__.items() if k != "points"}
 
 
@@ -109,7 +109,7 @@ def table() -> None:
         "SB3 PPO and SAC with their default hyper-parameters (`PPO/SAC(\"MlpPolicy\", env, seed=0)`) on",
         "`gym.make(\"Billiards4Ball-v0\")` (korean_medium table, random racks, continue-on-miss, 10-shot innings,",
         "normalised [-1, 1]^4 actions, raw carom reward), one seed, evaluated with the project's protocol",
-        "(`billiards.evaluation.evaluate`: 100 innings x 10 shots, racks from seed 0, deterministic action).",
+        "(`billiards.evaluation.evaluate_policy`: 100 innings x 10 shots, racks from seed 0, deterministic action).",
         "Two shared CPU cores, `OMP_NUM_THREADS=1`; train_seconds is wall time including the evaluations, and depends",
         "on the load other jobs put on the machine (high during the ppo and sac runs, low during ppo_raw).",
         "`ppo_raw`: the same PPO on the paper's raw box (`normalize_actions=False`, `--raw`), for comparison.",
@@ -147,7 +147,7 @@ def main() -> None:
     name = args.algo + ("_raw" if args.raw and args.algo != "random" else "")
     record = dict(algo=name, command=command, commit=git_commit(), seed=args.seed, steps=args.steps)
     if args.algo == "random":
-        result = evaluate(random_policy(seed=args.seed))
+        result = evaluate_policy(random_policy(seed=args.seed))
         record["evals"] = [dict(steps=0, **{k: v for k, v in result.__dict__.items() if k != "points"})]
         write(record)
         print(result.summary())

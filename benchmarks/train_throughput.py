@@ -45,7 +45,7 @@ class Bench:
         from torchrl.collectors import Collector
         from torchrl.data import LazyTensorStorage, RandomSampler, ReplayBuffer
 
-        from billiards.rl.agents import make_agent
+        from billiards.rl.learners import make_agent
         from billiards.rl.train import make_train_env
 
         self.cfg = cfg

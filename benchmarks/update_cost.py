@@ -30,7 +30,7 @@ def make_agent(width: int, obs_dim: int = 32):
     from torchrl.data import Bounded
     from train_throughput import compose
 
-    from billiards.rl.agents import make_agent as build
+    from billiards.rl.learners import make_agent as build
 
     cfg = compose([f"algo.hidden_sizes=[{width},{width}]"])  # the defaults of conf/algo/sac.yaml otherwise
     low, high = torch.tensor([-1.0, 0.0, -1.0, -1.0]), torch.ones(4)  # the aim-constraint action box

@@ -105,7 +105,7 @@ LEGACY_UNION_KEYS = {
     "proposer": ("checkpoints", "command", "power_low", "power_high", "u_low", "u_high", "spin_low", "spin_high"),
 }
 # A league player's keys when every kind shared one schema: a league.json of then holds them all
-# for every player (today each kind has its own closed schema, billiards.league.agents.PLAYERS)
+# for every player (today each kind has its own closed schema, billiards.league.players.PLAYERS)
 LEGACY_PLAYER_KEYS = ("search", "proposer", "search_budget", "k", "replays", "opp_k", "opp_replays", "foul_penalty",
                       "leave_weight", "threshold", "overrides", "policy")
 # The noise node as it was when the node was added, before noise.scale and variable noise

@@ -37,7 +37,7 @@ from billiards.physics.noise import get_noise
 
 @dataclasses.dataclass
 class EvalResult:
-    """Outcome of :func:`evaluate`. Percentages are in [0, 100]. ``eval.json`` holds its fields
+    """Outcome of :func:`evaluate_policy`. Percentages are in [0, 100]. ``eval.json`` holds its fields
     (:meth:`from_json` reads one of any version through :func:`billiards.compat.upgrade_eval_record`)."""
 
     mean: float  # points per inning
@@ -101,7 +101,7 @@ def summarize(score: np.ndarray, foul: np.ndarray, *, start: str = "random", see
     )
 
 
-def evaluate(
+def evaluate_policy(
     policy,
     n_innings: int = 100,
     max_shots: int = 10,
@@ -149,7 +149,7 @@ def evaluate(
 
 
 def numpy_policy(act, *, normalized: bool = True, constrain_aim: bool = False):
-    """A policy for :func:`evaluate` from a NumPy one, e.g. a Stable-Baselines3 model's
+    """A policy for :func:`evaluate_policy` from a NumPy one, e.g. a Stable-Baselines3 model's
     ``lambda obs: model.predict(obs, deterministic=True)[0]``.
 
     ``act(observation)`` gets the (B, D) float32 observations of the TorchRL env (the gymnasium

@@ -23,7 +23,7 @@ the proposer's own shot where the chosen one's statistic beats it by no more), p
 ``algo.policy_share`` < 1 the policy proposes that share of the candidates from round 1 on and
 round 0's proposer the rest (:class:`~billiards.search.proposers.MixedProposer`), so the
 labeller never loses the candidates it started from. After the round's last block,
-``algo.epochs`` passes of maximum likelihood (:class:`~billiards.rl.agents.ExItAgent`) over the
+``algo.epochs`` passes of maximum likelihood (:class:`~billiards.rl.learners.ExItAgent`) over the
 last ``algo.buffer_size`` labelled shots, continuing from the round before.
 
 Everything else is the trainer's: the run directory, ``resume=``, checkpoints (the labelled

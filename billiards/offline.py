@@ -5,7 +5,7 @@ An episode is one inning of the benchmark's ``innings-v1`` protocol (a random ra
 miss, 10 shots; ``docs/benchmark.md``), played on the gymnasium vector env with raw actions, its
 rack and noise from its own seed (``DATASET_SEED`` + the inning's index: far from every
 benchmark track's held-out seeds). The agent is any spec the benchmark takes
-(:func:`billiards.bench.agents.resolve_agent`), under the track's simulation budget. The
+(:func:`billiards.bench.adapters.resolve_agent`), under the track's simulation budget. The
 datasets of the issue, per noise preset (``none``, ``fastfiz``):
 
 * ``expert``: the default search of ``search.py`` for that noise (``search:h2`` exact -- the
@@ -408,7 +408,7 @@ def _plan(dataset: str, noise: str, shots: int, out: Path, agent_spec: str | Non
         read_block(out, b, manifest)
     if not todo:
         return manifest, track, todo, None, write
-    from billiards.bench.agents import resolve_agent
+    from billiards.bench.adapters import resolve_agent
 
     try:
         agent = resolve_agent(spec, track)
@@ -426,7 +426,7 @@ def generate(dataset: str, noise: str, shots: int, out: Path, agent_spec: str | 
         return manifest
     import time
 
-    from billiards.bench.agents import AgentError
+    from billiards.bench.adapters import AgentError
     from billiards.provenance import git_commit
 
     spec, blocks = manifest["agent"], manifest["blocks"]
@@ -599,13 +599,13 @@ def space_action(obs: np.ndarray, actions: np.ndarray, space: str, R: float | No
 
 
 def space_agent(policy, space: str, name: str, R: float | None = None):
-    """A benchmark agent (:class:`~billiards.bench.agents.CallableAgent`) of ``policy``, a NumPy
+    """A benchmark agent (:class:`~billiards.bench.adapters.CallableAgent`) of ``policy``, a NumPy
     function from the learner's observations (:func:`space_observation`) to its normalised
     actions in ``space``: raw, the env's own normalised box; under ``aim_features`` mapped back to
     the raw shot on the observed table (:func:`billiards.domain.raw_action`, balls of radius
     ``R``: the table it plays on; default the default table's)."""
     from billiards import domain
-    from billiards.bench.agents import CallableAgent
+    from billiards.bench.adapters import CallableAgent
 
     _check_space(space)
     R = _radius(R)
@@ -731,7 +731,7 @@ def train_iql(directory: Path, updates: int, out: Path, seed: int = 0, progress:
     from torchrl.objectives import IQLLoss, SoftUpdate, ValueEstimators
 
     from billiards.bench import evaluate
-    from billiards.rl.agents import mlp
+    from billiards.rl.learners import mlp
 
     torch.manual_seed(seed)
     data = transitions(directory, space)

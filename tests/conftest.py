@@ -1,5 +1,6 @@
 """Fixtures shared by several test modules, and a patient ``subprocess.Popen``."""
 
+import os
 import subprocess
 import time
 from pathlib import Path
@@ -22,6 +23,36 @@ def _patient_popen_init(self, *args, **kwargs):
 
 
 subprocess.Popen.__init__ = _patient_popen_init
+
+
+def _record_processes(log: str) -> None:
+    """With ``SAGU_PROCESS_LOG=<file>`` set, every process a test starts (``subprocess``,
+    ``multiprocessing``, a fork) appends the test's id to that file: how the suite counts the
+    test files that start processes (docs/development.md)."""
+    import _posixsubprocess
+
+    def note():
+        test = os.environ.get("PYTEST_CURRENT_TEST")
+        if test:
+            with open(log, "a") as f:
+                f.write(test.rsplit(" ", 1)[0] + "\n")
+
+    fork_exec, fork = _posixsubprocess.fork_exec, os.fork
+
+    def noting_fork_exec(*args, **kwargs):
+        note()
+        return fork_exec(*args, **kwargs)
+
+    def noting_fork():
+        note()
+        return fork()
+
+    _posixsubprocess.fork_exec = subprocess._fork_exec = noting_fork_exec  # multiprocessing's, subprocess's
+    os.fork = noting_fork
+
+
+if os.environ.get("SAGU_PROCESS_LOG"):
+    _record_processes(os.environ["SAGU_PROCESS_LOG"])
 
 
 def pytest_configure(config):

@@ -181,7 +181,7 @@ pytest.importorskip("pettingzoo")
 
 
 def random_league():
-    from billiards.league.agents import RandomPlayer, make_agent
+    from billiards.league.players import RandomPlayer, make_agent
     from billiards.physics import DEFAULT_PARAMS
     from billiards.physics.noise import get_noise
 

@@ -300,7 +300,7 @@ def test_the_search_league_and_training_refuse_a_folder_another_run_writes(holde
     assert sorted(p.name for p in run.iterdir()) == [LOCK_FILE]
 
     pytest.importorskip("pettingzoo")
-    from billiards.league.agents import RandomPlayer, make_agent
+    from billiards.league.players import RandomPlayer, make_agent
     from billiards.league.play import run_league
     from billiards.physics import DEFAULT_PARAMS
     from billiards.physics.noise import get_noise

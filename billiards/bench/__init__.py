@@ -9,7 +9,7 @@
 ``python -m billiards.bench leaderboard`` rebuilds ``results/leaderboard.md`` / ``.json``.
 """
 
-from .agents import Agent, AgentError, as_agent, resolve_agent
+from .adapters import Agent, AgentError, as_agent, resolve_agent
 from .run import EvaluationError, evaluate
 from .tracks import TRACKS, Track, get_track
 

@@ -34,7 +34,7 @@ _BUILT: dict = {}  # (agent, track, limit, name) -> the agent validation built, 
 
 def build_agent(cfg):
     """The agent of a config, built once a process."""
-    from .agents import resolve_agent
+    from .adapters import resolve_agent
     from .tracks import get_track
 
     key = (cfg.agent, cfg.track, cfg.limit, cfg.name)
@@ -46,7 +46,7 @@ def build_agent(cfg):
 
 def errors(cfg) -> list[str]:
     """Every problem of an evaluate config, each a sentence naming its key."""
-    from .agents import AgentError
+    from .adapters import AgentError
     from .run import IDENTITY_FILE, EvaluationError, out_problem, read_identity
     from .tracks import TRACKS
 

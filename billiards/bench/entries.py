@@ -19,7 +19,7 @@ MATCH = ("match-x5-v1",)
 
 
 @dataclass(frozen=True)
-class Entry:
+class BoardEntry:
     row: str  # the leaderboard row (seeds of one setting share it)
     slug: str  # the scorecard directory name
     spec: str
@@ -27,51 +27,51 @@ class Entry:
     note: str = ""
 
 
-def _seeds(row: str, slug: str, folder: str, tracks, note: str = "") -> list[Entry]:
-    return [Entry(row, f"{slug}_s{s}", f"results/policies/{folder}/seed{s}.pt", tracks, note) for s in range(3)]
+def _seeds(row: str, slug: str, folder: str, tracks, note: str = "") -> list[BoardEntry]:
+    return [BoardEntry(row, f"{slug}_s{s}", f"results/policies/{folder}/seed{s}.pt", tracks, note) for s in range(3)]
 
 
-ENTRIES: tuple[Entry, ...] = (
-    Entry("random", "random", "random", ALL_SINGLE + MATCH, "uniform in the normalised box"),
-    Entry("nearest-red heuristic", "nearest", "nearest", ALL_SINGLE + MATCH, "full-ball hit on the nearest red, half power"),
-    Entry("random inside the aim window", "random_aim", "random_aim", ALL_SINGLE + MATCH, "uniform u, power, tip"),
+ENTRIES: tuple[BoardEntry, ...] = (
+    BoardEntry("random", "random", "random", ALL_SINGLE + MATCH, "uniform in the normalised box"),
+    BoardEntry("nearest-red heuristic", "nearest", "nearest", ALL_SINGLE + MATCH, "full-ball hit on the nearest red, half power"),
+    BoardEntry("random inside the aim window", "random_aim", "random_aim", ALL_SINGLE + MATCH, "uniform u, power, tip"),
     *_seeds("SAC aim + features, foul penalty (Table 5)", "sac_base", "base", ALL_SINGLE),
     *_seeds("SAC aim + features, gentle (Table 5)", "sac_gentle", "gentle", EXACT),
     *_seeds("SAC aim + features, near-miss (Table 5)", "sac_near_miss", "near_miss", EXACT),
     *_seeds("SAC aim + features, both bonuses (Table 5)", "sac_both", "both", EXACT),
     *_seeds("SAC aim + features trained under fastfiz", "sac_fastfiz", "fastfiz_aim_features", ALL_SINGLE),
-    Entry("SAC aim + features, foul penalty (Table 5), seed 0", "sac_base_s0_match", "results/policies/base/seed0.pt", MATCH),
-    Entry("expert iteration policy (exact), seed 0", "exit_s0", "results/policies/exit/seed0.pt", EXACT + NOISY_P1),
-    Entry("expert iteration policy started from SAC (exact), seed 0", "exit_sac_s0", "results/policies/exit_sac/seed0.pt",
+    BoardEntry("SAC aim + features, foul penalty (Table 5), seed 0", "sac_base_s0_match", "results/policies/base/seed0.pt", MATCH),
+    BoardEntry("expert iteration policy (exact), seed 0", "exit_s0", "results/policies/exit/seed0.pt", EXACT + NOISY_P1),
+    BoardEntry("expert iteration policy started from SAC (exact), seed 0", "exit_sac_s0", "results/policies/exit_sac/seed0.pt",
           EXACT + NOISY_P1),
-    Entry("h2, geometric proposer", "h2_geometric", "search:h2/geometric", EXACT + ("p1-fastfiz-v1",)),
-    Entry("h2, expert-iteration policy proposer", "h2_exit", "search:h2/exit", EXACT),
-    Entry("h2, SAC ensemble proposer (base)", "h2_base", "search:h2/base", EXACT),
-    Entry("h2, exact-play shot ranker proposer", "h2_ranked_exact", "search:h2/ranked_exact", EXACT),
-    Entry("h2, small exact-play shot ranker proposer", "h2_ranked_exact_small", "search:h2/ranked_exact_small", EXACT),
-    Entry("PUCT, geometric proposer", "puct_geometric", "search:puct/geometric", EXACT),
-    Entry("PUCT, SAC ensemble proposer (near_miss)", "puct_near_miss", "search:puct/near_miss", EXACT),
-    Entry("robust search over the shot ranker, blind to the leave", "robust_ranked", "search:robust/for_noise", NOISY),
-    Entry("position-aware robust search (the default of search.py under noise)", "position_default", "search:default", NOISY),
-    Entry("position-aware robust search over the shot ranker", "position_ranked", "search:default/for_noise",
+    BoardEntry("h2, geometric proposer", "h2_geometric", "search:h2/geometric", EXACT + ("p1-fastfiz-v1",)),
+    BoardEntry("h2, expert-iteration policy proposer", "h2_exit", "search:h2/exit", EXACT),
+    BoardEntry("h2, SAC ensemble proposer (base)", "h2_base", "search:h2/base", EXACT),
+    BoardEntry("h2, exact-play shot ranker proposer", "h2_ranked_exact", "search:h2/ranked_exact", EXACT),
+    BoardEntry("h2, small exact-play shot ranker proposer", "h2_ranked_exact_small", "search:h2/ranked_exact_small", EXACT),
+    BoardEntry("PUCT, geometric proposer", "puct_geometric", "search:puct/geometric", EXACT),
+    BoardEntry("PUCT, SAC ensemble proposer (near_miss)", "puct_near_miss", "search:puct/near_miss", EXACT),
+    BoardEntry("robust search over the shot ranker, blind to the leave", "robust_ranked", "search:robust/for_noise", NOISY),
+    BoardEntry("position-aware robust search (the default of search.py under noise)", "position_default", "search:default", NOISY),
+    BoardEntry("position-aware robust search over the shot ranker", "position_ranked", "search:default/for_noise",
           ("p1-x5-v1", "p1-variable-v1")),
-    Entry("position-aware robust search over the expert-iteration policy", "position_exit", "search:default/exit", NOISY_P1),
-    Entry("expert iteration policy (fastfiz_x5), seed 0", "exit_x5_s0", "results/policies/exit_x5/seed0.pt", NOISY_P1),
-    Entry("position-aware robust search over the fastfiz_x5 expert-iteration policy", "position_exit_x5", "search:default/exit_x5",
+    BoardEntry("position-aware robust search over the expert-iteration policy", "position_exit", "search:default/exit", NOISY_P1),
+    BoardEntry("expert iteration policy (fastfiz_x5), seed 0", "exit_x5_s0", "results/policies/exit_x5/seed0.pt", NOISY_P1),
+    BoardEntry("position-aware robust search over the fastfiz_x5 expert-iteration policy", "position_exit_x5", "search:default/exit_x5",
           NOISY_P1),
-    Entry("position-aware robust search over the fastfiz_x5 expert-iteration policy and shot ranker (half each)", "position_exit_x5_mixed",
-          "search:default/exit_x5_mixed", NOISY_P1),
-    Entry("expert iteration policy started from SAC under fastfiz, seed 0", "exit_fastfiz_s0",
+    BoardEntry("position-aware robust search over the fastfiz_x5 expert-iteration policy and shot ranker (half each)",
+               "position_exit_x5_mixed", "search:default/exit_x5_mixed", NOISY_P1),
+    BoardEntry("expert iteration policy started from SAC under fastfiz, seed 0", "exit_fastfiz_s0",
           "results/policies/exit_fastfiz/seed0.pt", NOISY_P1),
-    Entry("league: greedy", "league_greedy", "league:greedy", MATCH),
-    Entry("league: greedy_r (run value)", "league_greedy_r", "league:greedy_r", MATCH),
-    Entry("league: safety_r (run value, safety shots)", "league_safety_r", "league:safety_r", MATCH),
+    BoardEntry("league: greedy", "league_greedy", "league:greedy", MATCH),
+    BoardEntry("league: greedy_r (run value)", "league_greedy_r", "league:greedy_r", MATCH),
+    BoardEntry("league: safety_r (run value, safety shots)", "league_safety_r", "league:safety_r", MATCH),
 )
 
 
 def check_entries() -> None:
     """Entries name no code: every spec is a baseline, a policy file, a search or a league player."""
-    from .agents import BASELINES
+    from .adapters import BASELINES
 
     for e in ENTRIES:
         ok = e.spec in BASELINES or e.spec.startswith(("search:", "league:")) or (e.spec.startswith("results/") and e.spec.endswith(".pt"))
@@ -81,4 +81,4 @@ def check_entries() -> None:
             raise ValueError(f"leaderboard entry {e.slug}: a row name has no quotes (it is quoted in the recorded command)")
 
 
-__all__ = ["ENTRIES", "Entry", "check_entries"]
+__all__ = ["ENTRIES", "BoardEntry", "check_entries"]

@@ -31,7 +31,7 @@ from billiards import domain, files
 from billiards.files import LedgerKind, atomic_write_text, display_path
 
 from billiards import stats
-from .agents import Agent, AgentError, checked_action, resolve_agent
+from .adapters import Agent, AgentError, checked_action, resolve_agent
 from .text import md_code, md_text, one_line
 from .tracks import Track, get_track
 
@@ -172,7 +172,7 @@ class _MatchPlayer:
 
     def act(self, view: np.ndarray, level: float | None = None) -> np.ndarray:
         from billiards.envs._common import with_levels
-        from billiards.league.agents import to_env_action
+        from billiards.league.players import to_env_action
 
         levels = None if level is None or not self.tells_level else np.array([float(level)])
         obs = with_levels(domain.observation(view[None]), levels)
@@ -189,7 +189,7 @@ def play_match(agent: Agent, track: Track, index: int, on_shot=None, opponent=No
     the pool player to use (default: the process's own, built once)."""
     from billiards.league.play import play_match as play
 
-    from .agents import league_player
+    from .adapters import league_player
 
     params, noise = _params_noise(track)
     j, i = divmod(index, track.units)
@@ -229,7 +229,7 @@ def fingerprint_data(track: Track) -> list:
     rounded to 1e-9."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
-    from .agents import NearestRedAgent
+    from .adapters import NearestRedAgent
 
     params, noise = _params_noise(track)
     ref = NearestRedAgent(params)
@@ -238,7 +238,7 @@ def fingerprint_data(track: Track) -> list:
     if track.protocol == "match":
         from billiards.envs import sagu_v0
         from billiards.envs.sagu import AGENTS, shooter_view
-        from billiards.league.agents import to_env_action
+        from billiards.league.players import to_env_action
 
         env = sagu_v0.raw_env(first="white", target=track.target, max_innings=track.max_innings, start="canonical",
                               noise=noise, physics=params)
@@ -676,8 +676,8 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
              name: str | None = None, command: str | None = None, group: str | None = None, spec: str | None = None) -> dict:
     """Score ``agent`` on ``track`` and return the scorecard (a dict; see docs/benchmark.md).
 
-    ``agent``: any agent :func:`billiards.bench.agents.as_agent` adapts or a spec string of
-    :func:`~billiards.bench.agents.resolve_agent`. ``track``: a track name or :class:`Track`.
+    ``agent``: any agent :func:`billiards.bench.adapters.as_agent` adapts or a spec string of
+    :func:`~billiards.bench.adapters.resolve_agent`. ``track``: a track name or :class:`Track`.
     ``out``: a directory for the ledger and the scorecard (resumable); None writes nothing, the
     scorecard is only returned.
     ``limit``: only the first ``limit`` innings / chains / matches per opponent (a quick look;

@@ -1,5 +1,5 @@
 """Two-player matches and leagues (``python match.py``; docs/matches.md): the players
-(:mod:`.agents`), matches, the league and its Elo table (:mod:`.play`), the app's schema
+(:mod:`.players`), matches, the league and its Elo table (:mod:`.play`), the app's schema
 (:mod:`.config`) and the app itself (:func:`run`)."""
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ def run(cfg, out_dir) -> dict:
     from billiards.physics.noise import noise_from_config, noise_record
     from billiards.provenance import git_commit
 
-    from .agents import make_agent, player_config
+    from .players import make_agent, player_config
     from .config import validate
     from .play import animate_match, play_match, run_league
 

@@ -14,7 +14,7 @@ from billiards.device import threads_error
 from billiards.physics.config import physics_errors
 from billiards.physics.noise import noise_errors
 
-from .agents import player_config
+from .players import player_config
 
 
 @dataclass

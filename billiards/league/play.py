@@ -1,4 +1,4 @@
-"""Matches and a league among players (:mod:`.agents`), with seeds, resume and an Elo table.
+"""Matches and a league among players (:mod:`.players`), with seeds, resume and an Elo table.
 
 A league plays, for every ordered pair of players (a, b), ``matches`` matches with a as white
 and b as yellow, the break alternating (a breaks in the even-numbered ones). Match ``i`` of pair

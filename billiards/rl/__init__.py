@@ -1,7 +1,7 @@
 """Training: SAC, TD3 and PPO on the billiards envs with TorchRL, configured by Hydra.
 
 * :mod:`billiards.rl.config` -- the config schema (ConfigStore), validation, Hydra callback;
-* :mod:`billiards.rl.agents` -- actors, critics, TorchRL losses, optimizers, target updates;
+* :mod:`billiards.rl.learners` -- actors, critics, TorchRL losses, optimizers, target updates;
 * :mod:`billiards.rl.train` -- the training loop (:func:`billiards.rl.train.train`);
 * :mod:`billiards.rl.checkpoint`, :mod:`billiards.rl.metrics` -- checkpoints and metric logs.
 

@@ -414,7 +414,7 @@ def agent_from_config(config: dict):
     from billiards.envs import make_env
     from billiards.physics.noise import noise_from_config
 
-    from .agents import make_agent
+    from .learners import make_agent
 
     cfg = OmegaConf.create(config)
     try:

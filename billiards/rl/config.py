@@ -272,7 +272,7 @@ class ExItConfig(AlgoConfig):
     ``init_policy``: an exported policy file (:func:`billiards.rl.policy.export_policy`, e.g. a
     SAC run's) whose actor has this one's shape, table and observation: the policy starts from
     its weights and proposes from round 0 on (:func:`billiards.rl.policy.init_policy_problem`).
-    ``nll_beta``: the loss's beta (:class:`~billiards.rl.agents.ExItAgent`; 0 = maximum likelihood).
+    ``nll_beta``: the loss's beta (:class:`~billiards.rl.learners.ExItAgent`; 0 = maximum likelihood).
     ``label_tolerance`` (under noise): the label is the proposer's own shot (candidate 0) where
     the search's choice beats its statistic over the noisy replays by no more than this
     (:func:`billiards.exit.noisy_labels`; 0: always the search's choice)."""
@@ -335,7 +335,7 @@ EXIT_SHOTS = 10  # shots of an expert-iteration inning (the benchmark's innings-
 
 
 # The algorithms, by algo.name: the one list (the algo group's schemas, validate's "one of ...";
-# billiards.rl.agents maps each to its agent). OFF_POLICY: those trained from a collector and a
+# billiards.rl.learners maps each to its agent). OFF_POLICY: those trained from a collector and a
 # replay buffer; REPLAY: those keeping a replay buffer (a checkpoint holds it); EXIT: expert
 # iteration (trained from the search's labels, its loop in billiards.exit).
 ALGO_SCHEMAS = {"sac": SACConfig, "td3": TD3Config, "ppo": PPOConfig, "exit": ExItConfig}
@@ -496,7 +496,7 @@ class BudgetConfig:
 
 @dataclass
 class EvalConfig:
-    """The unified evaluation protocol (:func:`billiards.evaluation.evaluate`): continue-on-miss,
+    """The unified evaluation protocol (:func:`billiards.evaluation.evaluate_policy`): continue-on-miss,
     deterministic policy, innings of ``max_shots`` shots, from every start in ``starts``
     (the first one is the primary metric)."""
 

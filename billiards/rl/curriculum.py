@@ -89,7 +89,7 @@ class Curriculum:
 
 def held_norm_values(scale, hold_power: float, hold_english: float) -> torch.Tensor:
     """The held values (p, a, b in env units; theta is never held) in ``"action_norm"`` units
-    of the agent's :class:`~billiards.rl.agents.ScaleAction` (``norm = (v - mid) / half``)."""
+    of the agent's :class:`~billiards.rl.learners.ScaleAction` (``norm = (v - mid) / half``)."""
     env_values = torch.tensor([0.0, hold_power, hold_english, hold_english], device=scale.mid.device)
     norm = (env_values - scale.mid) / scale.half_range
     norm[0] = 0.0

@@ -157,8 +157,8 @@ def export_policy(run_dir: str | Path, out: str | Path) -> Path:
 
 def _gaussian_actors() -> tuple[str, ...]:
     """The algorithms whose actor is the tanh-Gaussian one expert iteration trains (each agent's
-    ``actor_kind``, billiards.rl.agents)."""
-    from .agents import AGENTS
+    ``actor_kind``, billiards.rl.learners)."""
+    from .learners import AGENTS
 
     return tuple(name for name, agent in AGENTS.items() if agent.actor_kind == "tanh_gaussian")
 

@@ -53,7 +53,7 @@ from billiards.physics.noise import noise_from_config, noise_record
 from billiards.physics.warmup import warm_up
 from billiards.provenance import record_start
 
-from .agents import OFF_POLICY, Agent, make_agent
+from .learners import OFF_POLICY, Agent, make_agent
 from .checkpoint import CheckpointError, RunState, load_checkpoint, save_checkpoint
 from .config import (
     ALGO_SCHEMAS,
@@ -111,9 +111,9 @@ def carrier_spec(env):
 
 
 def evaluate_policy(cfg, policy, n_innings: int, start: str):
-    from billiards.evaluation import evaluate
+    from billiards.evaluation import evaluate_policy
 
-    return evaluate(
+    return evaluate_policy(
         policy,
         n_innings=n_innings,
         max_shots=cfg.eval.max_shots,

@@ -98,7 +98,7 @@ class EnsembleHeads:
     time). It reproduces, in float32 like the torch modules: the MLP (Linear/ReLU), TorchRL's
     ``NormalParamExtractor`` (biased softplus scale, lower bound), the ``TanhNormal`` on
     [-1, 1] (tanh clamped to +-(1 - float32 resolution), TorchRL's safe tanh) and
-    :class:`~billiards.rl.agents.ScaleAction`.
+    :class:`~billiards.rl.learners.ScaleAction`.
     """
 
     def __init__(self, weights, biases, scale_bias, scale_min, scale_lb, tanh_lim, mid, half, held):
@@ -329,7 +329,7 @@ class PolicyProposer:
         probabilistic actor) gives the deterministic action, and the samples are the
         distribution's reparameterised draws ``transforms(loc + scale * eps)`` with eps from
         the caller's numpy ``rng``, so torch's global RNG is never touched. The policy's last
-        module (:class:`~billiards.rl.agents.ScaleAction`) maps them onto the env's bounds.
+        module (:class:`~billiards.rl.learners.ScaleAction`) maps them onto the env's bounds.
         """
         from tensordict import TensorDict
 

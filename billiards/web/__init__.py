@@ -3,7 +3,7 @@
 
 * :mod:`.app` -- the FastAPI app (:func:`create_app`): the JSON API and the page;
 * :mod:`.sim` -- one shot as the API answers it (exact simulation, noise, paths, outcome);
-* :mod:`.agents` -- the closed list of agents the page may ask, built once and kept;
+* :mod:`.catalogue` -- the closed list of agents the page may ask, built once and kept;
 * :mod:`.runs` -- the recorded runs it replays, and the folders it may read;
 * :mod:`.replays` -- runs whose records hold scores, not shots, played again shot by shot
   (benchmark scorecards' units, search runs' P1 innings, training runs' evaluations);

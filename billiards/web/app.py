@@ -32,7 +32,7 @@ from starlette.exceptions import HTTPException
 
 from billiards.files import OUTPUTS, ROOT, LedgerError, RunLockedError, display_path
 
-from . import agents as web_agents
+from . import catalogue
 from . import sim
 from .guard import Guard, error, host_names
 from .match import HUMAN, Matches, MatchError, MatchMoved
@@ -195,7 +195,7 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
     @app.get("/api/config")
     def config():
         """The presets (tables to draw, noise models), the agents and the league players."""
-        return JSONResponse({**sim.presets(), "agents": web_agents.catalogue(root), "opponents": web_agents.league_names(root),
+        return JSONResponse({**sim.presets(), "agents": catalogue.catalogue(root), "opponents": catalogue.league_names(root),
                              "default_physics": "korean_medium"})
 
     @app.post("/api/shot")
@@ -211,14 +211,14 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
     @app.post("/api/agent")
     def agent(body: AgentRequest):
         """An agent's shot for a table (white to play) and what it considered."""
-        from billiards.bench.agents import AgentError
+        from billiards.bench.adapters import AgentError
         from billiards.physics import check_positions
 
         try:
             check_positions(body.positions, body.physics)
-            out = web_agents.ask(body.agent, body.positions, physics=body.physics, noise=body.noise, seed=body.seed,
+            out = catalogue.ask(body.agent, body.positions, physics=body.physics, noise=body.noise, seed=body.seed,
                                  level=body.level, replays=body.replays, root=root)
-        except web_agents.UnknownAgent as err:
+        except catalogue.UnknownAgent as err:
             return _error(INVALID, str(err))
         except (AgentError, ValueError) as err:
             return _error(INVALID, f"agent {body.agent}: {err}")
@@ -228,7 +228,7 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
     def considered(body: ConsideredRequest):
         """What the agent of a recorded run (or of the list) considers for a recorded shot's table:
         its candidates and estimates, asked again, and the recorded shot replayed under the noise."""
-        from billiards.bench.agents import AgentError
+        from billiards.bench.adapters import AgentError
         from billiards.envs.sagu import shooter_view
         from billiards.physics import check_actions, check_positions
 
@@ -238,19 +238,19 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
                 if kind == "scorecard":
                     entry = _scorecard_entry(real)
                 else:
-                    entry = web_agents.search_run_entry(real)
+                    entry = catalogue.search_run_entry(real)
             else:
-                entry = web_agents.get_entry(body.agent, body.physics, body.noise, root)
+                entry = catalogue.get_entry(body.agent, body.physics, body.noise, root)
             check_positions(shooter_view(np.asarray(body.positions, dtype=np.float64), body.shooter), entry.params)
             if body.commanded is not None:
                 check_actions(np.asarray(body.commanded, dtype=np.float64))
-            out = web_agents.reconsider(entry, body.positions, body.commanded, shooter=body.shooter, seed=body.seed,
+            out = catalogue.reconsider(entry, body.positions, body.commanded, shooter=body.shooter, seed=body.seed,
                                         level=body.level, replays=body.replays)
         except PathRefused as err:
             return _error(REFUSED, str(err))
         except RunNotFound as err:
             return _error(MISSING, str(err))
-        except web_agents.UnknownAgent as err:
+        except catalogue.UnknownAgent as err:
             return _error(INVALID, str(err))
         except (AgentError, ReplayRefused, LedgerError, ValueError) as err:
             return _error(INVALID, str(err))
@@ -266,7 +266,7 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
             raise ReplayRefused(f"this scorecard's agent cannot be built: {refusal}")
         spec = spec.strip()
         full = str(root / spec) if spec.endswith(".pt") and not Path(spec).is_absolute() else spec
-        return web_agents.bench_entry(full, track)
+        return catalogue.bench_entry(full, track)
 
     @app.get("/api/runs")
     def runs():
@@ -310,9 +310,9 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
     def new_match(body: MatchRequest):
         """Start a match against a league player; the player's opening turns if it breaks. A
         repeated ``key`` answers the match it started (no second match)."""
-        from billiards.bench.agents import AgentError
+        from billiards.bench.adapters import AgentError
 
-        name, players = body.opponent.removeprefix("league:"), web_agents.league_names(root)
+        name, players = body.opponent.removeprefix("league:"), catalogue.league_names(root)
         if name not in players:
             return _error(INVALID, f"opponent: no league player {body.opponent!r}; players: {', '.join(players)}")
         try:

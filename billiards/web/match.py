@@ -183,7 +183,7 @@ class Match:
                  seed: int = 0, first: str = HUMAN, max_innings: int = 200, foul_penalty: float = 1.0,
                  out_dir: Path | None = None, dt: float = sim.DEFAULT_DT, match_id: str | None = None,
                  started: float | None = None):
-        from billiards.bench.agents import league_player
+        from billiards.bench.adapters import league_player
 
         self.started = time.time() if started is None else float(started)
         self.id = match_id or new_id(self.started)

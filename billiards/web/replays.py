@@ -4,7 +4,7 @@ Three kinds (:mod:`.runs` lists them and caches what is played here):
 
 * a **benchmark scorecard's unit** (``results/bench/scorecards/<track>/<agent>/``: its
   ``evaluation.json`` names the track and the agent spec, ``units.jsonl`` holds each unit's
-  scores): the agent built again by :func:`billiards.bench.agents.resolve_agent` -- only from a
+  scores): the agent built again by :func:`billiards.bench.adapters.resolve_agent` -- only from a
   spec that names no code (the baselines, ``search:...``, ``league:...``, a ``.pt`` policy under
   ``results/``; :func:`scorecard_refusal` says why any other is refused) -- plays the unit on its
   seed as :func:`billiards.bench.run.play_unit` plays it (the same envs, seeds, clock and
@@ -18,7 +18,7 @@ Three kinds (:mod:`.runs` lists them and caches what is played here):
   shots) and its points per inning compared with ``results.json``'s ``values``;
 * a **training run's evaluation innings** (``eval.json`` beside ``config.yaml``), where the
   run's weights were shipped (``results/policies/<name>/seed<k>.pt`` whose ``source`` names the
-  run): :func:`billiards.evaluation.evaluate`'s innings played again with that policy, their
+  run): :func:`billiards.evaluation.evaluate_policy`'s innings played again with that policy, their
   points compared with ``eval.json``'s ``points``.
 
 Every shot is recorded as the replay view reads it (:func:`shot_entry`): the table before,
@@ -80,7 +80,7 @@ def scorecard_refusal(spec, root: Path) -> str | None:
     """Why the viewer will not build the agent a scorecard names, or None: it builds the
     baselines, ``search:``, ``league:`` and ``.pt`` policies under ``results/``; a spec naming
     code (``file.py:name``, ``module:name``, ``sb3:...``) or another file is refused."""
-    from billiards.bench.agents import BASELINES, spec_kind
+    from billiards.bench.adapters import BASELINES, spec_kind
 
     if not isinstance(spec, str) or not spec.strip():
         return "its evaluation.json names no agent spec, so the agent cannot be built again"
@@ -183,7 +183,7 @@ def _chain_recorded(agent, track, index: int) -> tuple[dict, list[dict]]:
 def _match_recorded(agent, track, index: int) -> tuple[dict, list[dict]]:
     """:func:`billiards.bench.run.play_match`, every shot recorded: the agent is white, the pool
     player yellow (a player of its own, reseeded per match as the pool's is)."""
-    from billiards.bench.agents import league_player
+    from billiards.bench.adapters import league_player
     from billiards.bench.run import _params_noise, play_match
 
     params, noise = _params_noise(track)
@@ -221,7 +221,7 @@ def replay_scorecard_block(d: Path, root: Path, block: int, build=None) -> dict:
     "units": their ids, "replayed", "recorded", "matches_ledger", "differences"}``. ``build``
     (spec, track) -> agent: how the agent is built (default :func:`resolve_agent`; the viewer
     passes its cache)."""
-    from billiards.bench.agents import AgentError, resolve_agent
+    from billiards.bench.adapters import AgentError, resolve_agent
 
     ev, track, why = read_scorecard(d)
     spec = (ev.get("agent") or {}).get("spec")
@@ -256,7 +256,7 @@ def scorecard_agent_searches(spec) -> bool:
     if spec.startswith("search:"):
         return True
     if spec.startswith("league:"):
-        from billiards.bench.agents import league_players
+        from billiards.bench.adapters import league_players
 
         cfg = league_players().get(spec.split(":", 1)[1]) or {}
         return cfg.get("kind", "search") not in ("random", "policy")
@@ -346,7 +346,7 @@ def policy_sources(root: Path) -> dict[str, str]:
 
 def replay_training(d: Path, policy: Path) -> dict:
     """The evaluation of training run ``d`` (``eval.json``) played again with its shipped policy
-    ``policy``, as :func:`billiards.evaluation.evaluate` plays it (the same env, seed and noise,
+    ``policy``, as :func:`billiards.evaluation.evaluate_policy` plays it (the same env, seed and noise,
     the deterministic policy): ``{"innings", "points", "recorded", "matches_record"}``."""
     import torch
     from torchrl.envs.utils import ExplorationType, set_exploration_type

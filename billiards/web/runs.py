@@ -410,10 +410,10 @@ class RunStore:
             raise RunNotFound(f"{self.display(d)} holds no {word} {unit} in its ledger")
         if refusal:
             raise ReplayRefused(out["note"])
-        from . import agents as web_agents
+        from . import catalogue
 
         def build(spec_full, track_):
-            entry = web_agents.bench_entry(spec_full, track_)
+            entry = catalogue.bench_entry(spec_full, track_)
             return entry.agent, entry.lock
 
         block = self._played(("scorecard", str(d), chosen["block"]),
@@ -473,7 +473,7 @@ class RunStore:
             refusal = "custom physics: the viewer replays presets only"
         note = (f"this run's evaluation cannot be played again: {refusal}" if refusal else
                 f"eval.json records points, not shots: choosing an inning plays the evaluation again with the run's shipped "
-                f"policy {policy} ({len(points)} innings side by side, as billiards.evaluation.evaluate plays them) and says "
+                f"policy {policy} ({len(points)} innings side by side, as billiards.evaluation.evaluate_policy plays them) and says "
                 f"whether its points equal eval.json's")
         out = {"path": self.display(d), "kind": "training", "physics": physics.split("+")[0], "noise": noise,
                "replayable": refusal is None, "note": note, "policy": policy, "considers": False, "units": units}
@@ -491,7 +491,7 @@ class RunStore:
             differ = sum(a != b for a, b in zip(run["points"], run["recorded"]))
             check = (f"played again: the points differ from eval.json's in {differ} of {len(run['recorded'])} innings (mean "
                      f"{np.mean(run['points']):.2f} against {np.mean(run['recorded']):.2f}): today's code, whose own "
-                     f"billiards.evaluation.evaluate gives these points, does not play this evaluation bit for bit as the code "
+                     f"billiards.evaluation.evaluate_policy gives these points, does not play this evaluation bit for bit as the code "
                      f"that wrote eval.json did (docs/reproducibility.md); these are today's innings of the same policy on the "
                      f"same racks and noise seed")
         out["units"] = [{**units[unit], "shots": shots, "seed": run["seed"], "replayed": {"points": run["points"][unit]},
@@ -535,7 +535,7 @@ def replay_league_match(league: dict, rec: dict) -> dict:
     (as :func:`billiards.league.play.play_match` plays it): ``shots`` and whether the replay
     gave the recorded scores (``reproduced``)."""
     from billiards.envs.sagu import AGENTS, SaguEnv, shooter_view
-    from billiards.league.agents import make_agent, player_keys
+    from billiards.league.players import make_agent, player_keys
     from billiards.physics import get_params
 
     try:

@@ -115,7 +115,7 @@ def test_the_bounds_are_listed_in_the_docs_and_the_shipped_configurations_keep_w
     """Every schema's UPPER bound is a row of docs/reliability.md's table (the key and the bound);
     the shipped presets and experiments pass; the config's noise cap is match.py's."""
     from billiards.envs.sagu import MAX_NOISE_LEVEL, noise_cap_error
-    from billiards.league.agents import PLAYERS
+    from billiards.league.players import PLAYERS
     from billiards.physics.noise import PRACTICAL_LEVEL, NoiseModel, practical_noise_error
 
     docs = (ROOT / "docs" / "reliability.md").read_text()

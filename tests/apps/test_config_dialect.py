@@ -313,7 +313,7 @@ def test_the_algorithms_are_listed_once():
     and the checkpoint's messages follow it; every algorithm's schema declares the shared keys
     through AlgoConfig; train.py's callback is the apps' ValidatingCallback."""
     from billiards.app_config import ValidatingCallback
-    from billiards.rl.agents import AGENTS, OFF_POLICY
+    from billiards.rl.learners import AGENTS, OFF_POLICY
     from billiards.rl.checkpoint import config_problem
 
     schemas = train_config.ALGO_SCHEMAS

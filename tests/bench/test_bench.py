@@ -16,7 +16,7 @@ import yaml
 
 from billiards import domain
 from billiards.bench import TRACKS, AgentError, EvaluationError, evaluate, get_track, resolve_agent
-from billiards.bench.agents import as_agent
+from billiards.bench.adapters import as_agent
 from billiards.bench.run import IDENTITY_FILE, LEDGER_FILE, SCORECARD_JSON, SCORECARD_MD, fingerprint
 from billiards.physics import get_params, random_racks
 from billiards.provenance import cpu
@@ -237,7 +237,7 @@ def test_a_search_plays_within_the_tracks_budget():
 
 @pytest.mark.parametrize("spec", ["league:random", "random"])
 def test_a_match_track_against_a_league_player(tmp_path, spec):
-    from billiards.bench.agents import league_players
+    from billiards.bench.adapters import league_players
 
     assert league_players()["random"]["kind"] == "random"  # conf/match.yaml has the opponent
     card = evaluate(spec, MATCH, out=tmp_path / "m", progress=False)

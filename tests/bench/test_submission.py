@@ -79,7 +79,7 @@ def build_board(root: Path, out: Path, report=None) -> tuple[dict, str]:
     ("random", "random"),
 ])
 def test_a_spec_gives_a_name_that_is_never_a_path(spec, name):
-    from billiards.bench.agents import spec_name
+    from billiards.bench.adapters import spec_name
     from billiards.bench.leaderboard import looks_like_path
 
     assert spec_name(spec) == name

@@ -27,7 +27,7 @@ from billiards.envs import (
     make_env,
     reset_to,
 )
-from billiards.evaluation import EvalResult, evaluate, summarize
+from billiards.evaluation import EvalResult, evaluate_policy, summarize
 from billiards.physics import (
     DEFAULT_PARAMS,
     canonical_rack,
@@ -746,7 +746,7 @@ def test_points_to_the_first_miss_are_the_end_at_first_miss_innings():
     """From the same racks, a deterministic policy's continue-on-miss inning is, up to its first
     miss, the inning the reset-on-miss env plays: its leading points are that inning's points."""
     n = 400
-    res = evaluate(nearest_red_policy(), n_innings=n, max_shots=4, seed=5)
+    res = evaluate_policy(nearest_red_policy(), n_innings=n, max_shots=4, seed=5)
     env = make_env(n, on_miss="reset", max_shots=4, seed=5)
     td = env.reset()
     points, alive = np.zeros(n, dtype=int), np.ones(n, dtype=bool)
@@ -762,7 +762,7 @@ def test_points_to_the_first_miss_are_the_end_at_first_miss_innings():
 
 
 def test_evaluate_protocol_and_json(tmp_path):
-    res = evaluate(nearest_red_policy(), n_innings=16, max_shots=5, seed=3)
+    res = evaluate_policy(nearest_red_policy(), n_innings=16, max_shots=5, seed=3)
     assert res.n_innings == 16 and res.shots == 80 and len(res.points) == 16
     assert res.mean == pytest.approx(np.mean(res.points)) and 0 <= res.best <= 5
     # the protocol by hand: continue-on-miss innings with the same racks and policy
@@ -773,10 +773,10 @@ def test_evaluate_protocol_and_json(tmp_path):
         td = step_mdp(env.step(nearest_red_policy()(td)))
         points += td["score"][:, 0].numpy()
     assert res.points == points.tolist()
-    assert evaluate(nearest_red_policy(), n_innings=16, max_shots=5, seed=3) == res
+    assert evaluate_policy(nearest_red_policy(), n_innings=16, max_shots=5, seed=3) == res
     res.to_json(tmp_path / "r.json")
     assert EvalResult.from_json(tmp_path / "r.json") == res
-    canon = evaluate(nearest_red_policy(), n_innings=4, max_shots=3, start="canonical")
+    canon = evaluate_policy(nearest_red_policy(), n_innings=4, max_shots=3, start="canonical")
     assert len(set(canon.points)) == 1  # identical racks, deterministic policy
 
 

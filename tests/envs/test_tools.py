@@ -19,7 +19,7 @@ from torchrl.envs import DoubleToFloat, GymEnv
 
 from billiards import domain
 from billiards.envs import GYM_ID, GYM_INFO_KEYS, Billiards4BallInningEnv, NormalizedActions, make_env, reset_to
-from billiards.evaluation import evaluate, numpy_policy
+from billiards.evaluation import evaluate_policy, numpy_policy
 from billiards.physics import DEFAULT_PARAMS, random_racks, simulate_batch
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -161,8 +161,8 @@ def test_torchrl_normalized_actions_transform_plays_the_same_shots():
 def test_numpy_policy_is_evaluated_like_the_raw_policy():
     x = np.array([-0.3, 0.2, 0.1, -0.1])
     shot = torch.from_numpy(domain.unnormalize_action(x))
-    a = evaluate(numpy_policy(lambda obs: np.tile(x, (len(obs), 1))), n_innings=6, max_shots=3)
-    b = evaluate(lambda td: td.set("action", shot.expand(td.batch_size[0], 4).clone()), n_innings=6, max_shots=3)
+    a = evaluate_policy(numpy_policy(lambda obs: np.tile(x, (len(obs), 1))), n_innings=6, max_shots=3)
+    b = evaluate_policy(lambda td: td.set("action", shot.expand(td.batch_size[0], 4).clone()), n_innings=6, max_shots=3)
     assert a == b and a.shots == 18
 
 

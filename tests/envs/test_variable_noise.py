@@ -298,7 +298,7 @@ def test_search_app_refuses_a_bad_scale_before_writing_anything(tmp_path):
 
 
 def test_league_players_are_told_their_shots_level():
-    from billiards.league.agents import RandomAgent
+    from billiards.league.players import RandomAgent
     from billiards.league.play import play_match
 
     class Telling(RandomAgent):
@@ -324,7 +324,7 @@ def test_a_policy_trained_under_variable_noise_is_told_the_level_or_refused_clea
     """Such a policy reads the level as its last input: the league's policy player feeds it; the
     policy proposer and the pictures, which have no level to give, refuse it by name."""
     from billiards.files import save_tagged
-    from billiards.league.agents import PolicyAgent
+    from billiards.league.players import PolicyAgent
     from billiards.pictures import load_player
     from billiards.rl.policy import POLICY_FORMAT, _build_agent, _load_policy_file
     from billiards.search.proposers import load_policy_proposer

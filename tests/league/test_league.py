@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("pettingzoo")
 
-from billiards.league.agents import PolicyPlayer, RandomPlayer, SafetyAgent, SafetyPlayer, SearchPlayer, make_agent, to_env_action  # noqa: E402
+from billiards.league.players import PolicyPlayer, RandomPlayer, SafetyAgent, SafetyPlayer, SearchPlayer, make_agent, to_env_action  # noqa: E402
 from billiards.league.play import MATCHES_FILE, elo, play_match, run_league, wilson  # noqa: E402
 from billiards.physics import DEFAULT_PARAMS  # noqa: E402
 from billiards.physics.noise import get_noise  # noqa: E402
@@ -173,7 +173,7 @@ def test_the_match_config_checks_the_noise_cap_and_each_players_search_before_an
 def test_a_player_can_be_added_on_the_command_line_and_a_bad_one_is_named():
     from hydra import compose, initialize_config_dir
 
-    from billiards.league.agents import player_config
+    from billiards.league.players import player_config
     from billiards.league.config import errors
 
     mine = "+agents.mine={kind: search, proposer: for_noise, overrides: {position: 4.0, value: results/values/run1.pt}}"
@@ -201,7 +201,7 @@ def test_a_league_record_of_the_one_schema_for_every_kind_loads_its_players():
     import dataclasses
 
     from billiards import compat
-    from billiards.league.agents import player_config, player_keys as own
+    from billiards.league.players import player_config, player_keys as own
     records = sorted((REPO / "results" / "sagu").glob("*/league.json"))
     assert records
     for path in records:

@@ -15,7 +15,7 @@ from hydra import compose, initialize_config_dir
 import billiards.rl.config  # noqa: F401  (schema + resolvers)
 from billiards import domain
 from billiards.envs import RewardModelBonus, make_env, reset_to
-from billiards.evaluation import EvalResult, evaluate
+from billiards.evaluation import EvalResult, evaluate_policy
 from billiards.physics import random_racks
 from billiards.rl.curriculum import Curriculum, HoldActions, held_norm_values
 from billiards.rl.train import make_run, train_off_policy
@@ -49,7 +49,7 @@ def test_curriculum_stage_boundaries_and_hold():
 
 
 def test_held_values_map_onto_the_documented_env_action():
-    from billiards.rl.agents import ScaleAction
+    from billiards.rl.learners import ScaleAction
 
     scale = ScaleAction(torch.tensor(domain.ACTION_LOW, dtype=torch.float32), torch.tensor(domain.ACTION_HIGH, dtype=torch.float32))
     norm = held_norm_values(scale, hold_power=0.25, hold_english=-0.5)
@@ -163,7 +163,7 @@ def test_training_with_rm_shaping_evaluates_the_true_score(tmp_path):
 
     saved = EvalResult.from_json(run_dir / "eval.json")
     policy, _ = load_policy(run_dir)
-    again = evaluate(policy, n_innings=saved.n_innings, max_shots=10, start="random", seed=0)
+    again = evaluate_policy(policy, n_innings=saved.n_innings, max_shots=10, start="random", seed=0)
     assert again.points == saved.points and again.mean == saved.mean
 
 

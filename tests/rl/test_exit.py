@@ -249,7 +249,7 @@ def test_an_exit_run_trains_stops_resumes_bit_for_bit_and_exports_a_policy_that_
     from conftest import app_here
 
     ok(app_here("billiards.rl.policy", "export", str(whole), "--out", str(out), cwd=tmp_path, env=ENV))
-    from billiards.bench.agents import resolve_agent
+    from billiards.bench.adapters import resolve_agent
     from billiards.bench.tracks import get_track
     from billiards.rl.policy import policy_file_error
     from billiards.search.proposers import load_policy_proposer
@@ -342,7 +342,7 @@ def test_the_loss_weights_each_label_by_its_scale_to_the_power_two_beta(beta):
     from tensordict import TensorDict
     from torchrl.data import Bounded
 
-    from billiards.rl.agents import make_agent
+    from billiards.rl.learners import make_agent
     from billiards.rl.config import ALGO_SCHEMAS
 
     algo = OmegaConf.structured(ALGO_SCHEMAS["exit"])
@@ -375,7 +375,7 @@ def test_each_agent_names_its_actors_form_truly():
     from torchrl.data import Bounded
     from torchrl.modules import ProbabilisticActor
 
-    from billiards.rl.agents import AGENTS, make_agent
+    from billiards.rl.learners import AGENTS, make_agent
     from billiards.rl.config import ALGO_SCHEMAS
     from billiards.rl.policy import _gaussian_actors
 

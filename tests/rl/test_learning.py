@@ -22,7 +22,7 @@ FRAMES = 24_576
 @pytest.mark.slow
 def test_sac_on_aim_features_beats_the_random_policy(tmp_path):
     from billiards.baselines import random_policy
-    from billiards.evaluation import EvalResult, evaluate
+    from billiards.evaluation import EvalResult, evaluate_policy
 
     run_dir = tmp_path / "run"
     from conftest import app_here
@@ -37,7 +37,7 @@ def test_sac_on_aim_features_beats_the_random_policy(tmp_path):
     assert summary["eval"][sac.start]["eval_mean"] == sac.mean and sac.n_innings == 100
 
     # the random policy in the same action space, on the same racks, under the same protocol
-    rand = evaluate(random_policy(constrain_aim=True, seed=0), n_innings=sac.n_innings, max_shots=sac.max_shots,
+    rand = evaluate_policy(random_policy(constrain_aim=True, seed=0), n_innings=sac.n_innings, max_shots=sac.max_shots,
                     start=sac.start, seed=sac.seed, constrain_aim=True, extra_features=True)
     assert rand.points and 0 < rand.mean < 1.0, rand.summary()  # the baseline is what it should be
     # a clear margin: half a point per inning more, twice the random mean, and over four standard

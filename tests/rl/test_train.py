@@ -830,7 +830,7 @@ def test_agents_meet_their_interface_and_average_their_actor_bit_exactly():
     import torch
     from omegaconf import OmegaConf
 
-    from billiards.rl.agents import OffPolicy, OnPolicy, make_agent
+    from billiards.rl.learners import OffPolicy, OnPolicy, make_agent
     from billiards.rl.config import ALGO_SCHEMAS
 
     rate = next(r for r in np.geomspace(1e-7, 1e-4, 20_001) if np.float32(1 - (1 - r)) != np.float32(r))

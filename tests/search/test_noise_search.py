@@ -162,7 +162,7 @@ def test_train_config_takes_the_noise_group_and_refuses_bad_sigmas():
 
 
 def test_evaluation_plays_noisy_shots_reproducibly_from_its_seed():
-    from billiards.evaluation import evaluate
+    from billiards.evaluation import evaluate_policy
 
     def policy(td):
         import torch
@@ -171,10 +171,10 @@ def test_evaluation_plays_noisy_shots_reproducibly_from_its_seed():
         td.set("action", torch.from_numpy(GeometricProposer(R=K.ball_radius).propose(pos, 1, np.random.default_rng(0))[:, 0]))
         return td
 
-    exact = evaluate(policy, n_innings=30, max_shots=3, seed=4, env_kwargs=dict(params=K))
+    exact = evaluate_policy(policy, n_innings=30, max_shots=3, seed=4, env_kwargs=dict(params=K))
     assert exact.noise == "none"
-    noisy = evaluate(policy, n_innings=30, max_shots=3, seed=4, env_kwargs=dict(params=K), noise="fastfiz_x5")
-    again = evaluate(policy, n_innings=30, max_shots=3, seed=4, env_kwargs=dict(params=K), noise="fastfiz_x5")
+    noisy = evaluate_policy(policy, n_innings=30, max_shots=3, seed=4, env_kwargs=dict(params=K), noise="fastfiz_x5")
+    again = evaluate_policy(policy, n_innings=30, max_shots=3, seed=4, env_kwargs=dict(params=K), noise="fastfiz_x5")
     assert noisy.noise == "fastfiz_x5" and noisy.points == again.points
     assert noisy.points != exact.points  # the baseline shot scores differently once perturbed
 

@@ -471,9 +471,9 @@ def test_a_training_evaluation_is_played_again_with_its_shipped_policy(tmp_path)
     """A training run whose weights are shipped (a policy under results/policies whose source
     is the run) plays its evaluation again; its points equal eval.json's. The run here is made
     in a repository copy of its own: a shipped policy re-sealed with that run as its source, the
-    run's eval.json written by billiards.evaluation.evaluate (the committed runs' eval.json were
+    run's eval.json written by billiards.evaluation.evaluate_policy (the committed runs' eval.json were
     written by older code: docs/reproducibility.md)."""
-    from billiards.evaluation import evaluate
+    from billiards.evaluation import evaluate_policy
     from billiards.files import SEAL_KEY, load_tagged, save_tagged
     from billiards.physics.config import params_from_config
     from billiards.physics.noise import noise_from_config
@@ -489,7 +489,7 @@ def test_a_training_evaluation_is_played_again_with_its_shipped_policy(tmp_path)
     save_tagged(root / "results/policies/tiny/seed0.pt", {**payload, "source": name})
     (run / "config.yaml").write_bytes((ROOT / "results/training/noisy/aim_features_fastfiz/seed0/config.yaml").read_bytes())
     policy, cfg = load_policy(shipped)
-    evaluate(policy, n_innings=12, max_shots=6, seed=5, constrain_aim=cfg.env.constrain_aim, extra_features=cfg.env.extra_features,
+    evaluate_policy(policy, n_innings=12, max_shots=6, seed=5, constrain_aim=cfg.env.constrain_aim, extra_features=cfg.env.extra_features,
              env_kwargs=dict(params=params_from_config(cfg.physics)), noise=noise_from_config(cfg.get("noise"))).to_json(run / "eval.json")
     recorded = json.loads((run / "eval.json").read_text())["points"]
     client = viewer(create_app(out_dir=None, root=root))
@@ -779,9 +779,9 @@ def test_a_slow_agent_does_not_block_a_shot(monkeypatch, out_dir):
     """The endpoints that compute run in the thread pool: a shot is answered while an agent thinks."""
     import uvicorn
 
-    import billiards.web.agents as web_agents
+    import billiards.web.catalogue as web_catalogue
 
-    real_ask = web_agents.ask
+    real_ask = web_catalogue.ask
     thinking, release = threading.Event(), threading.Event()
 
     def slow_ask(*args, **kwargs):  # an agent that thinks until the test lets it answer
@@ -789,7 +789,7 @@ def test_a_slow_agent_does_not_block_a_shot(monkeypatch, out_dir):
         release.wait(600)
         return real_ask(*args, **kwargs)
 
-    monkeypatch.setattr(web_agents, "ask", slow_ask)
+    monkeypatch.setattr(web_catalogue, "ask", slow_ask)
     port = _free_port()
     server = uvicorn.Server(uvicorn.Config(create_app(out_dir=out_dir), host="127.0.0.1", port=port, log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)

@@ -410,18 +410,18 @@ def test_a_league_replay_shows_the_running_score_and_a_shot_s_link_opens_it(page
 
 
 def test_the_page_says_it_prepares_the_simulator_on_first_use(browser, monkeypatch, tmp_path):
-    import billiards.web.agents as web_agents
+    import billiards.web.catalogue as web_catalogue
 
     app = create_app(out_dir=tmp_path)
     sim = app.state.simulator
     sim.cached, sim.ready = False, False  # as on a machine whose numba cache is empty
-    real_ask = web_agents.ask
+    real_ask = web_catalogue.ask
 
     def slow_ask(*args, **kwargs):
         time.sleep(1.5)
         return real_ask(*args, **kwargs)
 
-    monkeypatch.setattr(web_agents, "ask", slow_ask)
+    monkeypatch.setattr(web_catalogue, "ask", slow_ask)
     with serving(app) as url:
         pg = open_page(browser, url)
         wait_until(pg, "!document.getElementById('sim-banner').classList.contains('hidden')")

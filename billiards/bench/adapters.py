@@ -336,7 +336,7 @@ class SearchActorAgent(Agent):
 
 
 class LeagueAgent(Agent):
-    """A player of ``conf/match.yaml`` (:mod:`billiards.league.agents`), one table at a time; the
+    """A player of ``conf/match.yaml`` (:mod:`billiards.league.players`), one table at a time; the
     simulations of its search are counted (its actor's ``search`` wrapped)."""
 
     kind = "league"
@@ -491,7 +491,7 @@ def league_players() -> dict:
 
 def league_player(name: str, noise, params):
     """The league player ``name`` for a match or a track (``noise`` a NoiseModel)."""
-    from billiards.league.agents import make_agent, player_config
+    from billiards.league.players import make_agent, player_config
 
     players = league_players()
     if name not in players:

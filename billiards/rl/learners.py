@@ -7,7 +7,7 @@ constraint). Losses, critics and the replay buffer work on ``"action_norm"``: th
 well-scaled inputs, and TD3's exploration and target-smoothing noise (absolute numbers in
 TorchRL) mean a fraction of each coordinate's half-range, as in stable-baselines3. The full
 policy (``agent.policy``) writes ``"action"``, so it plugs straight into the env, the
-collector and :func:`billiards.evaluation.evaluate`.
+collector and :func:`billiards.evaluation.evaluate_policy`.
 
 Specs. Built from ``env.action_spec_unbatched`` (shape (4,)), never the batched spec: a
 batched (B, 4) spec silently gives SAC a target entropy of -4B instead of -4.

@@ -1,5 +1,5 @@
 """The agents the page may ask for a shot: a closed list, built by the benchmark's own
-:func:`billiards.bench.agents.resolve_agent` and kept once built.
+:func:`billiards.bench.adapters.resolve_agent` and kept once built.
 
 The list (:func:`catalogue`): the three baselines, ``search:h2`` (depth-2 lookahead over
 geometric draws), ``search:h2/base`` (the same over the shipped ``base`` ensemble),
@@ -83,7 +83,7 @@ def league_names(root: Path = ROOT) -> list[str]:
 
 
 def _catalogue(root: Path) -> dict[str, dict]:
-    from billiards.bench.agents import league_players
+    from billiards.bench.adapters import league_players
 
     out: dict[str, dict] = {name: {"kind": "baseline", "note": note} for name, note in BASELINE_NOTES.items()}
     out.update({spec: {"kind": "search", "note": note} for spec, note in SEARCHES.items()})
@@ -113,7 +113,7 @@ class _Recorder:
         return getattr(self.inner, name)
 
 
-class Entry:
+class LoadedAgent:
     """A built agent, its lock, the table and noise it plays (``params``, ``noise_model``: a
     run's own, which may be custom; ``physics``, ``noise``: their names), and the hooks that read
     what its search considered."""
@@ -144,10 +144,10 @@ _CACHE: OrderedDict = OrderedDict()
 _BUILD = threading.Lock()  # building (Hydra's global state, the first compilations) one at a time
 
 
-def get_entry(spec: str, physics: str, noise: str, root: Path = ROOT) -> Entry:
+def get_entry(spec: str, physics: str, noise: str, root: Path = ROOT) -> LoadedAgent:
     """The built agent ``spec`` for this table and noise (built once; :class:`UnknownAgent` for a
-    spec outside the list, :class:`billiards.bench.agents.AgentError` when it cannot be built)."""
-    from billiards.bench.agents import resolve_agent
+    spec outside the list, :class:`billiards.bench.adapters.AgentError` when it cannot be built)."""
+    from billiards.bench.adapters import resolve_agent
 
     spec = str(spec).strip()
     known = catalogue(root)
@@ -156,11 +156,11 @@ def get_entry(spec: str, physics: str, noise: str, root: Path = ROOT) -> Entry:
         raise UnknownAgent(f"unknown agent {spec!r}: the viewer offers random, nearest, random_aim, {', '.join(SEARCHES)}, "
                            f"{leagues} and the shipped policies results/policies/<name>/seed<k>.pt (GET /api/config lists them all)")
     track = SimpleNamespace(physics=physics, noise=noise, budget=BUDGET, name="web", tells_level=False)
-    return cached_entry((spec, physics, noise), lambda: Entry(
+    return cached_entry((spec, physics, noise), lambda: LoadedAgent(
         spec, resolve_agent(str(root / spec) if known[spec]["kind"] == "policy" else spec, track), physics, noise))
 
 
-def cached_entry(key, build) -> Entry:
+def cached_entry(key, build) -> LoadedAgent:
     """The entry ``key`` names, built by ``build()`` the first time (one build at a time; the
     :data:`MAX_CACHED` most recently used are kept)."""
     with _BUILD:
@@ -174,19 +174,19 @@ def cached_entry(key, build) -> Entry:
         return entry
 
 
-def bench_entry(spec: str, track) -> Entry:
+def bench_entry(spec: str, track) -> LoadedAgent:
     """The agent a benchmark scorecard names, built for its track (:func:`resolve_agent`; the
     caller has refused a spec that names code)."""
-    from billiards.bench.agents import resolve_agent
+    from billiards.bench.adapters import resolve_agent
 
     key = ("bench", spec, track.name, track.units)
-    return cached_entry(key, lambda: Entry(spec, resolve_agent(spec, track), track.physics, track.noise))
+    return cached_entry(key, lambda: LoadedAgent(spec, resolve_agent(spec, track), track.physics, track.noise))
 
 
-def search_run_entry(run_dir: Path) -> Entry:
+def search_run_entry(run_dir: Path) -> LoadedAgent:
     """The search a search run's ``config.yaml`` describes (its proposer, search, budget, table
     and noise, :func:`billiards.search.run.make_actor`), as an agent (rebuilt when the file changes)."""
-    from billiards.bench.agents import SearchActorAgent
+    from billiards.bench.adapters import SearchActorAgent
     from billiards.physics.config import params_from_config
     from billiards.physics.noise import noise_from_config
     from billiards.search.config import saved_config
@@ -195,17 +195,17 @@ def search_run_entry(run_dir: Path) -> Entry:
     path = Path(run_dir) / "config.yaml"
     key = ("run", str(path), path.stat().st_mtime_ns)
 
-    def build() -> Entry:
+    def build() -> LoadedAgent:
         cfg = saved_config(run_dir)
         params, noise = params_from_config(cfg.physics), noise_from_config(cfg.noise)
         actor = make_actor(cfg, make_proposer(cfg.proposer, params), params)
         name = f"{cfg.search.kind} search, proposer {cfg.proposer.name}, {cfg.search.budget} simulations"
-        return Entry(name, SearchActorAgent(actor, name), cfg.physics.preset, noise.describe(), params, noise)
+        return LoadedAgent(name, SearchActorAgent(actor, name), cfg.physics.preset, noise.describe(), params, noise)
 
     return cached_entry(key, build)
 
 
-def considered(entry: Entry, table: np.ndarray, params) -> dict | None:
+def considered(entry: LoadedAgent, table: np.ndarray, params) -> dict | None:
     """What a search considered for its last decision (see the module docstring), or None for
     an agent that does not search."""
     if entry.recorder is None:
@@ -234,7 +234,7 @@ def considered(entry: Entry, table: np.ndarray, params) -> dict | None:
     return out
 
 
-def leave_value(entry: Entry):
+def leave_value(entry: LoadedAgent):
     """The table value a position-aware (or safety) search prices its leaves with, its position
     and leave weights and its foul penalty, or None."""
     actor = entry.actor
@@ -283,7 +283,7 @@ def noisy_replays(table: np.ndarray, action: np.ndarray, noise, params, n: int, 
     return out
 
 
-def decide(entry: Entry, table: np.ndarray, *, seed: int = 0, level: float | None = None) -> dict:
+def decide(entry: LoadedAgent, table: np.ndarray, *, seed: int = 0, level: float | None = None) -> dict:
     """The agent's shot for ``table`` (its cue ball in slot 0), reseeded with ``seed``, and what
     it considered (:func:`considered`)."""
     with entry.lock:
@@ -318,7 +318,7 @@ def ask(spec: str, positions, *, physics: str = "korean_medium", noise: str = "n
             "noisy": noisy_replays(table, action, noise, params, replays, seed, level, leave_value(entry))}
 
 
-def reconsider(entry: Entry, positions, commanded=None, *, shooter: int = 0, seed: int = 0, level: float | None = None,
+def reconsider(entry: LoadedAgent, positions, commanded=None, *, shooter: int = 0, seed: int = 0, level: float | None = None,
                replays: int = 50) -> dict:
     """What the agent of ``entry`` considers for a recorded shot's table ``positions`` (in the
     table's ball order; ``shooter`` 1: the yellow's shot, looked at from its side): the agent is
@@ -342,5 +342,5 @@ def reconsider(entry: Entry, positions, commanded=None, *, shooter: int = 0, see
             "noisy": noisy_replays(table, chosen, entry.noise_model, entry.params, replays, seed, level, leave_value(entry))}
 
 
-__all__ = ["BUDGET", "Entry", "UnknownAgent", "ask", "bench_entry", "cached_entry", "catalogue", "considered", "decide",
+__all__ = ["BUDGET", "LoadedAgent", "UnknownAgent", "ask", "bench_entry", "cached_entry", "catalogue", "considered", "decide",
            "get_entry", "leave_value", "league_names", "noisy_replays", "policy_specs", "reconsider", "search_run_entry"]
