@@ -1,4 +1,5 @@
-"""The paper's unified evaluation protocol, as one function.
+"""The paper's unified evaluation protocol (:data:`billiards.protocol.Protocol.INNINGS`) for a
+TorchRL policy, as one function.
 
 Protocol: continue-on-miss innings of ``max_shots`` shots (default 10), ``n_innings`` of them
 (default 100) played side by side in one batched env (B = n_innings), random starting racks
@@ -33,6 +34,7 @@ from billiards import compat, domain
 from billiards.envs import make_env
 from billiards.files import atomic_write_text
 from billiards.physics.noise import get_noise
+from billiards.protocol import Protocol
 
 
 @dataclasses.dataclass
@@ -105,7 +107,7 @@ def evaluate_policy(
     policy,
     n_innings: int = 100,
     max_shots: int = 10,
-    start: str = "random",
+    start: str = Protocol.INNINGS.spec.start,
     seed: int = 0,
     *,
     constrain_aim: bool = False,
@@ -132,7 +134,7 @@ def evaluate_policy(
     env = make_env(
         n_innings,
         start=start,
-        on_miss="continue",
+        on_miss=Protocol.INNINGS.spec.on_miss,
         max_shots=max_shots,
         constrain_aim=constrain_aim,
         extra_features=extra_features,

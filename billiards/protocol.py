@@ -85,3 +85,8 @@ def get_protocol(name) -> Protocol:
         return Protocol(name)
     except ValueError:
         raise ValueError(f"unknown protocol {str(name)[:40]!r}; the protocols are {', '.join(p.value for p in Protocol)}") from None
+
+
+def find_protocol(name) -> Protocol | None:
+    """The protocol called ``name``, or None (a record read from a file may name anything)."""
+    return Protocol._value2member_map_.get(name) if isinstance(name, str) else None

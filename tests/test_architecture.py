@@ -17,6 +17,7 @@ first; an import inside one layer is a cycle waiting to happen and is not allowe
 
     cli -> apps -> web -> campaign -> offline -> bench -> pictures, report, league, exit -> search -> rl
       -> evaluation -> envs -> render, rm, baselines -> domain, app_config -> physics, provenance -> files, device
+      -> protocol
 
 ``search`` may import ``rl`` (a trained policy as a proposer); ``rl`` never imports ``search``.
 ``render`` only draws (physics, domain): playing an inning for a picture is ``pictures``'.
@@ -127,6 +128,7 @@ def test_the_package_import_graph_is_acyclic():
 
 
 LAYERS = [  # lowest first; a new top-level module or subpackage takes its place here
+    ("billiards.protocol",),  # the protocols' registry: every layer asks it, it imports nothing
     ("billiards", "billiards.files", "billiards.device", "billiards.numerics", "billiards.stats", "billiards.shaping"),
     ("billiards.physics", "billiards.provenance", "billiards.tables"),
     ("billiards.domain", "billiards.app_config", "billiards.compat"),

@@ -40,6 +40,8 @@ from billiards.compat import upgrade_scorecard
 from billiards.files import RunFileError, atomic_write_text, display_path, read_run_json
 
 from billiards import stats
+from billiards.protocol import Protocol
+
 from .text import md_text, one_line, plot_label
 from .tracks import TRACKS
 
@@ -48,56 +50,56 @@ OUTSIDE = "unverified"  # the status of outside submissions: counted apart from 
 SOURCES = (("verified", "scorecards/*/*/scorecard.json"), ("recorded", "recorded/*/*.json"),
            ("unverified", "submissions/*/*/scorecard.json"))
 # performance profiles: the share of units (innings, chains) scoring above each threshold
-PROFILE_THRESHOLDS = {"innings": tuple(range(10)), "p1": tuple(round(0.1 * k, 1) for k in range(10)),
-                      "p3": (0, 1, 2, 5, 10, 20, 50, 100, 200, 500)}
+PROFILE_THRESHOLDS = {Protocol.INNINGS: tuple(range(10)), Protocol.P1: tuple(round(0.1 * k, 1) for k in range(10)),
+                      Protocol.P3: (0, 1, 2, 5, 10, 20, 50, 100, 200, 500)}
 REBUILD = "python -m billiards.bench leaderboard"
 
 # The project's earlier figures for the same agent and protocol, beside the leaderboard's:
-# (track, row) -> (how to read them, the committed files, what differs from the track). Each is
+# (track, row) -> (their protocol, the committed files, what differs from the track). Each is
 # read from its files with its own interval (the same bootstrap), and agrees when the two
 # intervals overlap.
-EARLIER: dict[tuple[str, str], tuple[str, tuple[str, ...], str]] = {
-    **{("innings-v1", row): ("eval", tuple(f"results/training/paper/table5/{folder}/seed{k}/eval.json" for k in range(3)),
+EARLIER: dict[tuple[str, str], tuple[Protocol, tuple[str, ...], str]] = {
+    **{("innings-v1", row): (Protocol.INNINGS, tuple(f"results/training/paper/table5/{folder}/seed{k}/eval.json" for k in range(3)),
                              "the training runs' final evaluations, on their own evaluation racks")
        for row, folder in (("SAC aim + features, foul penalty (Table 5)", "foul_penalty"),
                            ("SAC aim + features, both bonuses (Table 5)", "both"),
                            ("SAC aim + features, gentle (Table 5)", "gentle"),
                            ("SAC aim + features, near-miss (Table 5)", "near_miss"))},
     ("p1-exact-v1", "h2, geometric proposer"): (
-        "p1", ("results/search/korean_medium/geometric_h2_p1.json",), "P1 of 100 innings x 100 shots, seed 0"),
+        Protocol.P1, ("results/search/korean_medium/geometric_h2_p1.json",), "P1 of 100 innings x 100 shots, seed 0"),
     ("p1-exact-v1", "PUCT, geometric proposer"): (
-        "p1", ("results/search/korean_medium/geometric_puct_p1.json",), "P1 of 100 innings x 100 shots, seed 0"),
+        Protocol.P1, ("results/search/korean_medium/geometric_puct_p1.json",), "P1 of 100 innings x 100 shots, seed 0"),
     ("p3-exact-v1", "h2, geometric proposer"): (
-        "p3", ("results/search/korean_medium/geometric_h2_p3.json",), "10 chains (seeds 0-9), cap 10,000"),
+        Protocol.P3, ("results/search/korean_medium/geometric_h2_p3.json",), "10 chains (seeds 0-9), cap 10,000"),
     ("p3-exact-v1", "PUCT, geometric proposer"): (
-        "p3", ("results/search/korean_medium/geometric_puct_p3.json",), "10 chains (seeds 0-9), cap 10,000"),
+        Protocol.P3, ("results/search/korean_medium/geometric_puct_p3.json",), "10 chains (seeds 0-9), cap 10,000"),
     ("p1-fastfiz-v1", "position-aware robust search (the default of search.py under noise)"): (
-        "p1", ("results/noisy_track/headline/target40_fastfiz_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
+        Protocol.P1, ("results/noisy_track/headline/target40_fastfiz_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
     ("p3-fastfiz-v1", "position-aware robust search (the default of search.py under noise)"): (
-        "p3", ("results/noisy_track/headline/target40_fastfiz_p3/results.json",), "300 chains, seeds 2000-2299"),
+        Protocol.P3, ("results/noisy_track/headline/target40_fastfiz_p3/results.json",), "300 chains, seeds 2000-2299"),
     ("p1-fastfiz-v1", "robust search over the shot ranker, blind to the leave"): (
-        "p1", ("results/noisy_track/headline/ranked500_fastfiz_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
+        Protocol.P1, ("results/noisy_track/headline/ranked500_fastfiz_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
     ("p3-fastfiz-v1", "robust search over the shot ranker, blind to the leave"): (
-        "p3", ("results/noisy_track/headline/ranked500_fastfiz_p3/results.json",), "300 chains, seeds 2000-2299"),
+        Protocol.P3, ("results/noisy_track/headline/ranked500_fastfiz_p3/results.json",), "300 chains, seeds 2000-2299"),
     ("p1-x5-v1", "position-aware robust search over the shot ranker"): (
-        "p1", ("results/noisy_track/headline/position_fastfiz_x5_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
+        Protocol.P1, ("results/noisy_track/headline/position_fastfiz_x5_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
     ("p1-x5-v1", "robust search over the shot ranker, blind to the leave"): (
-        "p1", ("results/noisy_track/headline/ranked500_fastfiz_x5_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
+        Protocol.P1, ("results/noisy_track/headline/ranked500_fastfiz_x5_p1/results.json",), "P1 of 100 innings x 50 shots, seed 2"),
 }
 
 
-def earlier_figure(kind: str, files: tuple[str, ...]) -> dict:
+def earlier_figure(kind: Protocol, files: tuple[str, ...]) -> dict:
     """An earlier figure and its 95 % interval, read from its committed files (innings: points
-    per inning over every seed's evaluation; P1: per-shot success resampled by inning; P3: the
-    chain mean resampled by chain)."""
+    per inning over every seed's training evaluation; P1: per-shot success resampled by inning;
+    P3: the chain mean resampled by chain)."""
     from billiards.files import ROOT
 
     data = [json.loads((ROOT / f).read_text()) for f in files]
-    if kind == "eval":
+    if kind is Protocol.INNINGS:
         runs = [d["points"] for d in data]
         agg = stats.aggregate(runs, statistic=np.mean) if len(runs) > 1 else None
         value, ci = (agg["iqm"], agg["ci95"]) if agg else (float(np.mean(runs[0])), stats.bootstrap_ci(runs[0]))
-    elif kind == "p1":
+    elif kind is Protocol.P1:
         rates = np.asarray(data[0]["values"], dtype=float) / data[0]["extra"]["shots_per_inning"]
         value, ci = float(rates.mean()), stats.bootstrap_ci(rates)
     else:
@@ -289,7 +291,7 @@ def _row(track, cards: list[dict]) -> dict:
            "compute": first["agent"].get("compute", "observation"), "version": first["version"]}
     runs = _runs(cards)
     row["seeds"] = len(runs)
-    if track.protocol == "match":
+    if track.protocol.spec.two_player:
         card = first
         ratings = dict(track.ratings)
         opponents = [track.opponents[u // track.units] for u in range(len(card["values"]))]
@@ -304,7 +306,7 @@ def _row(track, cards: list[dict]) -> dict:
             mean = stats.aggregate(runs, statistic=np.mean)
             iqm = stats.aggregate(runs)
             row.update(score=mean["iqm"], ci95=mean["ci95"], iqm=iqm["iqm"], iqm_ci95=iqm["ci95"], per_seed=mean["per_seed"])
-        if track.protocol == "p3":
+        if track.protocol is Protocol.P3:
             pooled = np.concatenate([np.asarray(r, dtype=float) for r in runs])
             row.update(median=float(np.median(pooled)), max=int(pooled.max()), reached_cap=int((pooled >= track.shots).sum()),
                        chains=int(pooled.size))
@@ -345,7 +347,7 @@ def leaderboard(root: Path, report: Callable[[str], None] | None = None) -> dict
         # the no-simulator division: the agents that act from the observation alone, ranked among themselves
         division = [(row, runs) for row, runs in ranked if row["compute"] == "observation"]
         entry["no_simulator"] = {"rows": [row["row"] for row, _ in division]}
-        if track.protocol != "match" and ranked:
+        if not track.protocol.spec.two_player and ranked:
             for (row, runs), (_, below) in zip(ranked, ranked[1:]):  # is each row really above the next?
                 row["p_above_next"] = stats.probability_of_improvement(runs, below)
             entry["no_simulator"]["p_above_next"] = {row["row"]: stats.probability_of_improvement(runs, below)
@@ -372,17 +374,14 @@ def _count(n: int, what: str) -> str:
     return f"{n} {what}{'' if n == 1 else 's'}"
 
 
-def format_score(protocol: str, value: float) -> str:
+_FORMATS = {Protocol.P1: lambda v: f"{100 * v:.2f} %", Protocol.INNINGS: lambda v: f"{v:.3f}", Protocol.P3: lambda v: f"{v:.2f}",
+            Protocol.MATCH: lambda v: f"{v:.0f}"}
+
+
+def format_score(protocol: Protocol | str, value: float) -> str:
     """A row's figure as the board writes it: success per shot in %, points per inning to three
     decimals, chain lengths to two, Elo to the unit."""
-    if protocol == "p1":
-        return f"{100 * value:.2f} %"
-    if protocol == "innings":
-        return f"{value:.3f}"
-    return f"{value:.0f}" if protocol == "match" else f"{value:.2f}"
-
-
-METRIC_NAMES = {"innings": "points per inning", "p1": "success per shot", "p3": "chain length (mean)", "match": "Elo"}
+    return _FORMATS[Protocol(protocol)](value)
 
 
 def _division_markdown(name: str, track, t: dict) -> list[str]:
@@ -397,13 +396,13 @@ def _division_markdown(name: str, track, t: dict) -> list[str]:
     lines = [f"### {name}: the no-simulator division", "",
              "The agents that act from the observation alone (no simulator at decision time: learned policies and "
              "baselines), ranked among themselves.", "",
-             f"| # | agent | {METRIC_NAMES[track.protocol]} [95 %] | "
-             + ("win rate [95 %]" if track.protocol == "match" else "P(above the next) [95 %]")
+             f"| # | agent | {track.protocol.spec.metric_name} [95 %] | "
+             + ("win rate [95 %]" if track.protocol.spec.two_player else "P(above the next) [95 %]")
              + " | ms / decision | overall # | status |", "|---|---|---|---|---|---|---|"]
     overall = {r["row"]: i for i, r in enumerate(t["rows"], 1)}
     above = division.get("p_above_next", {})
     for i, r in enumerate(rows, 1):
-        if track.protocol == "match":
+        if track.protocol.spec.two_player:
             main = f"{fmt(r['score'])} [{fmt(r['elo_ci95'][0])}, {fmt(r['elo_ci95'][1])}]"
             second = f"{100 * r['win_rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}]"
         else:
@@ -433,22 +432,23 @@ def markdown(board: dict) -> str:
              "racks, no weights in the repository); **unverified** an outside submission not yet re-run.", ""]
     for name, t in board["tracks"].items():
         track = TRACKS[name]
-        metric = METRIC_NAMES[track.protocol]
+        metric = track.protocol.spec.metric_name
         lines += [f"## {name}", "", f"{t['description']}: {t['rules']}.", ""]
         if not t["rows"]:
             lines += ["(no scorecards yet)", ""]
             continue
-        extra = {"innings": "IQM", "p1": "IQM", "p3": "median · IQM · max · at cap", "match": "win rate [95 %]"}[track.protocol]
+        extra = {Protocol.INNINGS: "IQM", Protocol.P1: "IQM", Protocol.P3: "median · IQM · max · at cap",
+                 Protocol.MATCH: "win rate [95 %]"}[track.protocol]
         lines += [f"| # | agent | {metric} [95 %] | {extra} | P(above the next) [95 %] | seeds | ms · sims / decision | class "
                   "| status | earlier figure |", "|---|---|---|---|---|---|---|---|---|---|"]
         for i, r in enumerate(t["rows"], 1):
             fmt = lambda v: format_score(track.protocol, v)  # noqa: E731
-            if track.protocol == "match":
+            if track.protocol.spec.two_player:
                 main = f"{fmt(r['score'])} [{fmt(r['elo_ci95'][0])}, {fmt(r['elo_ci95'][1])}]"
                 more = f"{100 * r['win_rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}]"
             else:
                 main = f"{fmt(r['score'])} [{fmt(r['ci95'][0])}, {fmt(r['ci95'][1])}]"
-                more = fmt(r["iqm"]) if track.protocol != "p3" else \
+                more = fmt(r["iqm"]) if track.protocol is not Protocol.P3 else \
                     f"{r['median']:.1f} · {r['iqm']:.2f} · {r['max']} · {r['reached_cap']}/{r['chains']}"
             cost = "—" if r["ms_per_decision"] is None else f"{r['ms_per_decision']:.2f} · {r['sims_per_decision']:.0f}"
             earlier = ""
@@ -483,16 +483,17 @@ def draw_figure(board: dict, path: Path) -> Path:
     for ax, name in zip(axes[:, 0], names):
         rows = board["tracks"][name]["rows"][::-1]
         y = np.arange(len(rows))
-        scale = 100.0 if TRACKS[name].protocol == "p1" else 1.0
-        score = np.array([r["score"] for r in rows]) * (scale if TRACKS[name].protocol != "match" else 1)
-        if TRACKS[name].protocol == "match":
+        protocol = TRACKS[name].protocol
+        scale = 100.0 if protocol is Protocol.P1 else 1.0
+        score = np.array([r["score"] for r in rows]) * (scale if not protocol.spec.two_player else 1)
+        if protocol.spec.two_player:
             lo = score - np.array([r["elo_ci95"][0] for r in rows])
             hi = np.array([r["elo_ci95"][1] for r in rows]) - score
         else:
             lo = score - np.array([r["ci95"][0] for r in rows]) * scale
             hi = np.array([r["ci95"][1] for r in rows]) * scale - score
         colors = ["tab:blue" if r["compute"] == "observation" else "tab:orange" for r in rows]
-        if TRACKS[name].protocol == "match":  # ratings: dots with their intervals, not bars from 0
+        if protocol.spec.two_player:  # ratings: dots with their intervals, not bars from 0
             ax.errorbar(score, y, xerr=[lo, hi], fmt="none", ecolor="black", capsize=2)
             ax.scatter(score, y, c=colors, zorder=3)
         else:
@@ -590,12 +591,8 @@ def snapshot_path() -> Path:
 def headline_value(card: dict) -> float:
     """The figure of a scorecard that the board ranks rows by (a row's ``score``): points per
     inning (innings), success per shot (P1), the mean chain length (P3), the Elo (matches)."""
-    protocol = TRACKS[card["track"]].protocol
-    if protocol == "innings":
-        return float(card["points_per_inning"]["mean"])
-    if protocol == "p1":
-        return float(card["success_per_shot"]["mean"])
-    return float(card["chain"]["mean"]) if protocol == "p3" else float(card["elo"])
+    metric = TRACKS[card["track"]].protocol.spec.metric
+    return float(card[metric]) if metric == "elo" else float(card[metric]["mean"])
 
 
 def placement(track: str, value: float, board: dict | str | Path | None = None, version: int | None = None,
@@ -697,8 +694,8 @@ def compare(first: Path, second: Path) -> dict:
     if va.size != track.n_values():
         raise ValueError(f"{display_path(pa)} and {display_path(pb)} hold {va.size} unit scores each, but a whole evaluation "
                          f"of {track.name} has {track.n_values()}: they cannot be compared")
-    unit, scale = {"innings": ("success per shot", 1.0 / track.shots), "p1": ("success per shot", 1.0),
-                   "p3": ("chain length", 1.0)}.get(track.protocol, ("match score", 1.0))
+    unit, scale = {Protocol.INNINGS: ("success per shot", 1.0 / track.shots), Protocol.P1: ("success per shot", 1.0),
+                   Protocol.P3: ("chain length", 1.0), Protocol.MATCH: ("match score", 1.0)}[track.protocol]
     diff = (va - vb) * scale
     name = lambda c: one_line(c["agent"].get("name", "?"))  # noqa: E731
     return {"track": a["track"], "unit": unit, "first": name(a), "second": name(b),

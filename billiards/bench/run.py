@@ -29,6 +29,7 @@ import numpy as np
 
 from billiards import domain, files
 from billiards.files import LedgerKind, atomic_write_text, display_path
+from billiards.protocol import Protocol
 
 from billiards import stats
 from .adapters import Agent, AgentError, checked_action, resolve_agent
@@ -37,9 +38,6 @@ from .tracks import Track, get_track
 
 IDENTITY_FILE, LEDGER_FILE = "evaluation.json", "units.jsonl"
 SCORECARD_JSON, SCORECARD_MD = "scorecard.json", "scorecard.md"
-# what a protocol's resumable unit is called: (one, several)
-UNIT_WORDS = {"innings": ("inning block", "inning blocks"), "p1": ("inning block", "inning blocks"), "p3": ("chain", "chains"),
-              "match": ("match", "matches")}
 
 
 class EvaluationError(RuntimeError):
@@ -111,7 +109,8 @@ def play_innings(agent: Agent, track: Track, first: int, n: int, on_shot=None, o
     truncated, info)."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
-    env = Billiards4BallVectorEnv(n, start="random", on_miss="continue", max_shots=track.shots, physics=track.physics,
+    spec = track.protocol.spec
+    env = Billiards4BallVectorEnv(n, start=spec.start, on_miss=spec.on_miss, max_shots=track.shots, physics=track.physics,
                                   noise=track.noise, normalize_actions=False)
     obs, info = env.reset(seed=track.seed + first)
     agent.reset(track.seed + first)
@@ -139,8 +138,8 @@ def play_chain(agent: Agent, track: Track, index: int, on_shot=None) -> dict:
     miss or foul or the cap (``on_shot`` as for :func:`play_innings`, the row always 0)."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
-    seed = track.seed + index
-    env = Billiards4BallVectorEnv(1, start="canonical", on_miss="reset", max_shots=track.shots, physics=track.physics,
+    seed, spec = track.seed + index, track.protocol.spec
+    env = Billiards4BallVectorEnv(1, start=spec.start, on_miss=spec.on_miss, max_shots=track.shots, physics=track.physics,
                                   noise=track.noise, normalize_actions=False)
     obs, info = env.reset(seed=seed)
     agent.reset(seed)
@@ -202,22 +201,26 @@ def play_match(agent: Agent, track: Track, index: int, on_shot=None, opponent=No
     seed = track.seed + 1000 * j + i
     result = play(_MatchPlayer(clock, track.tells_level), opponent, seed=seed,
                   first="white" if i % 2 == 0 else "yellow", target=track.target, max_innings=track.max_innings,
-                  start="canonical", noise=noise, physics=params, on_shot=on_shot)
+                  start=track.protocol.spec.start, noise=noise, physics=params, on_shot=on_shot)
     winner = {"white": "agent", "yellow": "opponent", None: None}[result["winner"]]
     return {"index": index, "opponent": name, "seed": seed, "first": "agent" if i % 2 == 0 else "opponent",
             "winner": winner, "points": [result["scores"]["white"], result["scores"]["yellow"]],
             "innings": result["innings"], **clock.record()}
 
 
+def _play_block(agent: Agent, track: Track, unit: int, on_shot=None) -> dict:
+    first = unit * track.block
+    return play_innings(agent, track, first, min(track.block, track.units - first), on_shot)
+
+
+# how each protocol plays one resumable unit for any agent (billiards.protocol names them)
+PLAYERS = {Protocol.INNINGS: _play_block, Protocol.P1: _play_block, Protocol.P3: play_chain, Protocol.MATCH: play_match}
+
+
 def play_unit(agent: Agent, track: Track, unit: int, on_shot=None) -> dict:
     """One resumable unit of ``track`` (a block of innings, a chain, a match); ``on_shot`` as the
     protocol's own function takes it."""
-    if track.protocol in ("innings", "p1"):
-        first = unit * track.block
-        return play_innings(agent, track, first, min(track.block, track.units - first), on_shot)
-    if track.protocol == "p3":
-        return play_chain(agent, track, unit, on_shot)
-    return play_match(agent, track, unit, on_shot)
+    return PLAYERS[track.protocol](agent, track, unit, on_shot)
 
 
 # ----------------------------------------------------------------------------- the fingerprint
@@ -235,12 +238,12 @@ def fingerprint_data(track: Track) -> list:
     ref = NearestRedAgent(params)
     r9 = lambda a: np.round(np.asarray(a, dtype=np.float64), 9).tolist()
     out: list = []
-    if track.protocol == "match":
+    if track.protocol.spec.two_player:
         from billiards.envs import sagu_v0
         from billiards.envs.sagu import AGENTS, shooter_view
         from billiards.league.players import to_env_action
 
-        env = sagu_v0.raw_env(first="white", target=track.target, max_innings=track.max_innings, start="canonical",
+        env = sagu_v0.raw_env(first="white", target=track.target, max_innings=track.max_innings, start=track.protocol.spec.start,
                               noise=noise, physics=params)
         env.reset(seed=track.seed)
         for _ in range(6):
@@ -249,8 +252,8 @@ def fingerprint_data(track: Track) -> list:
             env.step(action)
             out.append([r9(env.game.positions), list(env.game.scores), env.agent_selection])
         return out
-    start, on_miss = ("canonical", "reset") if track.protocol == "p3" else ("random", "continue")
-    env = Billiards4BallVectorEnv(4, start=start, on_miss=on_miss, max_shots=max(track.shots, 2), physics=track.physics,
+    spec = track.protocol.spec
+    env = Billiards4BallVectorEnv(4, start=spec.start, on_miss=spec.on_miss, max_shots=max(track.shots, 2), physics=track.physics,
                                   noise=track.noise, normalize_actions=False)
     obs, info = env.reset(seed=track.seed)
     out.append([r9(info["positions"]), r9(obs), None if env._levels is None else r9(env._levels)])
@@ -284,12 +287,11 @@ def _match_score(rec: dict) -> float:
 def unit_values(track: Track, records: list[dict]) -> list:
     """The per-unit scores the intervals resample (a scorecard's ``values``): points per inning
     (innings), each inning's success rate (P1), chain lengths (P3), match scores (1, 0.5, 0)."""
-    if track.protocol in ("innings", "p1"):
-        score = _per_inning(records, "score")
-        if track.protocol == "innings":
-            return score.sum(axis=1).astype(int).tolist()
-        return [round(float(v), 6) for v in score.mean(axis=1)]
-    if track.protocol == "p3":
+    if track.protocol is Protocol.INNINGS:
+        return _per_inning(records, "score").sum(axis=1).astype(int).tolist()
+    if track.protocol is Protocol.P1:
+        return [round(float(v), 6) for v in _per_inning(records, "score").mean(axis=1)]
+    if track.protocol is Protocol.P3:
         return [int(r["length"]) for r in records]
     return [_match_score(r) for r in records]
 
@@ -302,14 +304,14 @@ def score_records(track: Track, records: list[dict]) -> dict:
                  "sims_per_decision": round(sum(r["sims"] for r in records) / max(decisions, 1), 2)}
     if not records:
         return out
-    if track.protocol in ("innings", "p1"):
+    if track.protocol.spec.by_innings:
         score, foul = _per_inning(records, "score"), _per_inning(records, "foul")
         rate = score.mean(axis=1)  # each inning's success rate: the unit of resampling
         out["success_per_shot"] = {"mean": round(float(score.mean()), 6), "ci95": stats.bootstrap_ci(rate),
                                    "n_shots": int(score.size), "n_innings": int(len(rate))}
         out["foul_per_shot"] = {"mean": round(float(foul.mean()), 6), "ci95": stats.bootstrap_ci(foul.mean(axis=1))}
         out["points_per_inning"] = stats.summary(score.sum(axis=1))
-    elif track.protocol == "p3":
+    elif track.protocol is Protocol.P3:
         lengths = np.asarray([r["length"] for r in records], dtype=float)
         out["chain"] = {**stats.summary(lengths), "max": int(lengths.max()), "reached_cap": int((lengths >= track.shots).sum()),
                         "cap": track.shots}
@@ -336,10 +338,10 @@ def score_records(track: Track, records: list[dict]) -> dict:
 def figures(card: dict) -> list[tuple[str, str, str]]:
     """The scorecard's figures as (what, value, 95 % interval) text, once for both the page and
     the one-line summary."""
-    protocol = card["track_record"]["protocol"]
+    protocol = Protocol(card["track_record"]["protocol"])
     pct = lambda v: f"{100 * v:.2f} %"
     out = []
-    if "points_per_inning" in card and protocol == "innings":
+    if "points_per_inning" in card and protocol is Protocol.INNINGS:
         p = card["points_per_inning"]
         out.append(("points per inning", f"{p['mean']:.3f} (IQM {p['iqm']:.3f})", f"{p['ci95'][0]:.3f} - {p['ci95'][1]:.3f}"))
     if "success_per_shot" in card and "ci95" in card["success_per_shot"]:
@@ -722,7 +724,7 @@ def _play(agent, track, full, out, ledger, done, identity_agent, run_id, command
 
     n_units = track.n_blocks()
     todo = [u for u in range(n_units) if u not in done]
-    one, several = UNIT_WORDS[track.protocol]
+    one, several = track.protocol.spec.unit
     if progress:
         print(f"evaluate: {agent.name} on {full.name} ({track.rules()}); {len(done)} of {n_units} {several} done"
               + (f"; output {display_path(out)}" if out is not None else ""), flush=True)
@@ -783,7 +785,7 @@ def headline(card: dict) -> str:
     return f"{one_line(card['agent']['name'])} on {card['track']}: " + "; ".join(parts) + (" (partial)" if card.get("partial") else "")
 
 
-__all__ = ["DERIVED", "EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "UNITS", "UNIT_WORDS",
+__all__ = ["DERIVED", "EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "UNITS",
            "claim_directory", "claim_problems", "evaluate", "failure_message", "figures", "fingerprint", "fingerprint_data",
            "headline", "ledger_figures", "out_problem", "play_unit", "read_identity", "read_ledger", "run_identity",
            "score_records", "scorecard_markdown", "scorecard_problems", "unit_values", "whose_failure"]

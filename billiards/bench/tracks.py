@@ -37,7 +37,8 @@ import math
 import re
 from dataclasses import dataclass
 
-PROTOCOLS = ("innings", "p1", "p3", "match")
+from billiards.protocol import Protocol, get_protocol
+
 VERSION_RE = re.compile(r"^(?P<base>[a-z0-9][a-z0-9-]*?)-v(?P<version>\d+)$")
 
 
@@ -46,7 +47,7 @@ class Track:
     """One evaluation protocol, fixed (see the module docstring)."""
 
     name: str  # "<base>-v<version>"
-    protocol: str  # innings | p1 | p3 | match
+    protocol: Protocol  # innings | p1 | p3 | match (a name is turned into the member)
     description: str
     units: int  # innings (innings, p1), chains (p3), matches per opponent (match)
     shots: int = 10  # shots per inning (innings, p1); the chain cap (p3)
@@ -63,6 +64,9 @@ class Track:
     max_innings: int = 200  # match: innings before a match is called a draw
     fingerprint: str = ""  # sha256 over the first racks and the reference agent's first decisions
 
+    def __post_init__(self):
+        object.__setattr__(self, "protocol", get_protocol(self.protocol))
+
     @property
     def version(self) -> int:
         return int(VERSION_RE.match(self.name)["version"])
@@ -74,17 +78,17 @@ class Track:
     @property
     def metric(self) -> str:
         """The number the leaderboard ranks this track by."""
-        return {"innings": "points_per_inning", "p1": "success_per_shot", "p3": "chain", "match": "elo"}[self.protocol]
+        return self.protocol.spec.metric
 
     def seeds(self) -> list[int]:
         """Every evaluation seed the track plays (innings, chains or matches)."""
-        if self.protocol == "match":
+        if self.protocol.spec.two_player:
             return [self.seed + 1000 * j + i for j in range(len(self.opponents)) for i in range(self.units)]
         return list(range(self.seed, self.seed + self.units))
 
     def n_blocks(self) -> int:
         """Resumable units: blocks of innings, chains or matches."""
-        if self.protocol in ("innings", "p1"):
+        if self.protocol.spec.by_innings:
             return -(-self.units // self.block)
         return len(self.seeds())
 
@@ -92,11 +96,11 @@ class Track:
         """The track's rules in one line (docs, scorecards, ``--help``)."""
         noise = "exact play" if self.noise == "none" else f"noise {self.noise}" + (" (level told)" if self.tells_level else "")
         what = {
-            "innings": f"{self.units} random-start innings x {self.shots} shots, continue-on-miss; points per inning",
-            "p1": f"{self.units} random-start innings x {self.shots} shots, continue-on-miss; per-shot success",
-            "p3": f"{self.units} chains from the opening rack to the first miss or foul, cap {self.shots}; chain length",
-            "match": (f"{self.units} matches to {self.target} against each of {', '.join(self.opponents)} (break "
-                      f"alternating); win rate and Elo ({self.anchor} = {dict(self.ratings).get(self.anchor, 0):.0f})"),
+            Protocol.INNINGS: f"{self.units} random-start innings x {self.shots} shots, continue-on-miss; points per inning",
+            Protocol.P1: f"{self.units} random-start innings x {self.shots} shots, continue-on-miss; per-shot success",
+            Protocol.P3: f"{self.units} chains from the opening rack to the first miss or foul, cap {self.shots}; chain length",
+            Protocol.MATCH: (f"{self.units} matches to {self.target} against each of {', '.join(self.opponents)} (break "
+                             f"alternating); win rate and Elo ({self.anchor} = {dict(self.ratings).get(self.anchor, 0):.0f})"),
         }[self.protocol]
         return f"{what}; {noise}, {self.physics}; seeds from {self.seed:,}; search budget {self.budget} sims/decision"
 
@@ -110,8 +114,7 @@ class Track:
         """(lowest, highest, whole numbers only) of one unit's score (a scorecard's ``values``):
         points per inning in [0, shots], an inning's success per shot in [0, 1], a chain's length
         in [0, the cap], a match's score 0, 0.5 or 1."""
-        return {"innings": (0, self.shots, True), "p1": (0.0, 1.0, False), "p3": (0, self.shots, True),
-                "match": (0.0, 1.0, False)}[self.protocol]
+        return self.protocol.spec.value_range(self.shots)
 
     def n_values(self) -> int:
         """How many unit scores a whole evaluation of the track has (innings, chains or matches)."""
@@ -128,7 +131,7 @@ class Track:
         lo, hi, whole = self.unit_range()
         for i, v in enumerate(values):
             why = _number_problem(v, lo, hi, whole)
-            if why is None and self.protocol == "match" and v not in (0, 0.5, 1):
+            if why is None and self.protocol.spec.two_player and v not in (0, 0.5, 1):
                 why = "not a match's score (1 a win, 0.5 a draw, 0 a loss)"
             if why is not None:
                 return f"unit score {i} ({str(v)[:40]}): {why} on {self.name}"
@@ -151,8 +154,8 @@ class Track:
         if rec["sims"] > self.budget * rec["decisions"]:
             return (f"{rec['sims']} simulations for {rec['decisions']} decisions, past the track's budget of {self.budget} "
                     "per decision")
-        check = {"innings": self._innings_problem, "p1": self._innings_problem, "p3": self._chain_problem,
-                 "match": self._match_problem}[self.protocol]
+        check = {Protocol.INNINGS: self._innings_problem, Protocol.P1: self._innings_problem, Protocol.P3: self._chain_problem,
+                 Protocol.MATCH: self._match_problem}[self.protocol]
         try:
             return check(rec)
         except (KeyError, TypeError, ValueError) as err:  # a key missing or of another kind: a sentence
@@ -232,28 +235,28 @@ class Track:
 _MATCH_RATINGS = (("greedy", 1500.0), ("greedy_r", 1547.1))
 
 _REGISTRY: tuple[Track, ...] = (
-    Track("innings-v1", "innings", "The paper's evaluation protocol: points per 10-shot inning from random racks, exact play",
+    Track("innings-v1", Protocol.INNINGS, "The paper's evaluation protocol: points per 10-shot inning from random racks, exact play",
           units=100, shots=10, seed=7_100_000,
           fingerprint="a2f0dab7360af71310fa73a116ad68180829a025e5cc4b1c905e7f83fbc0286b"),
-    Track("p1-exact-v1", "p1", "Per-shot success from random racks, exact play",
+    Track("p1-exact-v1", Protocol.P1, "Per-shot success from random racks, exact play",
           units=100, shots=20, seed=7_200_000,
           fingerprint="cfc0f8ff7ff57815fe1d4eda320562dc2d7589f2e553dc96acfc7668c57df251"),
-    Track("p3-exact-v1", "p3", "Chains from the opening rack, exact play",
+    Track("p3-exact-v1", Protocol.P3, "Chains from the opening rack, exact play",
           units=20, shots=1000, seed=7_300_000,
           fingerprint="ed89d0bb2a977de82ed0d01dcbb269e036fc547adabafb6fdf5f9c326f2bb17b"),
-    Track("p1-fastfiz-v1", "p1", "Per-shot success from random racks under fastfiz execution noise",
+    Track("p1-fastfiz-v1", Protocol.P1, "Per-shot success from random racks under fastfiz execution noise",
           units=100, shots=20, seed=7_400_000, noise="fastfiz",
           fingerprint="3af43f59e5a5084ad25b11190a174655d1a4abe04fb3bdcabe171e19c4c9c3da"),
-    Track("p3-fastfiz-v1", "p3", "Chains from the opening rack under fastfiz execution noise",
+    Track("p3-fastfiz-v1", Protocol.P3, "Chains from the opening rack under fastfiz execution noise",
           units=50, shots=1000, seed=7_500_000, noise="fastfiz",
           fingerprint="cd0e39edc0b7e1ff86c825ae55dc85313af0873d4f30995f7808e41000b6c996"),
-    Track("p1-x5-v1", "p1", "Per-shot success from random racks under five times fastfiz's noise",
+    Track("p1-x5-v1", Protocol.P1, "Per-shot success from random racks under five times fastfiz's noise",
           units=100, shots=20, seed=7_600_000, noise="fastfiz_x5",
           fingerprint="e0b426743600da4d2ff5c6f179aa4ee38c24114355790ad23298d756757ea22b"),
-    Track("p1-variable-v1", "p1", "Per-shot success from random racks, each shot's noise level drawn in [0, 5] x fastfiz and told",
+    Track("p1-variable-v1", Protocol.P1, "Per-shot success from random racks, each shot's noise level drawn in [0, 5] x fastfiz and told",
           units=100, shots=20, seed=7_700_000, noise="variable", tells_level=True,
           fingerprint="21f58dd0847e89d3fe80b44fa3f9a2aef6bfea353ef75824e021e3cb52a1b886"),
-    Track("match-x5-v1", "match", "Matches to 10 under fastfiz_x5 against the reference pool",
+    Track("match-x5-v1", Protocol.MATCH, "Matches to 10 under fastfiz_x5 against the reference pool",
           units=10, seed=7_800_000, noise="fastfiz_x5", opponents=("greedy", "greedy_r"), ratings=_MATCH_RATINGS,
           anchor="greedy", fingerprint="5e6bf1ae696bf9691ae21d6706926dd3187da7476a94e0415db3e8d8ce680657"),
 )
@@ -292,4 +295,4 @@ def track_help() -> str:
     return "\n".join(f"  {t.name}: {t.rules()}" for t in TRACKS.values())
 
 
-__all__ = ["PROTOCOLS", "TRACKS", "Track", "get_track", "track_help"]
+__all__ = ["TRACKS", "Track", "get_track", "track_help"]

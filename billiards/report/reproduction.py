@@ -36,6 +36,7 @@ from billiards import files
 from billiards.files import SUMMARY_FILE, atomic_write_text
 from billiards.provenance import STARTS_FILE
 from billiards.tables import Table, paper_tables
+from billiards.protocol import Protocol
 
 from .markdown import COLUMN_TITLES, figure, md_table
 from .runs import SMALL_RUN_FILES, aggregate, read_curve, read_run
@@ -214,13 +215,13 @@ def search_rows(src: Sources, table: Table, spent: dict[str, float]) -> list[dic
                "complete": res is not None, "cpu_hours": round(cpu / 3600, 3),
                "commits": [c for c in [(res or {}).get("commit")] if c], "proposer_steps": steps}
         paper = (spec.figures if spec else {}).get(f"{protocol}_{method}")
-        if protocol == "p1":
+        if Protocol(protocol) is Protocol.P1:
             row["paper"] = None if paper is None else {"mean": paper}
         else:
             row["paper"] = None if paper is None else {"mean": paper[0], "max": paper[1]}
         if res is not None:
             extra = res.get("extra", {})
-            if protocol == "p1":
+            if Protocol(protocol) is Protocol.P1:
                 row.update(innings=extra.get("n_innings"), shots=extra.get("shots_per_inning"))
             else:
                 row.update(cap=extra.get("cap"), seeds=extra.get("seeds"), reached_cap=extra.get("reached_cap"),
@@ -355,7 +356,7 @@ def markdown(data: dict) -> str:
         body = []
         for r in t6:
             paper = r["paper"]
-            if r["protocol"] == "p1":
+            if Protocol(r["protocol"]) is Protocol.P1:
                 ours = f"{r['mean']:.2f}" if r["complete"] else "–"
                 ptxt = f"{paper['mean']:.2f}" if paper else "–"
             else:

@@ -54,6 +54,7 @@ from billiards.device import device_error, threads_error
 from billiards.files import CONFIG_FILE, read_run_text, repo_path
 from billiards.physics.config import physics_errors
 from billiards.physics.noise import noise_errors, noise_from_config
+from billiards.protocol import Protocol
 
 from .settings import MAX_SEARCH, H2Config, PUCTConfig, RobustConfig
 
@@ -81,7 +82,7 @@ class _ProtocolOption:
 class P1Config(_ProtocolOption):
     """P1: ``n_innings`` random-start innings of ``shots`` shots (continue-on-miss)."""
 
-    name: str = "p1"
+    name: str = Protocol.P1.value
     n_innings: int = 100
     shots: int = 100
 
@@ -93,7 +94,7 @@ class P3Config(_ProtocolOption):
     """P3: ``seeds`` canonical-start chains (seeds ``seed`` ... ``seed + seeds - 1``), each
     until the first miss or foul, capped at ``cap`` shots."""
 
-    name: str = "p3"
+    name: str = Protocol.P3.value
     seeds: int = 10
     cap: int = 10000
 
@@ -315,7 +316,7 @@ class SearchAppConfig(AppConfig):
 # group -> (the key naming the option inside its node, {option: schema})
 OPTIONS: dict[str, tuple[str, dict[str, type]]] = {
     "search": ("kind", {"h2": H2Config, "puct": PUCTConfig, "robust": RobustConfig}),
-    "protocol": ("name", {"p1": P1Config, "p3": P3Config}),
+    "protocol": ("name", {Protocol.P1.value: P1Config, Protocol.P3.value: P3Config}),
     "proposer": ("kind", {"geometric": GeometricProposerConfig, "policy": PolicyProposerConfig,
                           "ranked": RankedProposerConfig, "mixed": MixedProposerConfig}),
 }
@@ -474,7 +475,7 @@ def typed(cfg) -> DictConfig:
         raise SearchConfigError(str(err)) from None
 
 
-def search_config(search: str = "h2", protocol: str = "p3", proposer: str = "geometric") -> DictConfig:
+def search_config(search: str = "h2", protocol: str = Protocol.P3.value, proposer: str = "geometric") -> DictConfig:
     """What ``python search.py search=<search> protocol=<protocol> proposer=<proposer>``
     composes, without Hydra (for scripts and tests)."""
     cfg = OmegaConf.structured(SearchAppConfig)

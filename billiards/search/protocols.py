@@ -29,13 +29,14 @@ from billiards.envs import BilliardsEnv
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.files import CHAINS, CHAINS_FILE, append_record, read_ledger
 from billiards.physics.noise import get_noise
+from billiards.protocol import Protocol
 
 from .actors import SearchActor, make_search_collector
 
 
 @dataclass
 class ProtocolResult:
-    protocol: str
+    protocol: Protocol
     mean: float
     std: float
     max: float
@@ -62,7 +63,8 @@ def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int
     finished steps give, marked ``extra["partial"]`` with ``extra["shots_done"]`` per inning (a
     P1 cannot be continued: a new run starts it again)."""
     noise = get_noise(noise)
-    env = BilliardsEnv(batch_size=[n_innings], start="random", on_miss="continue", max_shots=shots, seed=seed, params=params,
+    spec = Protocol.P1.spec
+    env = BilliardsEnv(batch_size=[n_innings], start=spec.start, on_miss=spec.on_miss, max_shots=shots, seed=seed, params=params,
                        noise=noise)
     actor.reseed(seed)
     collector = make_search_collector(env, actor, frames_per_batch=n_innings, total_frames=n_innings * shots)
@@ -99,7 +101,7 @@ def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int
     if done < shots:
         extra.update(partial=True, shots_done=done)
     return ProtocolResult(
-        protocol="p1", mean=float(points.mean()), std=float(points.std()), max=float(points.max()),
+        protocol=Protocol.P1, mean=float(points.mean()), std=float(points.std()), max=float(points.max()),
         min=float(points.min()), values=points.tolist(), shots=n_innings * done, seconds=seconds,
         sims_per_decision=actor.n_sims / max(actor.n_decisions, 1),
         ms_per_decision=1e3 * seconds / max(n_innings * done, 1), extra=extra,
@@ -113,7 +115,8 @@ def run_chain(actor: SearchActor, seed: int, cap: int = 10_000, keep_last: int =
     [(..., played action, the shot's level)])."""
     actor.reseed(seed)
     noise = get_noise(noise)
-    env = BilliardsEnv(batch_size=[1], start="canonical", on_miss="reset", max_shots=cap, seed=seed, params=params,
+    spec = Protocol.P3.spec
+    env = BilliardsEnv(batch_size=[1], start=spec.start, on_miss=spec.on_miss, max_shots=cap, seed=seed, params=params,
                        noise=noise)
     td = env.reset()
     history: list = []
@@ -240,10 +243,10 @@ def _p3_result(recs: list[dict], cap: int, sims_per_decision: float, partial: bo
     if partial:
         extra["partial"] = True
     if not recs:
-        return ProtocolResult("p3", float("nan"), float("nan"), float("nan"), float("nan"), [], 0, 0.0,
+        return ProtocolResult(Protocol.P3, float("nan"), float("nan"), float("nan"), float("nan"), [], 0, 0.0,
                               sims_per_decision, float("nan"), extra)
     return ProtocolResult(
-        protocol="p3", mean=float(arr.mean()), std=float(arr.std()), max=float(arr.max()), min=float(arr.min()),
+        protocol=Protocol.P3, mean=float(arr.mean()), std=float(arr.std()), max=float(arr.max()), min=float(arr.min()),
         values=[int(v) for v in arr], shots=int(arr.sum() + len(recs)), seconds=seconds,
         sims_per_decision=sims_per_decision, ms_per_decision=1e3 * seconds / max(decisions, 1), extra=extra,
     )

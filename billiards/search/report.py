@@ -12,9 +12,10 @@ from pathlib import Path
 
 from tabulate import tabulate
 
+from billiards.protocol import Protocol
 from billiards.tables import paper_tables
 
-COLUMNS = [("p1", "h2"), ("p1", "puct"), ("p3", "h2"), ("p3", "puct")]
+COLUMNS = [(Protocol.P1, "h2"), (Protocol.P1, "puct"), (Protocol.P3, "h2"), (Protocol.P3, "puct")]
 
 
 def physics_of(res: dict) -> str:
@@ -48,7 +49,7 @@ def _cell(res: dict | None, protocol: str) -> str:
         return "—"
     extra = res.get("extra", {})
     notes = []
-    if protocol == "p1":
+    if Protocol(protocol) is Protocol.P1:
         innings, shots = extra.get("n_innings"), extra.get("shots_per_inning")
         if innings and innings != 100:
             notes.append(f"{innings} inn.")
@@ -77,7 +78,7 @@ def _paper(name: str, protocol: str, kind: str) -> str:
     v = paper_table6().get(name, {}).get(f"{protocol}_{kind}")
     if v is None:
         return "—"
-    return f"{v:.2f}" if protocol == "p1" else f"{v[0]:g} ({v[1]})"
+    return f"{v:.2f}" if Protocol(protocol) is Protocol.P1 else f"{v[0]:g} ({v[1]})"
 
 
 def table6_markdown(results: list[dict]) -> str:

@@ -22,6 +22,7 @@ from billiards.physics.config import params_from_config, physics_record
 from billiards.physics.noise import noise_from_config, noise_record
 from billiards.physics.warmup import warm_up
 from billiards.provenance import git_commit
+from billiards.protocol import Protocol, find_protocol
 
 from .actors import SearchActor
 from .config import SearchAppConfig, option, saved_config, typed, validate
@@ -83,7 +84,7 @@ def _saved_config(out_dir: Path):
 def describe(cfg, params, noise) -> str:
     """What a search run will do, in one line (printed before it starts)."""
     s, p = cfg.search, cfg.protocol
-    what = (f"P1: {p.n_innings} random-start innings x {p.shots} shots" if p.name == "p1"
+    what = (f"P1: {p.n_innings} random-start innings x {p.shots} shots" if Protocol(p.name) is Protocol.P1
             else f"P3: {p.seeds} chains from the opening rack, each up to {p.cap:,} shots")
     return (f"{what}; {s.kind} search, {s.budget} simulations per shot, proposer {cfg.proposer.name}, physics {params.describe()}"
             f", noise {noise.describe()}")
@@ -112,7 +113,7 @@ def finished_run(out_dir: Path) -> dict | None:
     extra = res.get("extra") if isinstance(res, dict) else None
     if not isinstance(res, dict) or (isinstance(extra, dict) and extra.get("partial")):
         return None
-    if res.get("protocol") == "p3" or (out_dir / CHAINS_FILE).exists():
+    if find_protocol(res.get("protocol")) is Protocol.P3 or (out_dir / CHAINS_FILE).exists():
         try:
             records = read_ledger(out_dir / CHAINS_FILE, CHAINS, search_identity(out_dir)).records
         except (LedgerError, SystemExit, ValueError, OSError):  # the resume refuses it, naming the line
@@ -141,7 +142,7 @@ def resume_state(out_dir: Path, config, finished: bool) -> str | None:
     done = finished_run(out_dir) if finished else None
     if done is None:
         return None
-    if saved.protocol.name == "p3":
+    if Protocol(saved.protocol.name) is Protocol.P3:
         try:
             scan = read_ledger(out_dir / CHAINS_FILE, CHAINS, search_identity(out_dir))
         except (LedgerError, SystemExit, ValueError, OSError):  # the resume refuses it, naming the line
@@ -177,7 +178,7 @@ def run(cfg, out_dir: str | Path) -> ProtocolResult | None:
             print(f"{display_path(out_dir)} is finished (mean {done['mean']:.2f}): nothing to do", flush=True)
             return None
         stopped = (out_dir / CONFIG_FILE).is_file() and (out_dir / CHAINS_FILE).is_file()
-        cfg.resume = str(out_dir) if stopped and cfg.protocol.name == "p3" else None
+        cfg.resume = str(out_dir) if stopped and Protocol(cfg.protocol.name) is Protocol.P3 else None
     if cfg.get("resume"):
         try:
             cfg = resume_config(out_dir, cfg)
@@ -204,10 +205,10 @@ def _run(cfg, out_dir: Path, commit: str) -> ProtocolResult:
                   f"(resume=<dir> continues a stopped one)", flush=True)
             old.unlink()
         atomic_write_text(out_dir / CONFIG_FILE, OmegaConf.to_yaml(cfg, resolve=True))
-    proto = cfg.protocol.name
+    proto = Protocol(cfg.protocol.name)
     ledger = out_dir / CHAINS_FILE
     run_id = search_identity(out_dir)  # every chain record carries it, and results.json
-    if cfg.get("resume") and proto == "p3":  # checked before anything is built: a bad ledger fails at once
+    if cfg.get("resume") and proto is Protocol.P3:  # checked before anything is built: a bad ledger fails at once
         try:  # every line sealed, of this run, each seed once; a torn last line is cut (its chain played again)
             scan = read_ledger(ledger, CHAINS, run_id, repair=True)
         except LedgerError as err:
@@ -232,7 +233,7 @@ def _run(cfg, out_dir: Path, commit: str) -> ProtocolResult:
         print(f"warning: {warning}", flush=True)
     actor = make_actor(cfg, proposer, params, noise)
     interrupted = False
-    if proto == "p1":
+    if proto is Protocol.P1:
         result = run_p1(actor, cfg.protocol.n_innings, cfg.protocol.shots, seed=cfg.seed, params=params, progress=cfg.progress,
                         noise=noise)
         interrupted = bool(result.extra.get("partial"))
@@ -258,9 +259,9 @@ def _run(cfg, out_dir: Path, commit: str) -> ProtocolResult:
     )
     atomic_write_text(out_dir / RESULTS_FILE, json.dumps(summary, indent=2) + "\n")
     if interrupted:
-        kept = (f"{len(result.values)} of {cfg.protocol.seeds} chains" if proto == "p3"
+        kept = (f"{len(result.values)} of {cfg.protocol.seeds} chains" if proto is Protocol.P3
                 else f"{result.extra['shots_done']} of {cfg.protocol.shots} shots per inning")
-        more = f"; continue with: python search.py resume={out_dir}" if proto == "p3" else " (a P1 restarts from scratch)"
+        more = f"; continue with: python search.py resume={out_dir}" if proto is Protocol.P3 else " (a P1 restarts from scratch)"
         print(f"interrupted: {kept} finished, written to {out_dir / RESULTS_FILE} (partial){more}", flush=True)
         raise SystemExit(130)
     print(f"{proto} {summary['search']} proposer={cfg.proposer.name}: mean {result.mean:.2f} ± {result.std:.2f}, "

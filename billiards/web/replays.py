@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from billiards.protocol import Protocol
+
 MAX_P1_SHOTS = 20_000  # a P1 run is played again whole: larger ones are refused
 
 
@@ -133,13 +135,15 @@ def scorecard_units(track, records: list[dict]) -> list[dict]:
     """The replay view's units of a scorecard, without shots: innings (innings and P1 tracks),
     chains (P3), matches (match tracks)."""
     units = []
-    if track.protocol in ("innings", "p1"):
+    if track.protocol is None:
+        return units
+    if track.protocol.spec.by_innings:
         for r in records:
             for k, row in enumerate(r["score"]):
                 i = r["first"] + k
                 units.append({"id": i, "title": f"inning {i} (seed {track.seed + i}): {sum(row)} points of {len(row)} shots",
                               "shots": None, "block": r["unit"], "seed": track.seed + i, "record": {"points": int(sum(row))}})
-    elif track.protocol == "p3":
+    elif track.protocol is Protocol.P3:
         for r in records:
             units.append({"id": r["unit"], "title": f"chain {r['index']} (seed {r['seed']}): {r['length']} points"
                           + (", ended by a foul" if r["ended_by_foul"] else ""), "shots": None, "block": r["unit"],
@@ -201,10 +205,10 @@ def play_scorecard_unit(agent, track, unit: int) -> tuple[dict, list[list[dict]]
     """Unit ``unit`` of ``track`` played again as :func:`billiards.bench.run.play_unit` plays it:
     (its record, as the ledger holds it, and its shots: one list per inning of a block, one
     list for a chain or a match)."""
-    if track.protocol in ("innings", "p1"):
+    if track.protocol.spec.by_innings:
         first = unit * track.block
         return _innings_recorded(agent, track, first, min(track.block, track.units - first))
-    if track.protocol == "p3":
+    if track.protocol is Protocol.P3:
         rec, shots = _chain_recorded(agent, track, unit)
     else:
         rec, shots = _match_recorded(agent, track, unit)
@@ -244,7 +248,7 @@ def replay_scorecard_block(d: Path, root: Path, block: int, build=None) -> dict:
         rec, shots = play_scorecard_unit(agent, track, block)
     recorded = {k: v for k, v in records[block].items() if k not in ("unit", "run", "sha256")}
     diff = ledger_differences(rec, recorded)
-    ids = list(range(rec["first"], rec["first"] + rec["n"])) if track.protocol in ("innings", "p1") else [block]
+    ids = list(range(rec["first"], rec["first"] + rec["n"])) if track.protocol.spec.by_innings else [block]
     return {"shots": shots, "units": ids, "replayed": rec, "recorded": recorded, "matches_ledger": not diff, "differences": diff,
             "protocol": track.protocol}
 

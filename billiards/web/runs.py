@@ -44,6 +44,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from billiards import compat
+from billiards.protocol import Protocol, find_protocol
 from billiards.files import (CHAINS, CHAINS_FILE, EVAL_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT, LedgerError,
                              read_run_bytes, read_run_json, read_run_text)
 
@@ -151,7 +152,7 @@ class RunStore:
     def _p3_entry(self, d: Path) -> dict:
         physics, noise = self._p3_settings(d)
         chains = _count_lines(d / CHAINS_FILE)
-        return {"path": self.display(d), "kind": "p3", "label": f"P3 chains ({chains}): {self.display(d)}",
+        return {"path": self.display(d), "kind": Protocol.P3, "label": f"P3 chains ({chains}): {self.display(d)}",
                 "units": chains, "physics": physics, "noise": noise, "replayable": True}
 
     def _p1_size(self, d: Path) -> dict | None:
@@ -164,7 +165,7 @@ class RunStore:
         if key not in self._protocols:
             res = _read_json(path)
             out = None
-            if isinstance(res, dict) and res.get("protocol") == "p1" and isinstance(res.get("values"), list):
+            if isinstance(res, dict) and find_protocol(res.get("protocol")) is Protocol.P1 and isinstance(res.get("values"), list):
                 extra = res.get("extra") if isinstance(res.get("extra"), dict) else {}
                 out = {"innings": len(res["values"]), "shots": extra.get("shots_per_inning"), "values": res["values"],
                        "partial": bool(extra.get("partial"))}
@@ -188,7 +189,7 @@ class RunStore:
             return None
         physics, noise = self._p3_settings(d)
         refusal = self._p1_refusal(d, size, physics)
-        return {"path": self.display(d), "kind": "p1", "label": f"P1 innings ({size['innings']} x {size['shots']} shots): "
+        return {"path": self.display(d), "kind": Protocol.P1, "label": f"P1 innings ({size['innings']} x {size['shots']} shots): "
                 f"{self.display(d)}", "units": size["innings"], "physics": physics, "noise": noise, "replayable": refusal is None,
                 "why_not": refusal}
 
@@ -346,7 +347,7 @@ class RunStore:
             units.append({"id": rec["seed"], "title": f"seed {rec['seed']}: {rec['length']} points (last {n} shots)",
                           "shots": shots, "seed": rec["seed"]})
         replayable = "+custom" not in physics
-        return {"path": self.display(d), "kind": "p3", "physics": physics.split("+")[0], "noise": noise,
+        return {"path": self.display(d), "kind": Protocol.P3, "physics": physics.split("+")[0], "noise": noise,
                 "replayable": replayable, "note": None if replayable else "custom physics: the viewer replays presets only",
                 "considers": replayable and (d / CONFIG_FILE).is_file(), "units": units}
 
@@ -388,13 +389,13 @@ class RunStore:
         spec = (ev.get("agent") or {}).get("spec")
         refusal = why or replays.scorecard_refusal(spec, self.root)
         records = replays.scorecard_records(d, ev)
-        like = track or SimpleNamespace(protocol=ev["track"].get("protocol"), seed=ev["track"].get("seed", 0))
+        like = track or SimpleNamespace(protocol=find_protocol(ev["track"].get("protocol")), seed=ev["track"].get("seed", 0))
         units = replays.scorecard_units(like, records)
         card = _read_json(d / "scorecard.json")
         summary = None
         if isinstance(card, dict):
             summary = {k: v for k, v in card.items() if k not in ("values", "runs", "track_record", "agent")}
-        word = {"innings": "inning", "p1": "inning", "p3": "chain", "match": "match"}.get(like.protocol, "unit")
+        word = like.protocol.spec.item[0] if like.protocol is not None else "unit"
         note = (f"this scorecard cannot be played again: {refusal}" if refusal else
                 f"a scorecard records scores, not shots: choose {'an' if word == 'inning' else 'a'} {word} and its agent plays "
                 f"it again on its seed" + (" (with the 49 innings of its block: they play together)" if word == "inning" else "")
@@ -419,14 +420,14 @@ class RunStore:
         block = self._played(("scorecard", str(d), chosen["block"]),
                              lambda: replays.replay_scorecard_block(d, self.root, chosen["block"], build=build))
         shots = block["shots"][block["units"].index(unit)]
-        if like.protocol in ("innings", "p1"):
+        if like.protocol.spec.by_innings:
             replayed = {"points": int(sum(s["scored"] for s in shots))}
-        elif like.protocol == "p3":
+        elif like.protocol is Protocol.P3:
             replayed = {"length": block["replayed"]["length"], "ended_by_foul": block["replayed"]["ended_by_foul"]}
         else:
             replayed = {"points": block["replayed"]["points"], "winner": block["replayed"]["winner"]}
         what = f"unit {chosen['block']} of the ledger" + (f" (innings {block['units'][0]}-{block['units'][-1]})"
-                                                            if like.protocol in ("innings", "p1") else "")
+                                                            if like.protocol.spec.by_innings else "")
         check = (f"played again: {what} gives the ledger's record (scores, fouls, decisions, simulations)" if block["matches_ledger"]
                  else f"played again: {what} differs from the ledger in {', '.join(block['differences'])}")
         out["units"] = [{**chosen, "shots": shots, "replayed": replayed, "matches_ledger": block["matches_ledger"],
@@ -444,15 +445,15 @@ class RunStore:
                 f"a P1 records points, not shots, and its {len(values)} innings step together with one search generator: "
                 f"choosing an inning plays the whole run again once ({len(values) * (size['shots'] or 0):,} shots) and "
                 f"says whether its points per inning equal results.json's")
-        out = {"path": self.display(d), "kind": "p1", "physics": physics.split("+")[0], "noise": noise, "replayable": refusal is None,
-               "note": note, "considers": refusal is None, "units": units}
+        out = {"path": self.display(d), "kind": Protocol.P1, "physics": physics.split("+")[0], "noise": noise,
+               "replayable": refusal is None, "note": note, "considers": refusal is None, "units": units}
         if unit is None:
             return out
         if not 0 <= unit < len(values):
             raise RunNotFound(f"{self.display(d)} has innings 0..{len(values) - 1}, not {unit}")
         if refusal:
             raise ReplayRefused(note)
-        run = self._played(("p1", str(d)), lambda: replays.replay_p1(d))
+        run = self._played((Protocol.P1, str(d)), lambda: replays.replay_p1(d))
         shots = run["innings"][unit]
         check = ("played again whole: every inning's points equal results.json's values" if run["matches_record"] else
                  f"played again whole: the points differ from results.json's in "
