@@ -170,7 +170,7 @@ def nearest_red(positions: np.ndarray) -> np.ndarray:
     positions (..., 4, 2) -> (...,) int64.
     """
     pos = _rows(positions)
-    return _nearest_red_rows(pos).reshape(np.shape(positions)[:-2])
+    return nearest_red_rows(pos).reshape(np.shape(positions)[:-2])
 
 
 def _take_ball(positions: np.ndarray, index: np.ndarray) -> np.ndarray:
@@ -202,10 +202,10 @@ def aim_window(positions: np.ndarray, R: float = DEFAULT_PARAMS.ball_radius,
     """
     pos = _rows(positions)
     lead = np.shape(positions)[:-2]
-    reds = (_nearest_red_rows(pos) if red is None
+    reds = (nearest_red_rows(pos) if red is None
             else np.ascontiguousarray(np.broadcast_to(np.asarray(red, dtype=np.int64), lead)).reshape(-1))
     # one compiled pass (the C library's atan2 and asin, not NumPy's CPU-dependent loops)
-    theta_target, half_width = _aim_window_rows(pos, reds, 2.0 * R, math.sin(max_half_width))
+    theta_target, half_width = aim_window_rows(pos, reds, 2.0 * R, math.sin(max_half_width))
     return theta_target.reshape(lead)[()], half_width.reshape(lead)[()]  # one table: two float64 scalars
 
 
@@ -273,7 +273,7 @@ def carom_features(positions: np.ndarray) -> np.ndarray:
     overlap, so |u1|, |u2| >= 2R > 0.
     """
     pos = _rows(positions)
-    return _carom_features_rows(pos).reshape(np.shape(positions)[:-2] + (N_CAROM_FEATURES,))
+    return carom_features_rows(pos).reshape(np.shape(positions)[:-2] + (N_CAROM_FEATURES,))
 
 
 # The three functions above as compiled passes over (N, 4, 2) rows: the same IEEE operations in
@@ -289,7 +289,7 @@ def _rows(positions) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _nearest_red_rows(pos):
+def nearest_red_rows(pos):
     out = np.empty(pos.shape[0], dtype=np.int64)
     for i in range(pos.shape[0]):
         ax, ay = pos[i, RED1, 0] - pos[i, WHITE, 0], pos[i, RED1, 1] - pos[i, WHITE, 1]
@@ -299,7 +299,7 @@ def _nearest_red_rows(pos):
 
 
 @numba.njit(cache=True, nogil=True)
-def _aim_window_rows(pos, reds, two_r, cap):
+def aim_window_rows(pos, reds, two_r, cap):
     n = pos.shape[0]
     theta, half = np.empty(n), np.empty(n)
     for i in range(n):
@@ -310,8 +310,8 @@ def _aim_window_rows(pos, reds, two_r, cap):
 
 
 @numba.njit(cache=True, nogil=True)
-def _carom_features_rows(pos):
-    near = _nearest_red_rows(pos)
+def carom_features_rows(pos):
+    near = nearest_red_rows(pos)
     out = np.empty((pos.shape[0], 4))
     for i in range(pos.shape[0]):
         k, m = near[i], RED1 + RED2 - near[i]
@@ -343,6 +343,13 @@ def check_coefficient(name: str, value: float, strict: bool = False) -> float:
 def foul_penalty(foul: np.ndarray, c: float) -> np.ndarray:
     """Foul penalty term: ``-c * foul`` (foul in {0, 1})."""
     return -check_coefficient("foul penalty c", c) * np.asarray(foul, dtype=np.float64)
+
+
+def shot_reward(score: np.ndarray, foul: np.ndarray, c: float) -> np.ndarray:
+    """The searches' reward of shots: ``score - c * foul`` (score and foul in {0, 1}, or their
+    rates over replays), in float64: what the verifier, the league players and the protocols'
+    predictions all score a shot by."""
+    return np.asarray(score, dtype=np.float64) + foul_penalty(foul, c)
 
 
 def gentle_bonus(

@@ -123,15 +123,17 @@ def performance_profile(runs, thresholds) -> list[float]:
     return [_round((pooled > t).mean()) for t in np.asarray(thresholds, dtype=np.float64)]
 
 
-def wilson(successes: float, n: int, confidence: float = 0.95) -> list[float]:
-    """The Wilson score interval of a rate ``successes / n`` (``successes`` may be a half)."""
+def wilson(successes: float, n: int, confidence: float = 0.95, *, z: float | None = None, digits: int = 6) -> list[float]:
+    """The Wilson score interval of a rate ``successes / n`` (``successes`` may be a half), its
+    ends rounded to ``digits``; ``z`` (the normal quantile) defaults to the one of ``confidence``
+    (the league's tables use the rounded 1.96 and four digits)."""
     if n == 0:
         return [0.0, 1.0]
-    z = float(_st.norm.ppf(0.5 + confidence / 2))
+    z = float(_st.norm.ppf(0.5 + confidence / 2)) if z is None else float(z)
     p = successes / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [_round(max(0.0, centre - half)), _round(min(1.0, centre + half))]
+    return [_round(max(0.0, centre - half), digits), _round(min(1.0, centre + half), digits)]
 
 
 def elo_for_score(opponents, score: float) -> float:

@@ -25,7 +25,8 @@
   over the shot proposer of the track's noise, ``proposer=for_noise_<preset>``), at the track's budget;
 * ``league:<name>``: a player of ``conf/match.yaml`` by name (``league:greedy``, ``league:safety_r``).
 
-Given no name, an agent built from a spec goes by :func:`spec_name` (a file's stem, never its
+The grammar is parsed once (:class:`~billiards.bench.spec.AgentSpec`). Given no name, an agent
+built from a spec goes by its :attr:`~billiards.bench.spec.AgentSpec.name` (a file's stem, never its
 path). Code is imported only from a spec the person gave or an object they passed; nothing the
 benchmark reads from disk (a scorecard, a config, a ledger) names code to import.
 """
@@ -34,16 +35,13 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import re
 from pathlib import Path
 
 import numpy as np
 
 from billiards import domain
 
-
-class AgentError(ValueError):
-    """A bad agent: a spec that names nothing usable, or an agent that answers wrongly."""
+from .spec import BASELINES, AgentError, AgentSpec, SpecKind, spec_name
 
 
 class Agent:
@@ -399,12 +397,10 @@ def as_agent(obj, name: str | None = None, *, normalized: bool = True) -> Agent:
 
 # ----------------------------------------------------------------------------- specs
 
-BASELINES = ("random", "nearest", "random_aim")
-
-
-def _import_object(spec: str):
+def _import_object(parsed: AgentSpec):
     """``path/to/file.py:name`` or ``package.module:name`` -> that object (the person's own code)."""
-    target, _, attr = spec.rpartition(":")
+    spec = parsed.text
+    target, attr = parsed.target
     if not target or not attr.isidentifier():
         raise AgentError(f"agent {spec!r}: expected file.py:name or package.module:name")
     if target.endswith(".py"):
@@ -428,8 +424,8 @@ def _import_object(spec: str):
     return getattr(module, attr)
 
 
-def _sb3(spec: str):
-    _, algo, path = spec.split(":", 2) if spec.count(":") >= 2 else (None, "", "")
+def _sb3(parsed: AgentSpec):
+    spec, (algo, path) = parsed.text, parsed.sb3
     try:
         import stable_baselines3 as sb3
     except ImportError:
@@ -448,7 +444,7 @@ def _sb3(spec: str):
     return as_agent(model, name=f"sb3:{algo.lower()}:{Path(path).stem}")
 
 
-def _search(spec: str, track) -> Agent:
+def _search(parsed: AgentSpec, track) -> Agent:
     """``search:<search>[/<proposer>]``: composed through search.py's own config, for the track."""
     from omegaconf import OmegaConf
 
@@ -456,8 +452,7 @@ def _search(spec: str, track) -> Agent:
     from billiards.physics.config import params_from_config
     from billiards.search.run import make_actor, make_proposer
 
-    what = spec.split(":", 1)[1]
-    search, _, proposer = what.partition("/")
+    spec, (search, proposer) = parsed.text, parsed.search
     searches = list(search_config.OPTIONS["search"][1])
     proposers = list(search_config.proposer_options())
     if search not in (*searches, "default"):
@@ -517,65 +512,31 @@ def resolve_agent(spec, track, name: str | None = None) -> Agent:
 
     if not isinstance(spec, (str, Path)):
         return as_agent(spec, name)
-    spec = str(spec).strip()
+    parsed = AgentSpec.parse(spec)
     params = get_params(track.physics)
-    if spec == "random":
-        agent = RandomAgent()
-    elif spec == "nearest":
-        agent = NearestRedAgent(params)
-    elif spec == "random_aim":
-        agent = RandomAimAgent(params)
-    elif spec.startswith("search:"):
-        agent = _search(spec, track)
-    elif spec.startswith("league:"):
-        player, config = league_player(spec.split(":", 1)[1], get_noise(track.noise), params)
-        agent = LeagueAgent(spec.split(":", 1)[1], player, config)
-    elif spec.startswith("sb3:"):
-        agent = _sb3(spec)
-    elif spec.endswith(".pt") or (Path(spec).is_dir() and not spec.endswith(".py")):
+    if parsed.kind is SpecKind.BASELINE:
+        agent = {"random": RandomAgent, "nearest": lambda: NearestRedAgent(params),
+                 "random_aim": lambda: RandomAimAgent(params)}[parsed.text]()
+    elif parsed.kind is SpecKind.SEARCH:
+        agent = _search(parsed, track)
+    elif parsed.kind is SpecKind.LEAGUE:
+        player, config = league_player(parsed.player, get_noise(track.noise), params)
+        agent = LeagueAgent(parsed.player, player, config)
+    elif parsed.kind is SpecKind.SB3:
+        agent = _sb3(parsed)
+    elif parsed.kind is SpecKind.POLICY:
         from billiards.files import repo_path
 
-        if not repo_path(spec).exists():
-            raise AgentError(f"agent {spec!r}: no such file or directory")
-        agent = ProjectPolicy(spec, params)
-    elif ":" in spec:
-        obj = _import_object(spec)
-        agent = as_agent(obj, name or spec_name(spec))
+        if not repo_path(parsed.text).exists():
+            raise AgentError(f"agent {parsed.text!r}: no such file or directory")
+        agent = ProjectPolicy(parsed.text, params)
     else:
-        raise AgentError(f"agent {spec!r} names nothing: give random | nearest | random_aim, file.py:name, "
-                         f"package.module:name, sb3:<algo>:<model.zip>, a policy .pt file or training run dir, "
-                         f"search:<search>[/<proposer>] or league:<player>")
+        agent = as_agent(_import_object(parsed), name or parsed.name)
     if name:
         agent.name = name
     return agent
 
 
-def spec_name(spec: str) -> str:
-    """The name an agent built from ``spec`` goes by when it is given none: never a path of the
-    machine that played it. A file or a folder goes by its stem (``agents/mine.py:act`` ->
-    ``mine:act``, ``runs/base/seed0.pt`` -> ``seed0``, a training run directory by its own name);
-    any other spec (``package.module:act``, ``random``) by itself."""
-    def stem(path: str) -> str:
-        return Path(re.split(r"[/\\]", path.rstrip("/\\"))[-1]).stem or path
-
-    if spec.startswith(("search:", "league:", "sb3:")):  # these name themselves (sb3: the model file's stem)
-        return spec
-    target, colon, attr = spec.rpartition(":")
-    if colon and target.endswith(".py") and attr.isidentifier():
-        return f"{stem(target)}:{attr}"
-    if spec.endswith(".pt") or re.search(r"[/\\]", spec):
-        return stem(spec)
-    return spec
-
-
-def spec_kind(spec: str) -> str:
-    """What kind of agent a spec names, without building it (for messages)."""
-    for prefix in ("search", "league", "sb3"):
-        if spec.startswith(prefix + ":"):
-            return prefix
-    return "baseline" if spec in BASELINES else "policy" if spec.endswith(".pt") else "code"
-
-
 __all__ = ["Agent", "AgentError", "BASELINES", "CallableAgent", "LeagueAgent", "NearestRedAgent", "ProjectPolicy",
            "RandomAgent", "RandomAimAgent", "SearchActorAgent", "as_agent", "checked_action", "league_player", "league_players",
-           "resolve_agent", "spec_kind", "spec_name", "to_raw"]
+           "resolve_agent", "spec_name", "to_raw"]

@@ -71,11 +71,15 @@ ENTRIES: tuple[BoardEntry, ...] = (
 
 def check_entries() -> None:
     """Entries name no code: every spec is a baseline, a policy file, a search or a league player."""
-    from .adapters import BASELINES
+    from .spec import AgentError, AgentSpec, SpecKind
 
     for e in ENTRIES:
-        ok = e.spec in BASELINES or e.spec.startswith(("search:", "league:")) or (e.spec.startswith("results/") and e.spec.endswith(".pt"))
-        if not ok:
+        try:
+            spec = AgentSpec.parse(e.spec)
+        except AgentError:
+            spec = None
+        shipped = spec is not None and spec.kind is SpecKind.POLICY and spec.text.startswith("results/") and spec.text.endswith(".pt")
+        if spec is None or not (spec.kind in (SpecKind.BASELINE, SpecKind.SEARCH, SpecKind.LEAGUE) or shipped):
             raise ValueError(f"leaderboard entry {e.slug}: spec {e.spec!r} is not a baseline, policy file, search or league player")
         if any(q in e.row for q in "'\"\\"):
             raise ValueError(f"leaderboard entry {e.slug}: a row name has no quotes (it is quoted in the recorded command)")

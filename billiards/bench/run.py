@@ -48,7 +48,7 @@ class EvaluationError(RuntimeError):
 # ----------------------------------------------------------------------------- playing units
 
 
-def _params_noise(track: Track):
+def params_noise(track: Track):
     from billiards.physics import get_params
     from billiards.physics.noise import get_noise
 
@@ -190,7 +190,7 @@ def play_match(agent: Agent, track: Track, index: int, on_shot=None, opponent=No
 
     from .adapters import league_player
 
-    params, noise = _params_noise(track)
+    params, noise = params_noise(track)
     j, i = divmod(index, track.units)
     name = track.opponents[j]
     if opponent is None:
@@ -234,7 +234,7 @@ def fingerprint_data(track: Track) -> list:
 
     from .adapters import NearestRedAgent
 
-    params, noise = _params_noise(track)
+    params, noise = params_noise(track)
     ref = NearestRedAgent(params)
     r9 = lambda a: np.round(np.asarray(a, dtype=np.float64), 9).tolist()
     out: list = []

@@ -52,7 +52,7 @@ class Track:
     units: int  # innings (innings, p1), chains (p3), matches per opponent (match)
     shots: int = 10  # shots per inning (innings, p1); the chain cap (p3)
     seed: int = 0  # the first evaluation seed (held out)
-    physics: str = "korean_medium"
+    physics: str = "korean_medium"  # written out: a track fixes its table, whatever the package's default becomes
     noise: str = "none"  # a noise preset of conf/noise/
     tells_level: bool = False  # variable noise: the shot's level is the observation's last entry
     budget: int = 400  # simulations per decision an agent that searches may use

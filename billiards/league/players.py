@@ -341,7 +341,7 @@ class SafetyAgent:
         q = np.zeros(c * r)
         q[missed] = self.opponent_chance(res.positions[missed])
         leave_cost = (q * missed).reshape(c, r).sum(axis=1) / r  # over all replays: (1 - p) x mean q of the misses
-        return cands, score - self.cfg.foul_penalty * foul - self.cfg.leave_weight * leave_cost
+        return cands, domain.shot_reward(score, foul, self.cfg.foul_penalty) - self.cfg.leave_weight * leave_cost
 
     def act(self, view: np.ndarray, level: float | None = None) -> np.ndarray:
         result = self.actor.search(view[None], None if level is None else np.array([level]))

@@ -4,7 +4,8 @@ rate, points and CPU per turn) and the Elo ratings of a Bradley-Terry fit -- ``l
 ``matches.jsonl`` gives (:func:`summary_problems`: ``python -m billiards.files verify`` and a
 resume run it; a league's tables are never trusted, only recomputed from its ledger).
 
-NumPy only (no simulator, no pettingzoo), so that a ledger is checked wherever the package loads."""
+NumPy and the package's statistics only (no simulator, no pettingzoo), so that a ledger is checked
+wherever the package loads."""
 
 from __future__ import annotations
 
@@ -12,17 +13,16 @@ import math
 
 import numpy as np
 
+from billiards import stats
+
 SIDES = ("white", "yellow")  # billiards.envs.sagu.AGENTS: white plays a, yellow b
 _FIGURES = ("a_score_rate", "a_points", "b_points", "a_ms_per_turn", "b_ms_per_turn")
 
 
-def wilson(successes: float, n: int, z: float = 1.96) -> list[float]:
-    """The Wilson score interval of a rate ``successes / n``."""
-    if n == 0:
-        return [0.0, 1.0]
-    p = successes / n
-    centre, half = (p + z * z / (2 * n)) / (1 + z * z / n), z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return [max(0.0, round(centre - half, 4)), min(1.0, round(centre + half, 4))]
+def wilson(successes: float, n: int) -> list[float]:
+    """The league tables' Wilson interval of a rate ``successes / n``: :func:`billiards.stats.wilson`
+    with z = 1.96, to four digits."""
+    return stats.wilson(successes, n, z=1.96, digits=4)
 
 
 def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 2000) -> dict[str, float]:

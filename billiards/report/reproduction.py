@@ -34,9 +34,9 @@ from typing import NamedTuple
 
 from billiards import files
 from billiards.files import SUMMARY_FILE, atomic_write_text
+from billiards.protocol import Protocol
 from billiards.provenance import STARTS_FILE
 from billiards.tables import Table, paper_tables
-from billiards.protocol import Protocol
 
 from .markdown import COLUMN_TITLES, figure, md_table
 from .runs import SMALL_RUN_FILES, aggregate, read_curve, read_run

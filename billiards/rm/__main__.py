@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from billiards.physics import DEFAULT_PRESET
+
 from .data import DEFAULT_CHUNK, DEFAULT_N, DatasetError
 
 
@@ -31,7 +33,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     gen.add_argument("--seed", type=int, default=0, help="data set seed (default %(default)s)")
     gen.add_argument("--chunk", type=_positive_int, default=DEFAULT_CHUNK, help="rows per chunk (default %(default)s)")
     gen.add_argument("--threads", type=_positive_int, default=None, help="numba threads (default: numba's)")
-    gen.add_argument("--physics", default="korean_medium", help="physics preset of the table (default %(default)s)")
+    gen.add_argument("--physics", default=DEFAULT_PRESET, help="physics preset of the table (default %(default)s)")
     gen.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     tr = sub.add_parser("train", help="train the reward model on a data set")

@@ -27,7 +27,7 @@ from .settings import VERIFIER_FOUL_PENALTY, H2Config  # H2Config: the options o
 
 def verifier_reward(result: BatchResult, foul_penalty: float = VERIFIER_FOUL_PENALTY) -> np.ndarray:
     """The verifier's reward of simulated shots: carom score plus the foul penalty term."""
-    return result.score.astype(np.float64) + domain.foul_penalty(result.foul, foul_penalty)
+    return domain.shot_reward(result.score, result.foul, foul_penalty)
 
 
 @dataclass(frozen=True)

@@ -186,7 +186,7 @@ def _candidates(pos, normals, flat, layout, consts, mid, half, held_mask, held_v
             x[0, s, ball * domain.BALL_STATE_DIM] = np.float32(pos[s, ball, 0])
             x[0, s, ball * domain.BALL_STATE_DIM + 1] = np.float32(pos[s, ball, 1])
     if extra_features:
-        feats = domain._carom_features_rows(pos)
+        feats = domain.carom_features_rows(pos)
         for s in range(S):
             for f in range(domain.N_CAROM_FEATURES):
                 x[0, s, domain.OBS_DIM + f] = np.float32(feats[s, f])
@@ -218,7 +218,7 @@ def _candidates(pos, normals, flat, layout, consts, mid, half, held_mask, held_v
         first += S * max(n_e - 1, 0) * A
     theta_target, half_width = np.zeros(0), np.zeros(0)
     if constrain_aim:
-        theta_target, half_width = domain._aim_window_rows(pos, domain._nearest_red_rows(pos), two_r, cap)
+        theta_target, half_width = domain.aim_window_rows(pos, domain.nearest_red_rows(pos), two_r, cap)
     for s in range(S):
         for j in range(k):
             out[s, j, 1] = _clip(out[s, j, 1], 0.0, 1.0)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
+from billiards import domain
 from billiards.envs import BilliardsEnv
 from billiards.physics import DEFAULT_PARAMS, PhysicsParams
 from billiards.files import CHAINS, CHAINS_FILE, append_record, read_ledger
@@ -94,10 +95,10 @@ def run_p1(actor: SearchActor, n_innings: int = 100, shots: int = 100, seed: int
              "success_per_shot": float(score.mean()) if done else float("nan"),
              "n_innings": n_innings, "shots_per_inning": shots, "seed": seed}
     if noise.is_exact:  # shots whose outcome in the env differed from the search's simulation (must be 0)
-        extra["mispredicted_shots"] = int((predicted != score - actor.cfg.foul_penalty * foul).sum())
+        extra["mispredicted_shots"] = int((predicted != domain.shot_reward(score, foul, actor.cfg.foul_penalty)).sum())
     else:  # the search's own estimate of the chosen shots' immediate reward, against what they got
         extra.update(noise=noise.describe(), predicted_r1_mean=float(predicted.mean()) if done else float("nan"),
-                     reward_mean=float((score - actor.cfg.foul_penalty * foul).mean()) if done else float("nan"))
+                     reward_mean=float(domain.shot_reward(score, foul, actor.cfg.foul_penalty).mean()) if done else float("nan"))
     if done < shots:
         extra.update(partial=True, shots_done=done)
     return ProtocolResult(

@@ -34,7 +34,7 @@ import numpy as np
 
 from billiards import numerics
 from billiards.files import load_tagged, repo_path, save_tagged
-from billiards.physics import DEFAULT_PARAMS, PhysicsParams, random_racks, simulate_batch
+from billiards.physics import DEFAULT_PARAMS, DEFAULT_PRESET, PhysicsParams, random_racks, simulate_batch
 from billiards.physics.core import RED1, RED2, WHITE, YELLOW
 from billiards.physics.noise import NOISE_PRESETS, SIGMA_FIELDS, NoiseModel
 
@@ -372,7 +372,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m billiards.search.ranker",
                                  description="Train a shot ranker for proposer=ranked (see the module docstring).")
     ap.add_argument("--out", required=True, help="the ranker file to write (e.g. results/rankers/fastfiz/ranker.pt)")
-    ap.add_argument("--physics", default="korean_medium", choices=sorted(PRESETS))
+    ap.add_argument("--physics", default=DEFAULT_PRESET, choices=sorted(PRESETS))
     ap.add_argument("--noise", default="fastfiz", choices=[n for n, m in NOISE_PRESETS.items() if not m.is_variable],
                     help="the noise it ranks for (none: whether a shot scores under exact play; no replays)")
     ap.add_argument("--racks", type=int, default=12000, help="training racks")

@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from billiards import numerics
-from billiards.physics import DEFAULT_PARAMS, PhysicsParams, random_racks, simulate_batch
+from billiards.physics import DEFAULT_PARAMS, DEFAULT_PRESET, PhysicsParams, random_racks, simulate_batch
 from billiards.physics.core import RED1, RED2, WHITE, YELLOW
 from billiards.physics.noise import NOISE_PRESETS
 
@@ -230,7 +230,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m billiards.search.value",
                                  description="Train a table value for the position-aware search (see the module docstring).")
     ap.add_argument("--out", required=True, help="the value file to write (e.g. results/values/value.pt)")
-    ap.add_argument("--physics", default="korean_medium", choices=sorted(PRESETS))
+    ap.add_argument("--physics", default=DEFAULT_PRESET, choices=sorted(PRESETS))
     ap.add_argument("--ranker", default="results/rankers/fastfiz/ranker.pt", help="the shot ranker the labelling search uses")
     ap.add_argument("--labeller", default="ranked", choices=("ranked", "search"),
                     help="ranked: top of a ranked pool by noisy shares (--pool, --top, --samples); search: the "

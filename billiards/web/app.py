@@ -31,6 +31,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from starlette.exceptions import HTTPException
 
 from billiards.files import OUTPUTS, ROOT, LedgerError, RunLockedError, display_path
+from billiards.physics import DEFAULT_PRESET
 
 from . import catalogue
 from . import sim
@@ -196,7 +197,7 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
     def config():
         """The presets (tables to draw, noise models), the agents and the league players."""
         return JSONResponse({**sim.presets(), "agents": catalogue.catalogue(root), "opponents": catalogue.league_names(root),
-                             "default_physics": "korean_medium"})
+                             "default_physics": DEFAULT_PRESET})
 
     @app.post("/api/shot")
     def shot(body: ShotRequest):
@@ -310,9 +311,14 @@ def create_app(run_dirs=(), out_dir: Path | str | None = DEFAULT_OUT, root: Path
     def new_match(body: MatchRequest):
         """Start a match against a league player; the player's opening turns if it breaks. A
         repeated ``key`` answers the match it started (no second match)."""
-        from billiards.bench.adapters import AgentError
+        from billiards.bench.spec import AgentError, AgentSpec, SpecKind
 
-        name, players = body.opponent.removeprefix("league:"), catalogue.league_names(root)
+        try:  # a league player by name, or as its spec league:<player>
+            parsed = AgentSpec.parse(body.opponent)
+        except AgentError:
+            parsed = None
+        name = parsed.player if parsed is not None and parsed.kind is SpecKind.LEAGUE else body.opponent
+        players = catalogue.league_names(root)
         if name not in players:
             return _error(INVALID, f"opponent: no league player {body.opponent!r}; players: {', '.join(players)}")
         try:

@@ -39,8 +39,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from billiards import domain
+from billiards.bench.spec import AgentSpec, SpecKind
 from billiards.files import ROOT
-from billiards.physics import get_params, simulate_batch
+from billiards.physics import DEFAULT_PRESET, get_params, simulate_batch
 from billiards.physics.noise import get_noise
 
 BUDGET = 400  # simulations per decision of the searches (the benchmark's tracks')
@@ -79,19 +80,19 @@ def catalogue(root: Path = ROOT) -> dict[str, dict]:
 
 def league_names(root: Path = ROOT) -> list[str]:
     """The league players of ``conf/match.yaml`` (the play view's opponents)."""
-    return [spec.split(":", 1)[1] for spec in catalogue(root) if spec.startswith("league:")]
+    return [AgentSpec.parse(spec).player for spec, entry in catalogue(root).items() if entry["kind"] is SpecKind.LEAGUE]
 
 
 def _catalogue(root: Path) -> dict[str, dict]:
     from billiards.bench.adapters import league_players
 
-    out: dict[str, dict] = {name: {"kind": "baseline", "note": note} for name, note in BASELINE_NOTES.items()}
-    out.update({spec: {"kind": "search", "note": note} for spec, note in SEARCHES.items()})
+    out: dict[str, dict] = {name: {"kind": SpecKind.BASELINE, "note": note} for name, note in BASELINE_NOTES.items()}
+    out.update({spec: {"kind": SpecKind.SEARCH, "note": note} for spec, note in SEARCHES.items()})
     for name, cfg in league_players().items():
         kind = cfg.get("kind", "search")
         note = f"league player ({kind}" + (f", {cfg.get('search', 'robust')} search" if kind in ("search", "safety") else "") + ")"
-        out[f"league:{name}"] = {"kind": "league", "note": note}
-    out.update({spec: {"kind": "policy", "note": "a shipped trained policy"} for spec in policy_specs(root)})
+        out[f"{SpecKind.LEAGUE}:{name}"] = {"kind": SpecKind.LEAGUE, "note": note}
+    out.update({spec: {"kind": SpecKind.POLICY, "note": "a shipped trained policy"} for spec in policy_specs(root)})
     return out
 
 
@@ -152,12 +153,12 @@ def get_entry(spec: str, physics: str, noise: str, root: Path = ROOT) -> LoadedA
     spec = str(spec).strip()
     known = catalogue(root)
     if spec not in known:
-        leagues = ", ".join(k for k in known if k.startswith("league:"))
+        leagues = ", ".join(k for k, entry in known.items() if entry["kind"] is SpecKind.LEAGUE)
         raise UnknownAgent(f"unknown agent {spec!r}: the viewer offers random, nearest, random_aim, {', '.join(SEARCHES)}, "
                            f"{leagues} and the shipped policies results/policies/<name>/seed<k>.pt (GET /api/config lists them all)")
     track = SimpleNamespace(physics=physics, noise=noise, budget=BUDGET, name="web", tells_level=False)
     return cached_entry((spec, physics, noise), lambda: LoadedAgent(
-        spec, resolve_agent(str(root / spec) if known[spec]["kind"] == "policy" else spec, track), physics, noise))
+        spec, resolve_agent(str(root / spec) if known[spec]["kind"] is SpecKind.POLICY else spec, track), physics, noise))
 
 
 def cached_entry(key, build) -> LoadedAgent:
@@ -274,7 +275,7 @@ def noisy_replays(table: np.ndarray, action: np.ndarray, noise, params, n: int, 
         scored = res.score.astype(bool)
         mine = model.predict(res.positions, state)  # the shooter plays on from the leave (a replay that scores)
         theirs = model.predict(res.positions[:, SWAP], state)  # the opponent's view of the leave (one that misses)
-        reward = res.score.astype(float) - foul_penalty * res.foul.astype(float)
+        reward = domain.shot_reward(res.score, res.foul, foul_penalty)
         out["leave"] = {"position": position, "leave": leave, "level": float(state[0]),
                         "values": np.round(np.where(scored, mine, theirs), 4).tolist(),
                         "mean_if_scored": float(mine[scored].mean()) if scored.any() else None,
@@ -303,7 +304,7 @@ def decide(entry: LoadedAgent, table: np.ndarray, *, seed: int = 0, level: float
     return {"action": action, "seconds": seconds, "sims": sims, "considered": seen}
 
 
-def ask(spec: str, positions, *, physics: str = "korean_medium", noise: str = "none", seed: int = 0,
+def ask(spec: str, positions, *, physics: str = DEFAULT_PRESET, noise: str = "none", seed: int = 0,
         level: float | None = None, replays: int = 50, root: Path = ROOT) -> dict:
     """The agent's shot for the table ``positions`` (white to play), and what it considered."""
     params = get_params(physics)

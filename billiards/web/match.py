@@ -55,7 +55,7 @@ from billiards import domain
 from billiards.envs.sagu import AGENTS, SaguEnv, shooter_view
 from billiards.files import (LEAGUE_FILE, MATCHES_FILE, LedgerError, LedgerKind, RunFileError, append_record, atomic_write_text,
                              display_path, read_ledger, read_run_json, register_ledger, run_identity, run_lock)
-from billiards.physics import check_actions, get_params
+from billiards.physics import DEFAULT_PRESET, check_actions, get_params
 from billiards.physics.noise import get_noise, noise_record
 
 from . import sim
@@ -179,7 +179,7 @@ def new_id(started: float) -> str:
 class Match:
     """One match (see the module docstring); ``out_dir`` None: kept in memory only."""
 
-    def __init__(self, opponent: str, *, noise: str = "fastfiz_x5", physics: str = "korean_medium", target: int = 5,
+    def __init__(self, opponent: str, *, noise: str = "fastfiz_x5", physics: str = DEFAULT_PRESET, target: int = 5,
                  seed: int = 0, first: str = HUMAN, max_innings: int = 200, foul_penalty: float = 1.0,
                  out_dir: Path | None = None, dt: float = sim.DEFAULT_DT, match_id: str | None = None,
                  started: float | None = None):

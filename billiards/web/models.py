@@ -8,7 +8,7 @@ from typing import Annotated, Literal, Optional
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from billiards.physics import PRESETS
+from billiards.physics import DEFAULT_PRESET, PRESETS
 from billiards.physics.noise import NOISE_PRESETS
 
 Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
@@ -29,7 +29,7 @@ class _Body(BaseModel):
 
 
 class _Table(_Body):
-    physics: str = "korean_medium"
+    physics: str = DEFAULT_PRESET
     noise: str = "none"
 
     @field_validator("physics")

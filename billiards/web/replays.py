@@ -82,12 +82,16 @@ def scorecard_refusal(spec, root: Path) -> str | None:
     """Why the viewer will not build the agent a scorecard names, or None: it builds the
     baselines, ``search:``, ``league:`` and ``.pt`` policies under ``results/``; a spec naming
     code (``file.py:name``, ``module:name``, ``sb3:...``) or another file is refused."""
-    from billiards.bench.adapters import BASELINES, spec_kind
+    from billiards.bench.spec import AgentError, AgentSpec, SpecKind
 
     if not isinstance(spec, str) or not spec.strip():
         return "its evaluation.json names no agent spec, so the agent cannot be built again"
-    spec = spec.strip()
-    if spec in BASELINES or spec.startswith(("search:", "league:")):
+    try:
+        parsed = AgentSpec.parse(spec)
+    except AgentError:
+        return f"its agent {spec.strip()!r} names nothing this version builds, so the agent cannot be built again"
+    spec = parsed.text
+    if parsed.kind in (SpecKind.BASELINE, SpecKind.SEARCH, SpecKind.LEAGUE):
         return None
     if spec.endswith(".pt"):
         path = Path(spec) if Path(spec).is_absolute() else Path(root) / spec
@@ -99,8 +103,9 @@ def scorecard_refusal(spec, root: Path) -> str | None:
         if not real.is_relative_to(results):
             return f"its policy {spec} lies outside results/: the viewer builds only the policies shipped there"
         return None
-    kind = spec_kind(spec)
-    what = {"sb3": "a Stable-Baselines3 model (loading it imports code)", "code": "code to import"}.get(kind, kind)
+    if parsed.kind is SpecKind.POLICY:
+        return f"its policy {spec} is a training run directory: the viewer builds only the .pt policies shipped under results/"
+    what = "a Stable-Baselines3 model (loading it imports code)" if parsed.kind is SpecKind.SB3 else "code to import"
     return (f"its agent {spec!r} names {what}: the viewer never imports code a file it reads names, so this scorecard "
             f"cannot be played again (python evaluate.py plays it)")
 
@@ -188,9 +193,9 @@ def _match_recorded(agent, track, index: int) -> tuple[dict, list[dict]]:
     """:func:`billiards.bench.run.play_match`, every shot recorded: the agent is white, the pool
     player yellow (a player of its own, reseeded per match as the pool's is)."""
     from billiards.bench.adapters import league_player
-    from billiards.bench.run import _params_noise, play_match
+    from billiards.bench.run import params_noise, play_match
 
-    params, noise = _params_noise(track)
+    params, noise = params_noise(track)
     name = track.opponents[index // track.units]
     shots: list[dict] = []
 
@@ -255,16 +260,20 @@ def replay_scorecard_block(d: Path, root: Path, block: int, build=None) -> dict:
 
 def scorecard_agent_searches(spec) -> bool:
     """Whether the agent a scorecard names searches with the simulator (what it considered can be shown)."""
+    from billiards.bench.spec import AgentError, AgentSpec, SpecKind
+
     if not isinstance(spec, str):
         return False
-    if spec.startswith("search:"):
-        return True
-    if spec.startswith("league:"):
+    try:
+        parsed = AgentSpec.parse(spec)
+    except AgentError:
+        return False
+    if parsed.kind is SpecKind.LEAGUE:
         from billiards.bench.adapters import league_players
 
-        cfg = league_players().get(spec.split(":", 1)[1]) or {}
+        cfg = league_players().get(parsed.player) or {}
         return cfg.get("kind", "search") not in ("random", "policy")
-    return False
+    return parsed.kind is SpecKind.SEARCH
 
 
 # ----------------------------------------------------------------------------- search runs' P1

@@ -44,6 +44,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from billiards import compat
+from billiards.physics import DEFAULT_PRESET
 from billiards.protocol import Protocol, find_protocol
 from billiards.files import (CHAINS, CHAINS_FILE, EVAL_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT, LedgerError,
                              read_run_bytes, read_run_json, read_run_text)
@@ -200,7 +201,7 @@ class RunStore:
         kind = "web" if web else "league"
         label = ("viewer match" if web else f"league ({matches} matches)") + f": {self.display(d)}"
         return {"path": self.display(d), "kind": kind, "label": label, "units": matches,
-                "physics": league.get("physics", "korean_medium"), "noise": league.get("noise", "none"), "replayable": True}
+                "physics": league.get("physics", DEFAULT_PRESET), "noise": league.get("noise", "none"), "replayable": True}
 
     def _scorecard_entry(self, path: Path) -> dict | None:
         card = _read_json(path)
@@ -249,7 +250,7 @@ class RunStore:
         try:
             key = (str(path), path.stat().st_mtime_ns)
         except OSError:
-            return "korean_medium", "none"
+            return DEFAULT_PRESET, "none"
         if key in self._settings:
             return self._settings[key]
         try:
@@ -262,7 +263,7 @@ class RunStore:
     @staticmethod
     def _settings_of(cfg: dict) -> tuple[str, str]:
         phys, noise = cfg.get("physics") or {}, cfg.get("noise") or {}
-        physics = phys.get("preset", "korean_medium") if isinstance(phys, dict) else "korean_medium"
+        physics = phys.get("preset", DEFAULT_PRESET) if isinstance(phys, dict) else DEFAULT_PRESET
         if isinstance(phys, dict) and any(v is not None for k, v in phys.items() if k != "preset"):
             physics += "+custom"
         if isinstance(noise, dict):
@@ -364,7 +365,7 @@ class RunStore:
             shots = r.get("log") if web else None
             units.append({"id": i, "title": title, "shots": shots, "record": {k: r[k] for k in
                           ("a", "b", "i", "seed", "first", "winner", "scores", "shots", "innings")}})
-        out = {"path": self.display(d), "kind": "web" if web else "league", "physics": league.get("physics", "korean_medium"),
+        out = {"path": self.display(d), "kind": "web" if web else "league", "physics": league.get("physics", DEFAULT_PRESET),
                "noise": league.get("noise", "none"), "target": league.get("target"), "replayable": True,
                "note": None if web else "a league records scores, not shots: choose a match and it is played again",
                "units": units}
@@ -540,7 +541,7 @@ def replay_league_match(league: dict, rec: dict) -> dict:
     from billiards.physics import get_params
 
     try:
-        params = get_params(league.get("physics", "korean_medium"))
+        params = get_params(league.get("physics", DEFAULT_PRESET))
         noise = _league_noise(league)
         agents = compat.upgrade_league_players(league["agents"], player_keys)
         players = {side: make_agent(agents[name], noise, params)

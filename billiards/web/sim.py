@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from billiards.envs.sagu import SWAP, shooter_view
-from billiards.physics import BALL_NAMES, CUSHION_NAMES, EVENT_KINDS, PRESETS, get_params, simulate_shot, trajectory
+from billiards.physics import BALL_NAMES, CUSHION_NAMES, DEFAULT_PRESET, EVENT_KINDS, PRESETS, get_params, simulate_shot, trajectory
 from billiards.physics.noise import NOISE_PRESETS, get_noise
 
 DEFAULT_DT = 1.0 / 60.0  # seconds between path samples (the page interpolates between them)
@@ -97,7 +97,7 @@ def paths(result, params, dt: float = DEFAULT_DT) -> dict:
     return {"dt": dt, "t": np.round(times, 6).tolist(), "xy": np.round(xy, PATH_DECIMALS).tolist()}
 
 
-def shot(positions, action, *, physics: str = "korean_medium", noise: str = "none", seed: int = 0,
+def shot(positions, action, *, physics: str = DEFAULT_PRESET, noise: str = "none", seed: int = 0,
          level: float | None = None, shooter: int = 0, dt: float = DEFAULT_DT, with_paths: bool = True) -> dict:
     """One shot as the API answers it (see the module docstring): the commanded and played
     actions, ``final`` (4, 2) exact, ``result``, ``events`` and ``paths``. Bad positions or
