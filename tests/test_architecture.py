@@ -147,6 +147,33 @@ LAYERS = [  # lowest first; a new top-level module or subpackage takes its place
 ]
 
 
+def module_graph() -> dict[str, dict[str, list[str]]]:
+    """{module: {imported module: ["path:line", ...]}} over every module of billiards/ (a package
+    is its ``__init__``; ``from .x import y`` reaches the module ``x.y`` where there is one)."""
+    modules = {_module_name(path)[0] for path in PACKAGE.rglob("*.py")}
+    graph: dict[str, dict[str, list[str]]] = defaultdict(lambda: defaultdict(list))
+    for path in sorted(PACKAGE.rglob("*.py")):
+        module, package = _module_name(path)
+        graph[module]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            targets = _imported(node, package)
+            if isinstance(node, ast.ImportFrom):  # a name of the module, or a submodule of it
+                targets = [f"{t}.{a.name}" if f"{t}.{a.name}" in modules else t for t in targets for a in node.names]
+            for target in targets:
+                if target in modules and target != module:
+                    graph[module][target].append(f"{path.relative_to(REPO)}:{node.lineno}")
+    return graph
+
+
+def test_no_import_circle_between_modules():
+    """No two files of the package import each other, directly or round a loop, counting imports
+    inside functions and under TYPE_CHECKING: a loop held apart only by a late import is a loop."""
+    graph = module_graph()
+    assert "billiards.physics.core" in graph["billiards.physics.api"]  # the walk sees imports at all
+    cycle = find_cycle(graph)
+    assert cycle is None, "import circle between billiards modules:\n" + describe_cycle(graph, cycle)
+
+
 @pytest.mark.slow
 def test_every_import_goes_down_the_layers():
     layer = {unit: i for i, units in enumerate(LAYERS) for unit in units}

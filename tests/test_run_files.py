@@ -351,7 +351,7 @@ def test_a_dead_holders_lock_is_taken_over_with_a_note(tmp_path):
 def test_without_flock_the_recorded_pid_decides(tmp_path, monkeypatch):
     """Where flock is missing, a lock naming a pid that is gone on this host is taken over; one
     naming a live pid here, or any pid on another host, is refused."""
-    monkeypatch.setattr(files, "_flock", lambda fd: None)
+    monkeypatch.setattr(files.lock, "_flock", lambda fd: None)  # where run_lock reads it
     run = tmp_path / "run"
     run.mkdir()
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
@@ -368,7 +368,7 @@ def test_without_flock_the_recorded_pid_decides(tmp_path, monkeypatch):
 
 
 def test_the_lock_file_is_refused_as_a_link_and_belongs_to_no_run(tmp_path, secret):
-    from billiards.app_config import _held
+    from billiards.app_config.rundirs import _held
 
     run = tmp_path / "run"
     run.mkdir()
@@ -400,7 +400,7 @@ def _thing_summary(records: list[dict], summary: dict, name: str) -> list[str]:
 def test_verify_knows_every_registered_ledger_kind(tmp_path, monkeypatch, capsys):
     """A kind registered beside chains and matches (as the benchmark's units.jsonl is) is
     verified like them: its records, its seal and run identity, its summary by the kind's check."""
-    monkeypatch.setattr(files, "_KINDS", dict(files._KINDS))
+    monkeypatch.setattr(files.ledgers, "_KINDS", dict(files.ledgers._KINDS))  # the registry register_ledger fills
     run = tmp_path / "run"
     run.mkdir()
     for k in range(3):

@@ -151,8 +151,10 @@ class SearchPlayer:
         return option.errors()
 
     def build(self, noise: NoiseModel, params: PhysicsParams):
+        from billiards.search.actors import build_actor
+
         proposer = self.proposer_config(noise).build(params)
-        return SearchAgent(self.search_option().actor(proposer, 0, params, noise=noise))
+        return SearchAgent(build_actor(self.search_option(), proposer, 0, params, noise=noise))
 
 
 @dataclass
@@ -188,10 +190,11 @@ class SafetyPlayer(SearchPlayer):
         return errs
 
     def build(self, noise: NoiseModel, params: PhysicsParams):
+        from billiards.search.actors import build_actor
         from billiards.search.config import proposer_options
 
         proposer = self.proposer_config(noise).build(params)
-        actor = self.search_option().actor(proposer, 0, params, noise=noise)
+        actor = build_actor(self.search_option(), proposer, 0, params, noise=noise)
         return SafetyAgent(actor, proposer, proposer_options()["geometric"].build(params), self, noise, params)
 
 

@@ -28,7 +28,7 @@ impulse model can only answer with ever more collisions) is stopped where it is 
 
 The first use on a machine compiles the kernels (numba; cached afterwards): before a kernel's
 first call in a process that will compile it, one line on stderr says so with the expected
-time (:mod:`billiards.physics.warmup`).
+time (:mod:`billiards.physics.first_use`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import core, warmup
+from . import core, first_use
 from .checks import ContractError, finite_number, generator, integer, real_array
 from .params import DEFAULT_PARAMS, PhysicsParams, get_params
 from .rules import carom_outcome
@@ -315,8 +315,8 @@ def simulate_shot(positions, action, params: PhysicsParams = DEFAULT_PARAMS) -> 
     pos = real_array(positions, "positions", (4, 2), note=POSITIONS_NOTE)
     act = real_array(action, "action", (4,), note=ACTION_NOTE)
     args = (np.ascontiguousarray(pos), np.ascontiguousarray(act), params.array, POSITION_TOL)
-    if core.checked_shot not in warmup.CHECKED:  # its first call here: say so if it compiles
-        warmup.before_first_call(core.checked_shot, *args)
+    if core.checked_shot not in first_use.CHECKED:  # its first call here: say so if it compiles
+        first_use.before_first_call(core.checked_shot, *args)
     ok, raw = core.checked_shot(*args)
     if not ok:
         check_actions(act[None])  # raise with the message
@@ -340,8 +340,8 @@ def simulate_batch(positions, actions, params: PhysicsParams = DEFAULT_PARAMS) -
     if n:
         kernel = core.run_batch if n >= PARALLEL_MIN_BATCH else core.run_batch_serial
         args = (pos, act, params.array, out_pos, out_int, out_float)
-        if kernel not in warmup.CHECKED:  # its first call here: say so if it compiles
-            warmup.before_first_call(kernel, *args)
+        if kernel not in first_use.CHECKED:  # its first call here: say so if it compiles
+            first_use.before_first_call(kernel, *args)
         kernel(*args)
     hits = out_int[:, core.O_HIT1:core.O_HIT3 + 1] != 0
     score, foul, miss = carom_outcome(hits[:, 0], hits[:, 1], hits[:, 2])

@@ -32,9 +32,8 @@ from typing import Any, Callable, ClassVar, List, Optional
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.device import device_error, threads_error
-from billiards.app_config import fixed_job_config as _fixed_job_config
-from billiards.app_config import (BASIC_SWEEPER, AppConfig, RESUME_AUTO, ValidatingCallback, claim_sweep_directories,
-                                  numeric_bound_errors, register_app, resolved_config, upper_bound_errors)
+from billiards.app_config import (AppConfig, RESUME_AUTO, numeric_bound_errors, register_app, resolved_config,
+                                  upper_bound_errors)
 from billiards.files import CHECKPOINT_FILE, repo_path
 from billiards.files import CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, METRICS_FILE  # noqa: F401  (re-exported: the run dir's files)
 from billiards.physics.config import physics_errors
@@ -104,7 +103,7 @@ def _need(ok: bool, message: str) -> list[str]:
 
 
 # Each schema's ``errors(node)`` checks what its types cannot say about its own node (a composed
-# DictConfig node, read by attribute); checks across nodes are :func:`_errors`'.
+# DictConfig node, read by attribute); checks across nodes are :func:`config_errors`'.
 
 @dataclass
 class AlgoConfig:
@@ -576,10 +575,13 @@ def appended_keys(cfg: DictConfig) -> list[str]:
     return errs
 
 
-def _errors(cfg: DictConfig) -> list[str]:
+def config_errors(cfg: DictConfig, init_policy_problem: Callable | None = None,
+                  checkpoint_problem: Callable | None = None) -> list[str]:
     """Every problem of the config, checked on its resolved values (:func:`resolved_config`:
     an interpolation is checked as what it yields, one through a resolver the project does not
-    allow is refused)."""
+    allow is refused). The files it names are read by the checks given (``init_policy_problem(path,
+    cfg)``, ``checkpoint_problem(run_dir)``: why the file is not usable, or None;
+    :mod:`billiards.rl.validation` gives them), else only their presence is checked."""
     cfg, errs = resolved_config(cfg)
     if errs:
         return errs
@@ -613,9 +615,7 @@ def _errors(cfg: DictConfig) -> list[str]:
             errs += _need(noise.is_exact or not a.centre_probes,
                           "algo.centre_probes centres exact play's labels: under noise the label is the noisy "
                           "search's choice (set algo.centre_probes=0)")
-        if a.init_policy is not None and not physics_errors(cfg.physics):
-            from billiards.rl.policy import init_policy_problem
-
+        if a.init_policy is not None and init_policy_problem is not None and not physics_errors(cfg.physics):
             errs += [f"algo.init_policy: {why}"] if (why := init_policy_problem(a.init_policy, cfg)) else []
     if a.name in ALGO_CHECKS and not errs:
         errs += ALGO_CHECKS[a.name](cfg)
@@ -635,90 +635,14 @@ def _errors(cfg: DictConfig) -> list[str]:
             )
         elif (run_dir / CHECKPOINT_FILE).stat().st_size == 0:
             errs.append(f"resume={cfg.resume!r}: {run_dir / CHECKPOINT_FILE} is empty (corrupt); start a new run instead")
-        else:  # loaded and checked now, before anything is written (the run reuses what was loaded)
-            from billiards.rl.checkpoint import CheckpointError, load_checkpoint
-
-            try:
-                load_checkpoint(run_dir, keep=True)
-            except CheckpointError as err:
-                errs.append(f"resume={cfg.resume!r}: {err}")
+        elif checkpoint_problem is not None and (why := checkpoint_problem(run_dir)):  # loaded and checked now
+            errs.append(f"resume={cfg.resume!r}: {why}")
     return errs
 
 
 def resolve_rm_model(path: str) -> Path:
     """A reward-model path as given if it exists (or is absolute), else relative to the repo."""
     return repo_path(path)
-
-
-def validate(cfg: DictConfig) -> None:
-    """Raise :class:`ConfigError` listing every problem of a composed training config."""
-    errs = _errors(cfg)
-    if errs:
-        raise ConfigError("invalid training config:\n  - " + "\n  - ".join(errs))
-
-
-def _refuse_other_apps_preset(config: DictConfig) -> None:
-    """``experiment=table6`` names search.py's preset: say so, before anything is composed or written."""
-    paper = config.get("paper")
-    if isinstance(paper, DictConfig) and paper.get("app", "train") != "train":
-        raise SystemExit(f"Error: experiment={config.get('table')} is a {paper.app}.py preset: "
-                         f"python {paper.app}.py -m experiment={config.get('table')}")
-
-
-def _validate_job(cfg: DictConfig) -> None:
-    """:func:`validate`, any other exception it meets raised as a :class:`ConfigError` with the
-    same message: the callback exits with it (Hydra would only warn and go on)."""
-    try:
-        validate(cfg)
-    except ValueError:
-        raise
-    except Exception as err:
-        raise ConfigError(str(err)) from None
-
-
-class ValidateConfig(ValidatingCallback):
-    """Hydra callback (``hydra.callbacks`` in conf/config.yaml): validates the training config
-    before Hydra creates any directory. For a multirun it composes and validates every job
-    first, so one bad job aborts the whole sweep before anything is written. Then it claims the
-    run's directories (billiards.app_config, "Whose directory" in docs/reliability.md).
-
-    Hydra turns exceptions raised by callbacks into warnings, so a failure exits the process
-    (``SystemExit``, status 1) with the message on stderr. It is search.py's and match.py's
-    :class:`~billiards.app_config.ValidatingCallback` with train.py's additions: another app's
-    preset is refused first, a multirun prints its sweep directory, and under another sweeper
-    (Optuna) what the sweeper does not vary is checked before the study starts.
-    """
-
-    validate = staticmethod(_validate_job)
-
-    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
-        _refuse_other_apps_preset(config)
-        super().on_run_start(config, **kwargs)
-
-    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        _refuse_other_apps_preset(config)
-        print(f"sweep: {config.hydra.sweep.dir}", flush=True)
-        if config.hydra.sweeper._target_ != BASIC_SWEEPER:
-            self._check_fixed_part(config)
-            claim_sweep_directories(config)
-            return
-        super().on_multirun_start(config, **kwargs)  # every job validated, then its directory claimed
-
-    @staticmethod
-    def _check_fixed_part(config: DictConfig) -> None:
-        """Another sweeper (Optuna) chooses its jobs' values as it goes, so each job validates
-        in its task (a bad trial fails on its own; see train.py). What the sweeper does not
-        vary is checked here, before the study starts: a problem that would fail every trial
-        aborts the sweep at once. Problems that name a swept key are left to the trials."""
-        try:
-            job, swept = _fixed_job_config(config)
-            errs = _errors(job)
-        except Exception as err:  # Hydra would only warn and go on
-            raise SystemExit(f"Error: {err}") from None
-        errs = [e for e in errs if not any(key in e for key in swept)]
-        if errs:
-            raise SystemExit("Error: invalid training config (every trial of the sweep would fail):\n  - "
-                             + "\n  - ".join(errs))
 
 
 def env_paradigm(paradigm: Paradigm | str) -> str:

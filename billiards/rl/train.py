@@ -65,10 +65,10 @@ from .config import (
     Config,
     ConfigError,
     env_options,
-    validate,
 )
 from .curriculum import Stages, make_curriculum
 from .metrics import MetricLogger, Window, eval_row
+from .validation import validate
 
 log = logging.getLogger(__name__)
 

@@ -129,6 +129,35 @@ def shot_levels(noise, levels):
     return levels
 
 
+def _h2_actor(settings: H2Config, proposer, seed: int, params, noise) -> SearchActor:
+    return LookaheadActor(proposer, settings, seed=seed, params=params)  # it plans with exact simulations, whatever the noise
+
+
+def _puct_actor(settings: PUCTConfig, proposer, seed: int, params, noise) -> SearchActor:
+    if noise is not None and not noise.is_exact:  # revisits are noisy replays (billiards.search.puct_noise)
+        return NoisyPUCTActor(proposer, settings, noise, seed=seed, params=params)
+    return PUCTActor(proposer, settings, seed=seed, params=params)
+
+
+def _robust_actor(settings: RobustConfig, proposer, seed: int, params, noise) -> SearchActor:
+    from billiards.physics.noise import get_noise
+
+    return RobustActor(proposer, settings, get_noise(noise), seed=seed, params=params, value=settings.table_value(params))
+
+
+ACTOR_OF = {H2Config: _h2_actor, PUCTConfig: _puct_actor, RobustConfig: _robust_actor}  # a search's settings -> its actor
+
+
+def build_actor(settings, proposer, seed: int, params: PhysicsParams = DEFAULT_PARAMS, noise=None) -> SearchActor:
+    """The actor of a search's checked ``settings`` (:mod:`billiards.search.settings`) over
+    ``proposer``, seeded with ``seed``, for the execution noise ``noise`` (a NoiseModel, or None:
+    exact play; the robust search samples it, PUCT replays with it, h2 plans exactly)."""
+    for kind, build in ACTOR_OF.items():
+        if isinstance(settings, kind):
+            return build(settings.settings(), proposer, seed, params, noise)
+    raise TypeError(f"no search actor for {type(settings).__name__}; the searches: {', '.join(k.__name__ for k in ACTOR_OF)}")
+
+
 def make_search_collector(env, actor: SearchActor, frames_per_batch: int, total_frames: int):
     """The search collector: a TorchRL ``Collector`` running ``actor`` in place of the policy."""
     from torchrl.collectors import Collector
@@ -137,4 +166,5 @@ def make_search_collector(env, actor: SearchActor, frames_per_batch: int, total_
                      auto_register_policy_transforms=False)
 
 
-__all__ = ["LookaheadActor", "NoisyPUCTActor", "PUCTActor", "RobustActor", "SearchActor", "make_search_collector"]
+__all__ = ["ACTOR_OF", "LookaheadActor", "NoisyPUCTActor", "PUCTActor", "RobustActor", "SearchActor", "build_actor",
+           "make_search_collector"]

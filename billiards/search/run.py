@@ -2,7 +2,8 @@
 write ``results.json`` (and a picture of the longest chain's last shots) into the run dir.
 
 The config's option nodes build what they describe (:mod:`billiards.search.config`): a
-proposer node ``.build(params)``, a search node ``.actor(proposer, seed, params)``."""
+proposer node ``.build(params)``; a search node's settings make their actor through
+:func:`billiards.search.actors.build_actor`."""
 
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ from billiards.physics.warmup import warm_up
 from billiards.provenance import git_commit
 from billiards.protocol import Protocol, find_protocol
 
-from .actors import SearchActor
+from .actors import SearchActor, build_actor
 from .config import SearchAppConfig, option, saved_config, typed, validate
 from .protocols import CHAINS_FILE, ProtocolResult, partial_p3, run_p1, run_p3
 from .ranker import noise_mismatch
@@ -45,7 +46,7 @@ def make_actor(cfg, proposer, params: PhysicsParams = DEFAULT_PARAMS, noise=None
     -- under noise PUCT's revisits are noisy replays (:mod:`billiards.search.puct_noise`) and
     ``robust`` samples the noise model."""
     noise = noise_from_config(cfg.noise) if noise is None else noise  # the caller's, where it has built it
-    return option("search", cfg.search).actor(proposer, cfg.seed, params, noise=noise)
+    return build_actor(option("search", cfg.search), proposer, cfg.seed, params, noise=noise)
 
 
 RUNTIME_KEYS = SearchAppConfig.RUNTIME  # taken from the command line when resuming

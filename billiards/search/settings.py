@@ -81,11 +81,6 @@ class SearchSettings:
             errs.append(f"search ({self.kind}): {err}")
         return errs
 
-    def actor(self, proposer, seed: int, params, noise=None):
-        """The search's actor (:mod:`billiards.search.actors`); ``noise``: the execution noise
-        the shots are played with (a NoiseModel)."""
-        raise NotImplementedError
-
 
 @dataclass
 class H2Config(SearchSettings):
@@ -126,12 +121,6 @@ class H2Config(SearchSettings):
             raise ValueError(f"h2 search cannot expand m1={self.m1} of only k1={self.k1} candidates")
         self._check_discount()
 
-    def actor(self, proposer, seed: int, params, noise=None):
-        """The actor; ``noise`` does not change how h2 searches: it plans with exact simulations."""
-        from .actors import LookaheadActor
-
-        return LookaheadActor(proposer, self.settings(), seed=seed, params=params)
-
 
 @dataclass
 class PUCTConfig(SearchSettings):
@@ -161,15 +150,6 @@ class PUCTConfig(SearchSettings):
             raise ValueError(f"PUCT needs finite c_puct >= 0, pw_c > 0 and 0 < pw_alpha <= 1; got c_puct={self.c_puct}, "
                              f"pw_c={self.pw_c}, pw_alpha={self.pw_alpha}")
         self._check_discount()
-
-    def actor(self, proposer, seed: int, params, noise=None):
-        """The actor; under execution noise (``noise`` a NoiseModel that is not exact) PUCT's
-        revisits are noisy replays (:mod:`billiards.search.puct_noise`)."""
-        from .actors import NoisyPUCTActor, PUCTActor
-
-        if noise is not None and not noise.is_exact:
-            return NoisyPUCTActor(proposer, self.settings(), noise, seed=seed, params=params)
-        return PUCTActor(proposer, self.settings(), seed=seed, params=params)
 
 
 @dataclass
@@ -255,7 +235,7 @@ class RobustConfig(SearchSettings):
                     f"value: name its file, search.value=<file> (made by: {VALUE_COMMAND})"]
         if not Path(str(repo_path(self.value))).is_file():
             return [f"search.value: no table value file at {self.value} (made by: {VALUE_COMMAND})"]
-        from .value import TableValue, ValueFileError
+        from .table_value import TableValue, ValueFileError
 
         try:
             TableValue.load(repo_path(self.value))
@@ -271,20 +251,11 @@ class RobustConfig(SearchSettings):
         from billiards.files import repo_path
         from billiards.physics.config import warn_physics_mismatch
 
-        from .value import TableValue
+        from .table_value import TableValue
 
         value = TableValue.load(repo_path(self.value))
         warn_physics_mismatch(f"search.value ({self.value})", value.params, params)
         return value
-
-    def actor(self, proposer, seed: int, params, noise=None):
-        """The actor, sampling ``noise`` (a NoiseModel; the app refuses robust without noise)."""
-        from billiards.physics.noise import get_noise
-
-        from .actors import RobustActor
-
-        return RobustActor(proposer, self.settings(), get_noise(noise), seed=seed, params=params,
-                           value=self.table_value(params))
 
 
 __all__ = ["COUNT", "H2Config", "MAX_SEARCH", "MAX_WEIGHT", "PUCTConfig", "RobustConfig", "SCHEDULES", "SIMS",

@@ -170,7 +170,7 @@ def test_a_hostile_option_file_is_refused_before_hydra_builds_it(app, name, tmp_
     shutil.copytree(CONF, conf)
     marker = tmp_path / "marker"
     (conf / "physics" / "international.yaml").write_text(evil_yaml(marker))
-    monkeypatch.setattr(ConfigLoaderImpl, "load_configuration", app_config._guarded(ConfigLoaderImpl.load_configuration))
+    monkeypatch.setattr(ConfigLoaderImpl, "load_configuration", app_config.guard._guarded(ConfigLoaderImpl.load_configuration))
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(conf), version_base="1.3"):
@@ -250,8 +250,8 @@ def test_a_config_group_is_listed_as_hydra_lists_it_without_copying_the_reposito
     hydras = ConfigLoaderImpl.get_group_options
     while getattr(hydras, "billiards_listed", False):
         hydras = hydras.__wrapped__
-    monkeypatch.setattr(ConfigLoaderImpl, "get_group_options", app_config._plain_listing(hydras))
-    assert app_config._plain_listing(ConfigLoaderImpl.get_group_options) is ConfigLoaderImpl.get_group_options  # idempotent
+    monkeypatch.setattr(ConfigLoaderImpl, "get_group_options", app_config.guard._plain_listing(hydras))
+    assert app_config.guard._plain_listing(ConfigLoaderImpl.get_group_options) is ConfigLoaderImpl.get_group_options  # idempotent
     loader = loader_for(CONF)
     groups, todo = [], [""]
     while todo:

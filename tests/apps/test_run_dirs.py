@@ -175,7 +175,7 @@ def test_resume_auto_keeps_the_first_attempts_hydra_record(tmp_path):
     own .hydra (a league's settings) stays as it started."""
     from hydra.core.hydra_config import HydraConfig
 
-    from billiards.app_config import _output_subdir
+    from billiards.app_config.schema import _output_subdir
 
     job = composed("match", "resume=auto")
     with read_write(job.hydra), open_dict(job.hydra):
@@ -382,8 +382,8 @@ def test_telling_whose_a_directory_is_never_blocks_on_a_fifo_or_follows_a_link(t
     os.symlink(elsewhere, run / "config.yaml")
     answers = {}
     worker = threading.Thread(target=lambda: answers.update(
-        results=app_config._final_results(run), hydra=app_config._yaml_head(run / ".hydra" / "hydra.yaml"),
-        linked=app_config._yaml_head(run / "config.yaml")), daemon=True)
+        results=app_config.rundirs._final_results(run), hydra=app_config.rundirs._yaml_head(run / ".hydra" / "hydra.yaml"),
+        linked=app_config.rundirs._yaml_head(run / "config.yaml")), daemon=True)
     worker.start()
     worker.join(timeout=300)  # only a guard against a hang (a FIFO read blocks forever)
     assert not worker.is_alive(), "a FIFO in a run folder blocked the directory check"

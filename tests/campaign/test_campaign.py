@@ -120,7 +120,7 @@ def _compose(overrides_lists, config: str = "config"):
 def test_every_trained_row_composes_validates_and_records_its_table_and_row():
     """Each table's sweep composes through the real Hydra config (``experiment=<t> variant=<t>/<row>``)
     and passes the trainer's validation, with the budget, physics and settings its row means."""
-    from billiards.rl.config import validate
+    from billiards.rl.validation import validate
 
     rows = [(name, row) for name, t in paper_tables().items() if t.app == "train" and name != "cpu_hour" for row in t.trained()]
     configs = _compose([[f"experiment={name}", f"variant={name}/{row}", "seed=1"] for name, row in rows])

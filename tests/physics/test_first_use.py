@@ -1,5 +1,5 @@
 """The simulator's first use on a machine: it says so before it compiles, once, and compiles
-each kernel once (billiards.physics.warmup, billiards.physics.core's "Compile time")."""
+each kernel once (billiards.physics.first_use, billiards.physics.core's "Compile time")."""
 
 import json
 import os
@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from billiards.physics import canonical_rack, core, simulate_batch, simulate_shot, warmup
+from billiards.physics import canonical_rack, core, first_use, simulate_batch, simulate_shot
 
 RACK = canonical_rack()
 ACTION = np.array([0.3, 0.5, 0.1, -0.2])
@@ -20,21 +20,21 @@ def said(err: str) -> list[str]:
 
 
 def test_a_kernel_whose_first_call_compiles_says_so_once(monkeypatch, capsys):
-    """The API prepares each entry kernel's first call in a process (warmup.CHECKED): when it
+    """The API prepares each entry kernel's first call in a process (first_use.CHECKED): when it
     would compile, a notice with the expected time goes to stderr before, and the time it took
     after; every later call is silent, and the results are those of a plain call."""
     single = simulate_batch(RACK[None], ACTION[None])
     shot = simulate_shot(RACK, ACTION)
-    monkeypatch.setattr(warmup, "CHECKED", set())  # a process that has not called a kernel yet
-    monkeypatch.setattr(warmup, "will_compile", lambda kernel: True)  # ... and has no cache
+    monkeypatch.setattr(first_use, "CHECKED", set())  # a process that has not called a kernel yet
+    monkeypatch.setattr(first_use, "will_compile", lambda kernel: True)  # ... and has no cache
     capsys.readouterr()
     again = [simulate_batch(RACK[None], ACTION[None]) for _ in range(3)]
     lines = said(capsys.readouterr().err)
     assert len(lines) == 2, lines
-    assert lines[0] == f"compiling the simulator (first use on this machine: about {warmup.FIRST_SECONDS} s on two cores; " \
+    assert lines[0] == f"compiling the simulator (first use on this machine: about {first_use.FIRST_SECONDS} s on two cores; " \
                        "cached for every later run) ..."
-    assert lines[1].startswith("simulator ready: compiled in ") and str(warmup.CACHE_DIR) in lines[1]
-    assert warmup.CHECKED == {core.run_batch_serial}
+    assert lines[1].startswith("simulator ready: compiled in ") and str(first_use.CACHE_DIR) in lines[1]
+    assert first_use.CHECKED == {core.run_batch_serial}
     for res in again:
         assert res.positions.tobytes() == single.positions.tobytes() and res.n_events.tolist() == single.n_events.tolist()
     # another entry kernel says so once too; a batch on the one already prepared says nothing
@@ -44,18 +44,18 @@ def test_a_kernel_whose_first_call_compiles_says_so_once(monkeypatch, capsys):
     lines = said(capsys.readouterr().err)
     assert len(lines) == 2 and lines[0].startswith("compiling the simulator"), lines
     assert res.event_state.tobytes() == shot.event_state.tobytes()
-    assert warmup.CHECKED == {core.run_batch_serial, core.checked_shot}
+    assert first_use.CHECKED == {core.run_batch_serial, core.checked_shot}
 
 
 def test_loaded_or_cached_kernels_say_nothing(monkeypatch, capsys):
     simulate_batch(RACK[None], ACTION[None])
-    monkeypatch.setattr(warmup, "CHECKED", set())
+    monkeypatch.setattr(first_use, "CHECKED", set())
     capsys.readouterr()
     simulate_batch(RACK[None], ACTION[None])
     simulate_shot(RACK, ACTION)
     assert capsys.readouterr().err == ""
-    assert {core.run_batch_serial, core.checked_shot} <= warmup.CHECKED
-    assert not warmup.will_compile(core.run_batch_serial)  # loaded in this process
+    assert {core.run_batch_serial, core.checked_shot} <= first_use.CHECKED
+    assert not first_use.will_compile(core.run_batch_serial)  # loaded in this process
 
 
 def test_the_notice_states_the_expected_time_of_what_compiles(monkeypatch):
@@ -71,21 +71,21 @@ def test_the_notice_states_the_expected_time_of_what_compiles(monkeypatch):
             compiled.append(sig)
 
     kernel = Kernel()
-    monkeypatch.setattr(warmup, "CHECKED", set())
-    monkeypatch.setattr(warmup, "_in_cache", lambda k: False)
+    monkeypatch.setattr(first_use, "CHECKED", set())
+    monkeypatch.setattr(first_use, "_in_cache", lambda k: False)
     monkeypatch.setattr(core, "run_shot", Kernel())  # the event loop: neither loaded nor cached
-    warmup.before_first_call(kernel, np.zeros((2, 4, 2)), 1.5, log=lines.append)
-    assert lines[0].startswith(f"compiling the simulator (first use on this machine: about {warmup.FIRST_SECONDS} s")
-    assert lines[1].startswith("simulator ready") and kernel in warmup.CHECKED
+    first_use.before_first_call(kernel, np.zeros((2, 4, 2)), 1.5, log=lines.append)
+    assert lines[0].startswith(f"compiling the simulator (first use on this machine: about {first_use.FIRST_SECONDS} s")
+    assert lines[1].startswith("simulator ready") and kernel in first_use.CHECKED
     assert [str(s) for s in compiled[0]] == ["array(float64, 3d, C)", "float64"]  # the call's own types
-    warmup.before_first_call(kernel, np.zeros((2, 4, 2)), 1.5, log=lines.append)
+    first_use.before_first_call(kernel, np.zeros((2, 4, 2)), 1.5, log=lines.append)
     assert len(lines) == 2 and len(compiled) == 1  # prepared once per process
     monkeypatch.setattr(core.run_shot, "overloads", {"loaded": None}, raising=False)  # the event loop is here
     lines.clear()
-    warmup.CHECKED.clear()  # another process
-    warmup.before_first_call(kernel, np.zeros((2, 4, 2)), 1.5, log=lines.append)
+    first_use.CHECKED.clear()  # another process
+    first_use.before_first_call(kernel, np.zeros((2, 4, 2)), 1.5, log=lines.append)
     assert lines[0].startswith(f"compiling the simulator's parallel batch kernel (first use on this machine: "
-                               f"about {warmup.MORE_SECONDS} s")
+                               f"about {first_use.MORE_SECONDS} s")
 
 
 FIRST_USE = """
@@ -117,7 +117,8 @@ def test_the_first_use_on_a_machine_says_so_before_it_compiles(tmp_path):
     lines = [line for line in first.stderr.splitlines() if line.startswith(("[", "compiling", "simulator ready"))]
     assert lines[:4] == [
         "[batch]",
-        f"compiling the simulator (first use on this machine: about {warmup.FIRST_SECONDS} s on two cores; cached for every later run) ...",
+        f"compiling the simulator (first use on this machine: about {first_use.FIRST_SECONDS} s on two cores; "
+        "cached for every later run) ...",
         lines[2], "[batch again]"], first.stderr
     assert lines[2].startswith("simulator ready: compiled in ") and str(tmp_path) in lines[2]
     assert lines[4] == "[shot]" and lines[5].startswith("compiling the simulator's single-shot kernel (first use on this machine: ")

@@ -269,10 +269,10 @@ def test_things_made_on_another_table_warn_loudly(tmp_path, international_policy
 
 
 def test_warm_up_says_when_it_compiles(tmp_path, monkeypatch):
-    from billiards.physics import warmup
+    from billiards.physics import first_use, warmup
 
     said = []
-    monkeypatch.setattr(warmup, "CACHE_DIR", tmp_path)  # an empty cache: the kernels count as not compiled
+    monkeypatch.setattr(first_use, "CACHE_DIR", tmp_path)  # an empty cache: the kernels count as not compiled
     assert not warmup.kernels_cached()
     seconds = warmup.warm_up(log=said.append)
     assert seconds >= 0 and said[0].startswith("compiling the simulator") and said[1].startswith("simulator ready")

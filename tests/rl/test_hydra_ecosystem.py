@@ -20,7 +20,8 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from billiards.rl.config import ConfigError, LoggerBackend, ValidateConfig, validate
+from billiards.rl.config import ConfigError, LoggerBackend
+from billiards.rl.validation import ValidateConfig, validate
 
 REPO = Path(__file__).resolve().parents[2]
 TRAIN = str(REPO / "train.py")

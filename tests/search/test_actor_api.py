@@ -25,6 +25,7 @@ from tensordict import TensorDict
 from billiards import domain
 from billiards.physics import DEFAULT_PARAMS, random_racks
 from billiards.physics.noise import get_noise
+from billiards.search.actors import build_actor
 from billiards.search.config import OPTIONS
 from billiards.search.proposers import GeometricProposer
 
@@ -43,7 +44,7 @@ def make_actor(case: str, seed: int = 0):
     schema = OPTIONS["search"][1][kind]
     settings = schema(budget=BUDGET, **overrides).settings()
     noise_model = get_noise(noise) if noise else None
-    return settings.actor(GeometricProposer(), seed, DEFAULT_PARAMS, noise=noise_model), noise_model
+    return build_actor(settings, GeometricProposer(), seed, DEFAULT_PARAMS, noise=noise_model), noise_model
 
 
 def racks(n: int, seed: int = 11) -> np.ndarray:

@@ -144,7 +144,8 @@ def test_train_config_takes_the_noise_group_and_refuses_bad_sigmas():
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
 
-    from billiards.rl.config import ConfigError, validate  # importing it registers the training schemas
+    from billiards.rl.config import ConfigError  # importing it registers the training schemas
+    from billiards.rl.validation import validate
     from billiards.rl.config import env_options
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):

@@ -11,6 +11,7 @@ from billiards.physics import PRESETS, random_racks, simulate_batch
 from billiards.physics.noise import NOISE_PRESETS
 from billiards.search import GeometricProposer
 from billiards.search import robust as robust_mod
+from billiards.search.actors import build_actor
 from billiards.search.ranker import RankerFileError, ShotRanker, fit_mlp
 from billiards.envs.sagu import SWAP
 from billiards.search.robust import RobustConfig, leave_terms, robust_search
@@ -171,9 +172,9 @@ def test_the_search_option_checks_its_value_file_before_anything_runs(tmp_path):
     good = small_value().save(tmp_path / "good.pt")
     assert RobustConfig(position=1.0, value=str(good)).errors() == []
     assert "position and leave must be finite" in RobustConfig(position=-1.0, value=str(good)).errors()[0]
-    actor = RobustConfig(position=1.0, value=str(good)).actor(GeometricProposer(R=K.ball_radius), 0, K, FASTFIZ)
+    actor = build_actor(RobustConfig(position=1.0, value=str(good)), GeometricProposer(R=K.ball_radius), 0, K, FASTFIZ)
     assert isinstance(actor.value, TableValue)
-    assert RobustConfig().actor(GeometricProposer(R=K.ball_radius), 0, K, FASTFIZ).value is None
+    assert build_actor(RobustConfig(), GeometricProposer(R=K.ball_radius), 0, K, FASTFIZ).value is None
 
 
 def test_the_shipped_value_loads_and_records_how_it_was_made():
