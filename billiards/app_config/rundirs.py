@@ -75,9 +75,8 @@ RUN_KINDS: dict[str, RunKind] = {kind.config_name: kind for kind in (
             ("protocol", "proposer"), "billiards.search.run:resume_state"),
     RunKind("match", "match.py", "league", (files.MATCHES_FILE, files.LEAGUE_FILE, "match.gif"), _has(files.LEAGUE_FILE),
             (), "billiards.league:resume_state"),
-    # billiards.bench.run's IDENTITY_FILE, LEDGER_FILE, SCORECARD_JSON, SCORECARD_MD
-    RunKind("evaluate", "evaluate.py", "evaluation", ("evaluation.json", "units.jsonl", "scorecard.json", "scorecard.md"),
-            _has("scorecard.json"), claims=False),
+    RunKind("evaluate", "evaluate.py", "evaluation", (files.IDENTITY_FILE, files.UNITS_FILE, files.SCORECARD_JSON,
+                                                      files.SCORECARD_MD), _has(files.SCORECARD_JSON), claims=False),
 )}
 HYDRA_RECORDS = (".hydra", ".hydra_resume")  # what Hydra writes into a run directory (and the job's .log)
 SWEEP_RECORDS = ("multirun.yaml", "optimization_results.yaml")  # what Hydra's sweepers write into a sweep directory

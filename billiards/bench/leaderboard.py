@@ -37,7 +37,7 @@ from typing import Callable
 import numpy as np
 
 from billiards.compat import upgrade_scorecard
-from billiards.files import RunFileError, atomic_write_text, display_path, read_run_json
+from billiards.files import SCORECARD_JSON, RunFileError, atomic_write_text, display_path, read_run_json
 
 from billiards import stats
 from billiards.protocol import Protocol
@@ -673,7 +673,7 @@ def compare(first: Path, second: Path) -> dict:
 
     cards = []
     for path in (Path(first), Path(second)):
-        path = path / "scorecard.json" if path.is_dir() else path
+        path = path / SCORECARD_JSON if path.is_dir() else path
         card = _load(path)
         if card.get("partial") or card.get("limit"):
             raise ValueError(f"{display_path(path)}: a partial or limited scorecard (play the whole track first)")

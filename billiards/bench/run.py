@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from billiards import domain, files
-from billiards.files import LedgerKind, atomic_write_text, display_path
+from billiards.files import (IDENTITY_FILE, SCORECARD_JSON, SCORECARD_MD, UNITS_FILE, LedgerKind, atomic_write_text,
+                             display_path)
 from billiards.protocol import Protocol
 
 from billiards import stats
@@ -36,8 +37,7 @@ from .adapters import Agent, AgentError, checked_action, resolve_agent
 from .text import md_code, md_text, one_line
 from .tracks import Track, get_track
 
-IDENTITY_FILE, LEDGER_FILE = "evaluation.json", "units.jsonl"
-SCORECARD_JSON, SCORECARD_MD = "scorecard.json", "scorecard.md"
+LEDGER_FILE = UNITS_FILE  # the evaluation's ledger (billiards.files names a run folder's files)
 
 
 class EvaluationError(RuntimeError):

@@ -21,9 +21,9 @@ from .describe import described, shown_name, shown_number
 from .ledgers import (CHAINS, LEDGER_PROVIDERS, MATCHES, RUN_KEY, LedgerError, LedgerKind, LedgerScan, append_record, ledger_kinds,
                       read_ledger, register_ledger, run_identity, scan_ledger)
 from .lock import LOCK_FILE, LockHolder, RunLock, RunLockedError, lock_holder, run_lock
-from .paths import (CHAINS_FILE, CHECKPOINT_FILE, CONF_DIR, CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, IN_CHECKOUT, LEAGUE_FILE,
-                    MATCHES_FILE, METRICS_FILE, OUTPUTS, PACKAGE, RESULTS_FILE, ROOT, SUMMARY_FILE, display_path, recorded_command,
-                    repo_path)
+from .paths import (CHAINS_FILE, CHECKPOINT_FILE, CONF_DIR, CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, IDENTITY_FILE, IN_CHECKOUT,
+                    LEAGUE_FILE, MATCHES_FILE, METRICS_FILE, OUTPUTS, PACKAGE, RESULTS_FILE, ROOT, SCORECARD_JSON, SCORECARD_MD,
+                    SUMMARY_FILE, UNITS_FILE, display_path, recorded_command, repo_path)
 from .runfiles import (MAX_JSON_DEPTH, RUN_FILE_LIMITS, RunFileError, json_depth_problem, open_run_file, parse_json, read_run_bytes,
                        read_run_json, read_run_text, run_file_kind)
 from .seals import SEAL_KEY, non_finite_entry, payload_digest, record_digest, sealed_record
@@ -33,8 +33,8 @@ from .tensors import MAX_NESTING, key_problem, load_tagged, plain_data_problem, 
 __all__ = [
     # paths
     "PACKAGE", "IN_CHECKOUT", "ROOT", "CONF_DIR", "OUTPUTS", "CONFIG_FILE", "CHECKPOINT_FILE", "EVAL_FILE", "EVAL_HISTORY_FILE",
-    "METRICS_FILE", "SUMMARY_FILE", "RESULTS_FILE", "CHAINS_FILE", "MATCHES_FILE", "LEAGUE_FILE", "repo_path", "display_path",
-    "recorded_command",
+    "METRICS_FILE", "SUMMARY_FILE", "RESULTS_FILE", "CHAINS_FILE", "MATCHES_FILE", "LEAGUE_FILE", "IDENTITY_FILE", "UNITS_FILE",
+    "SCORECARD_JSON", "SCORECARD_MD", "repo_path", "display_path", "recorded_command",
     # atomic
     "TMP_SUFFIX", "atomic_open", "atomic_write_bytes", "atomic_write_text",
     # runfiles

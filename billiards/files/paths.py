@@ -28,9 +28,14 @@ SUMMARY_FILE = "summary.json"
 # ... a search run directory (billiards.search) ...
 RESULTS_FILE = "results.json"
 CHAINS_FILE = "chains.jsonl"  # a P3's ledger: one finished chain a line
-# ... and a league's run directory (billiards.league)
+# ... a league's run directory (billiards.league) ...
 MATCHES_FILE = "matches.jsonl"  # one finished match a line
 LEAGUE_FILE = "league.json"
+# ... and a benchmark evaluation's (billiards.bench.run)
+IDENTITY_FILE = "evaluation.json"  # the track and agent it scores
+UNITS_FILE = "units.jsonl"  # its ledger: one finished unit (a block of innings, a chain, a match) a line
+SCORECARD_JSON = "scorecard.json"
+SCORECARD_MD = "scorecard.md"
 
 
 def repo_path(path) -> Path:

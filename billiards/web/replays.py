@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from billiards.files import IDENTITY_FILE, UNITS_FILE
 from billiards.protocol import Protocol
 
 MAX_P1_SHOTS = 20_000  # a P1 run is played again whole: larger ones are refused
@@ -115,7 +116,7 @@ def read_scorecard(d: Path) -> tuple[dict, object, str | None]:
     played again or None)."""
     from billiards.bench.tracks import get_track
 
-    ev = _run_json(d / "evaluation.json")
+    ev = _run_json(d / IDENTITY_FILE)
     rec = ev.get("track") or {}
     try:
         track = get_track(rec.get("name"))
@@ -133,7 +134,7 @@ def scorecard_records(d: Path, ev: dict) -> list[dict]:
     from billiards.bench.run import UNITS
     from billiards.files import read_ledger
 
-    return sorted(read_ledger(d / "units.jsonl", UNITS, ev.get("run"), repair=False).records, key=lambda r: r["unit"])
+    return sorted(read_ledger(d / UNITS_FILE, UNITS, ev.get("run"), repair=False).records, key=lambda r: r["unit"])
 
 
 def scorecard_units(track, records: list[dict]) -> list[dict]:

@@ -46,14 +46,13 @@ import numpy as np
 from billiards import compat
 from billiards.physics import DEFAULT_PRESET
 from billiards.protocol import Protocol, find_protocol
-from billiards.files import (CHAINS, CHAINS_FILE, EVAL_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT, LedgerError,
-                             read_run_bytes, read_run_json, read_run_text)
+from billiards.files import (CHAINS, CHAINS_FILE, EVAL_FILE, IDENTITY_FILE, LEAGUE_FILE, MATCHES, MATCHES_FILE, RESULTS_FILE, ROOT,
+                             SCORECARD_JSON, UNITS_FILE, LedgerError, read_run_bytes, read_run_json, read_run_text)
 
 from . import replays
 from .replays import ReplayRefused, match_shot
 
 CONFIG_FILE = "config.yaml"
-EVALUATION_FILE, UNITS_FILE = "evaluation.json", "units.jsonl"  # a benchmark scorecard's run (billiards.bench.run)
 WEB_APP = "billiards.web"  # league.json's "app" of a match played in the viewer
 MAX_REPLAYS = 24  # runs and units played again, kept (the most recently used)
 
@@ -138,13 +137,13 @@ class RunStore:
                     runs.setdefault(self.display(d), self._league_entry(d))
                 if EVAL_FILE in files and CONFIG_FILE in files:
                     runs.setdefault(self.display(d), self._training_entry(d))
-                if EVALUATION_FILE in files and UNITS_FILE in files:
+                if IDENTITY_FILE in files and UNITS_FILE in files:
                     entry = self._scorecard_dir_entry(d)
                     if entry is not None:
                         runs.setdefault(self.display(d), entry)
-                elif "scorecard.json" in files or d.is_relative_to(self.results / "bench" / "recorded"):
+                elif SCORECARD_JSON in files or d.is_relative_to(self.results / "bench" / "recorded"):
                     for name in sorted(files):
-                        if name == "scorecard.json" or (name.endswith(".json") and d.is_relative_to(self.results / "bench" / "recorded")):
+                        if name == SCORECARD_JSON or (name.endswith(".json") and d.is_relative_to(self.results / "bench" / "recorded")):
                             entry = self._scorecard_entry(d / name)
                             if entry is not None:
                                 runs.setdefault(self.display(d / name), entry)
@@ -213,7 +212,7 @@ class RunStore:
                 "why_not": "a scorecard without its ledger (units.jsonl) and evaluation.json: nothing to play again"}
 
     def _scorecard_dir_entry(self, d: Path) -> dict | None:
-        ev = _read_json(d / EVALUATION_FILE)
+        ev = _read_json(d / IDENTITY_FILE)
         if not (isinstance(ev, dict) and isinstance(ev.get("track"), dict) and isinstance(ev.get("agent"), dict)):
             return None
         track, agent = ev["track"], ev["agent"]
@@ -281,13 +280,13 @@ class RunStore:
         """A run's replayable shots (see the module docstring); ``unit``: the match, inning or
         chain to play again (leagues, scorecards, P1 runs, training evaluations)."""
         real = self.resolve(path)
-        if real.is_file() and real.name == "scorecard.json" and (real.parent / EVALUATION_FILE).is_file():
+        if real.is_file() and real.name == SCORECARD_JSON and (real.parent / IDENTITY_FILE).is_file():
             real = real.parent  # a scorecard's run is its directory
         if real.is_dir() and (real / CHAINS_FILE).is_file():
             return self._load_p3(real)
         if real.is_dir() and (real / MATCHES_FILE).is_file():
             return self._load_matches(real, unit)
-        if real.is_dir() and (real / EVALUATION_FILE).is_file() and (real / UNITS_FILE).is_file():
+        if real.is_dir() and (real / IDENTITY_FILE).is_file() and (real / UNITS_FILE).is_file():
             return self._load_scorecard_dir(real, unit)
         if real.is_dir() and (real / CONFIG_FILE).is_file() and self._p1_size(real) is not None:
             return self._load_p1(real, unit)
@@ -304,9 +303,9 @@ class RunStore:
         """(the kind of run at ``path``, its real directory) for the runs whose agent can be asked
         again (/api/considered): ``p3`` and ``p1`` search runs, ``scorecard`` runs."""
         real = self.resolve(path)
-        if real.is_file() and real.name == "scorecard.json":
+        if real.is_file() and real.name == SCORECARD_JSON:
             real = real.parent
-        if real.is_dir() and (real / EVALUATION_FILE).is_file() and (real / UNITS_FILE).is_file():
+        if real.is_dir() and (real / IDENTITY_FILE).is_file() and (real / UNITS_FILE).is_file():
             return "scorecard", real
         if real.is_dir() and (real / CONFIG_FILE).is_file() and ((real / CHAINS_FILE).is_file() or self._p1_size(real) is not None):
             return "search", real
@@ -392,7 +391,7 @@ class RunStore:
         records = replays.scorecard_records(d, ev)
         like = track or SimpleNamespace(protocol=find_protocol(ev["track"].get("protocol")), seed=ev["track"].get("seed", 0))
         units = replays.scorecard_units(like, records)
-        card = _read_json(d / "scorecard.json")
+        card = _read_json(d / SCORECARD_JSON)
         summary = None
         if isinstance(card, dict):
             summary = {k: v for k, v in card.items() if k not in ("values", "runs", "track_record", "agent")}
