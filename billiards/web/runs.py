@@ -129,22 +129,13 @@ class RunStore:
                 dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
                 d = Path(dirpath)
                 files = {f for f in filenames if not (d / f).is_symlink()}
-                if CHAINS_FILE in files:
-                    runs.setdefault(self.display(d), self._p3_entry(d))
-                elif RESULTS_FILE in files and CONFIG_FILE in files and (entry := self._p1_entry(d)) is not None:
-                    runs.setdefault(self.display(d), entry)
-                if MATCHES_FILE in files:
-                    runs.setdefault(self.display(d), self._league_entry(d))
-                if EVAL_FILE in files and CONFIG_FILE in files:
-                    runs.setdefault(self.display(d), self._training_entry(d))
-                if IDENTITY_FILE in files and UNITS_FILE in files:
-                    entry = self._scorecard_dir_entry(d)
-                    if entry is not None:
-                        runs.setdefault(self.display(d), entry)
-                elif SCORECARD_JSON in files or d.is_relative_to(self.results / "bench" / "recorded"):
+                kind = self.kind_here(d, files.__contains__)
+                if kind is not None and (entry := self._entry_of(kind)(d)) is not None:
+                    runs[self.display(d)] = entry
+                if kind != "scorecard" and (SCORECARD_JSON in files or d.is_relative_to(self.results / "bench" / "recorded")):
                     for name in sorted(files):
                         if name == SCORECARD_JSON or (name.endswith(".json") and d.is_relative_to(self.results / "bench" / "recorded")):
-                            entry = self._scorecard_entry(d / name)
+                            entry = self._scorecard_file_entry(d / name)
                             if entry is not None:
                                 runs.setdefault(self.display(d / name), entry)
         return [runs[k] for k in sorted(runs)]
@@ -202,7 +193,7 @@ class RunStore:
         return {"path": self.display(d), "kind": kind, "label": label, "units": matches,
                 "physics": league.get("physics", DEFAULT_PRESET), "noise": league.get("noise", "none"), "replayable": True}
 
-    def _scorecard_entry(self, path: Path) -> dict | None:
+    def _scorecard_file_entry(self, path: Path) -> dict | None:
         card = _read_json(path)
         if not (isinstance(card, dict) and isinstance(card.get("track"), str) and "agent" in card):
             return None
@@ -211,7 +202,7 @@ class RunStore:
                 "units": None, "physics": None, "noise": None, "replayable": False,
                 "why_not": "a scorecard without its ledger (units.jsonl) and evaluation.json: nothing to play again"}
 
-    def _scorecard_dir_entry(self, d: Path) -> dict | None:
+    def _scorecard_entry(self, d: Path) -> dict | None:
         ev = _read_json(d / IDENTITY_FILE)
         if not (isinstance(ev, dict) and isinstance(ev.get("track"), dict) and isinstance(ev.get("agent"), dict)):
             return None
@@ -276,26 +267,44 @@ class RunStore:
 
     # ------------------------------------------------------------------------- one run
 
+    def kind_here(self, d: Path, has) -> Protocol | str | None:
+        """The kind of run the directory ``d`` holds (``has(name)``: whether it holds that file),
+        or None: one answer, in one order, for listing, loading and asking again -- a P3 (its
+        chains' ledger), a league or a viewer match (its matches' ledger), a benchmark
+        evaluation (its identity and ledger), a P1 search run, a training run's evaluation.
+        Each kind has its listing's line (:meth:`_entry_of`) and its loader (:meth:`_load_of`)."""
+        if has(CHAINS_FILE):
+            return Protocol.P3
+        if has(MATCHES_FILE):
+            return "league"
+        if has(IDENTITY_FILE) and has(UNITS_FILE):
+            return "scorecard"
+        if has(CONFIG_FILE) and has(RESULTS_FILE) and self._p1_size(d) is not None:
+            return Protocol.P1
+        if has(CONFIG_FILE) and has(EVAL_FILE):
+            return "training"
+        return None
+
+    def _entry_of(self, kind: str):
+        return {Protocol.P3: self._p3_entry, "league": self._league_entry, "scorecard": self._scorecard_entry,
+                Protocol.P1: self._p1_entry, "training": self._training_entry}[kind]
+
+    def _load_of(self, kind: str):
+        return {Protocol.P3: self._load_p3, "league": self._load_league, "scorecard": self._load_scorecard,
+                Protocol.P1: self._load_p1, "training": self._load_training}[kind]
+
     def load(self, path: str, unit: int | None = None) -> dict:
         """A run's replayable shots (see the module docstring); ``unit``: the match, inning or
         chain to play again (leagues, scorecards, P1 runs, training evaluations)."""
         real = self.resolve(path)
         if real.is_file() and real.name == SCORECARD_JSON and (real.parent / IDENTITY_FILE).is_file():
             real = real.parent  # a scorecard's run is its directory
-        if real.is_dir() and (real / CHAINS_FILE).is_file():
-            return self._load_p3(real)
-        if real.is_dir() and (real / MATCHES_FILE).is_file():
-            return self._load_matches(real, unit)
-        if real.is_dir() and (real / IDENTITY_FILE).is_file() and (real / UNITS_FILE).is_file():
-            return self._load_scorecard_dir(real, unit)
-        if real.is_dir() and (real / CONFIG_FILE).is_file() and self._p1_size(real) is not None:
-            return self._load_p1(real, unit)
-        if real.is_dir() and (real / CONFIG_FILE).is_file() and (real / EVAL_FILE).is_file():
-            return self._load_training(real, unit)
+        if real.is_dir() and (kind := self.kind_here(real, lambda name: (real / name).is_file())) is not None:
+            return self._load_of(kind)(real, unit)
         if real.is_file() and real.suffix == ".json":
             card = _read_json(real)
             if isinstance(card, dict) and isinstance(card.get("track"), str) and "agent" in card:
-                return self._load_scorecard(real, card)
+                return self._load_scorecard_file(real, card)
         raise RunNotFound(f"{path!r} is not a run the viewer replays (a directory with {CHAINS_FILE}, {MATCHES_FILE}, a P1's "
                           f"{RESULTS_FILE}, a training run's {EVAL_FILE} or a benchmark scorecard's {UNITS_FILE}, or a scorecard)")
 
@@ -305,9 +314,10 @@ class RunStore:
         real = self.resolve(path)
         if real.is_file() and real.name == SCORECARD_JSON:
             real = real.parent
-        if real.is_dir() and (real / IDENTITY_FILE).is_file() and (real / UNITS_FILE).is_file():
+        kind = self.kind_here(real, lambda name: (real / name).is_file()) if real.is_dir() else None
+        if kind == "scorecard":
             return "scorecard", real
-        if real.is_dir() and (real / CONFIG_FILE).is_file() and ((real / CHAINS_FILE).is_file() or self._p1_size(real) is not None):
+        if kind in (Protocol.P3, Protocol.P1) and (real / CONFIG_FILE).is_file():  # a search run: its config rebuilds the search
             return "search", real
         raise RunNotFound(f"{path!r} is not a run whose agent the viewer asks again (a search run's P3 or P1, "
                           f"or a benchmark scorecard's run)")
@@ -331,7 +341,7 @@ class RunStore:
                     self._replays.popitem(last=False)
             return out
 
-    def _load_p3(self, d: Path) -> dict:
+    def _load_p3(self, d: Path, unit: int | None = None) -> dict:
         physics, noise = self._p3_settings(d)
         records = compat.ledger_records(d / CHAINS_FILE, CHAINS)
         units = []
@@ -351,7 +361,7 @@ class RunStore:
                 "replayable": replayable, "note": None if replayable else "custom physics: the viewer replays presets only",
                 "considers": replayable and (d / CONFIG_FILE).is_file(), "units": units}
 
-    def _load_matches(self, d: Path, unit: int | None) -> dict:
+    def _load_league(self, d: Path, unit: int | None) -> dict:
         league = _read_json(d / LEAGUE_FILE) or {}
         web = league.get("app") == WEB_APP
         records = compat.ledger_records(d / MATCHES_FILE, MATCHES)
@@ -377,14 +387,14 @@ class RunStore:
             out["units"] = [units[unit]]
         return out
 
-    def _load_scorecard(self, path: Path, card: dict) -> dict:
+    def _load_scorecard_file(self, path: Path, card: dict) -> dict:
         summary = {k: v for k, v in card.items() if k not in ("values", "runs", "track_record", "agent")}
         return {"path": self.display(path), "kind": "scorecard", "physics": None, "noise": None, "replayable": False,
                 "note": "a scorecard without its ledger (units.jsonl) and evaluation.json records figures, not shots: "
                         "nothing to play again",
                 "summary": summary, "agent": card.get("agent"), "units": []}
 
-    def _load_scorecard_dir(self, d: Path, unit: int | None) -> dict:
+    def _load_scorecard(self, d: Path, unit: int | None) -> dict:
         ev, track, why = replays.read_scorecard(d)
         spec = (ev.get("agent") or {}).get("spec")
         refusal = why or replays.scorecard_refusal(spec, self.root)
