@@ -191,7 +191,7 @@ FORBIDDEN = [  # (importer, imported, why)
     ("billiards.render", "billiards.search", "render only draws; loading a player is billiards.pictures'"),
     ("billiards.rl", "billiards.search", "the policy -> proposer adapter lives in billiards.search"),
     ("billiards.rm", "billiards.rl", "a reward model loads without the trainer"),
-    ("billiards.files", "billiards.physics", "files is the lowest layer: standard library only"),
+    ("billiards.files", "billiards.physics", "files sits below the simulator: the standard library and the protocol registry only"),
 ]
 
 

@@ -165,7 +165,7 @@ def robust_search(positions: np.ndarray, proposer, cfg: RobustConfig, rng: np.ra
     by noisy replays drawn from ``noise`` with ``rng`` (see the module docstring). ``levels``
     (S,), optional: each state's multiplier of ``noise``'s sigmas (variable noise: the level
     drawn for the shot and told to the player); without it every state plays ``noise`` itself.
-    ``value`` (a :class:`~billiards.search.value.TableValue`) prices the replays' leaves by
+    ``value`` (a :class:`~billiards.search.table_value.TableValue`) prices the replays' leaves by
     ``cfg.position`` and ``cfg.leave`` (:func:`leave_terms`); the statistic is then over the
     replays' reward plus that term, ``r1`` stays the mean verifier reward. ValueError if ``cfg``
     has a knob out of range (:meth:`RobustConfig.check`)."""
