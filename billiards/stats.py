@@ -12,7 +12,11 @@
 * :func:`probability_of_improvement`: P(X > Y), the Mann-Whitney statistic of two agents'
   episode scores, averaged over seed pairs, with a stratified bootstrap interval;
 * :func:`performance_profile`: the share of episodes scoring above each threshold;
-* :func:`wilson`: the Wilson score interval of a win rate (a draw counts half).
+* :func:`wilson`: the Wilson score interval of a win rate (a draw counts half; the league's
+  tables use it with z = 1.96 and four digits);
+* :func:`chain_interval`: the reproduction report's percentile bootstrap of a mean P3 chain
+  (exact integer sums, to one decimal);
+* :func:`elo_against`, :func:`elo_interval`: an Elo rating against fixed opponents and its interval.
 """
 
 from __future__ import annotations
@@ -59,6 +63,19 @@ def bootstrap_ci(values, statistic=np.mean, confidence: float = 0.95, resamples:
     res = _st.bootstrap((values,), statistic, confidence_level=confidence, n_resamples=resamples, method="percentile",
                         vectorized=True, rng=np.random.default_rng(SEED))
     return [_round(res.confidence_interval.low), _round(res.confidence_interval.high)]
+
+
+def chain_interval(values, level: float = 0.95, draws: int = 10_000, seed: int = 0) -> list[float]:
+    """The percentile-bootstrap ``level`` interval of the mean of P3 chain lengths ``values``
+    (a heavy-tailed, capped distribution: no normal approximation). Integers sum exactly, so the
+    same bits on every machine."""
+    x = np.asarray(values, dtype=np.float64)
+    if x.size == 0:
+        return [float("nan"), float("nan")]
+    idx = np.random.default_rng(seed).integers(0, x.size, size=(draws, x.size))
+    means = np.sort(x[idx].sum(axis=1)) / x.size
+    lo, hi = means[int((1 - level) / 2 * draws)], means[int((1 + level) / 2 * draws) - 1]
+    return [round(float(lo), 1), round(float(hi), 1)]
 
 
 def summary(values, statistic=np.mean) -> dict:
@@ -178,5 +195,5 @@ def elo_interval(results: list[tuple[float, float]], prior_games: int = 1, confi
     return [elo_for_score(ratings, mix(lo)), elo_for_score(ratings, mix(hi))]
 
 
-__all__ = ["aggregate", "bootstrap_ci", "elo_against", "elo_for_score", "elo_interval", "iqm", "performance_profile",
+__all__ = ["aggregate", "bootstrap_ci", "chain_interval", "elo_against", "elo_for_score", "elo_interval", "iqm", "performance_profile",
            "probability_of_improvement", "summary", "wilson"]

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-from billiards import files
+from billiards import files, stats
 from billiards.files import SUMMARY_FILE, atomic_write_text
 from billiards.protocol import Protocol
 from billiards.provenance import STARTS_FILE
@@ -199,7 +199,7 @@ def training_rows(src: Sources, tables: list[Table], spent: dict[str, float],
 
 def search_rows(src: Sources, table: Table, spent: dict[str, float]) -> list[dict]:
     """One row per Table 6 cell (proposer x method x protocol); a P3 row carries the 95 %
-    bootstrap interval of its mean chain (:func:`chain_interval`)."""
+    bootstrap interval of its mean chain (:func:`billiards.stats.chain_interval`)."""
     rows = []
     for proposer, method, protocol in table.search_cells():
         spec = table.rows.get(proposer)
@@ -225,27 +225,12 @@ def search_rows(src: Sources, table: Table, spent: dict[str, float]) -> list[dic
                 row.update(innings=extra.get("n_innings"), shots=extra.get("shots_per_inning"))
             else:
                 row.update(cap=extra.get("cap"), seeds=extra.get("seeds"), reached_cap=extra.get("reached_cap"),
-                           ci95=chain_interval(res["values"]))
+                           ci95=stats.chain_interval(res["values"]))
             row.update(mean=_round(res["mean"]), max=res["max"], physics=res.get("physics"),
                        sims_per_decision=res.get("sims_per_decision"))
             src.copy(run_dir, "search", SEARCH_FILES)
         rows.append(row)
     return rows
-
-
-def chain_interval(values, level: float = 0.95, draws: int = 10_000, seed: int = 0) -> list[float]:
-    """The percentile-bootstrap ``level`` interval of the mean of P3 chain lengths ``values``
-    (a heavy-tailed, capped distribution: no normal approximation). Integers sum exactly, so the
-    same bits on every machine."""
-    import numpy as np
-
-    x = np.asarray(values, dtype=np.float64)
-    if x.size == 0:
-        return [float("nan"), float("nan")]
-    idx = np.random.default_rng(seed).integers(0, x.size, size=(draws, x.size))
-    means = np.sort(x[idx].sum(axis=1)) / x.size
-    lo, hi = means[int((1 - level) / 2 * draws)], means[int((1 + level) / 2 * draws) - 1]
-    return [round(float(lo), 1), round(float(hi), 1)]
 
 
 def curve_figures(src: Sources, tables: list[Table], extra: list[Table], out: Path) -> dict[str, str]:
