@@ -80,10 +80,10 @@ def track_for(noise: str):
 
 def play_block(agent, track, first: int, n: int) -> dict[str, np.ndarray]:
     """Innings ``first .. first + n - 1``, played by the benchmark's own loop
-    (:func:`billiards.bench.run.play_innings`): observations (n, T+1, D), actions (n, T, 4),
+    (:func:`billiards.bench.protocols.play_innings`): observations (n, T+1, D), actions (n, T, 4),
     rewards, terminations, truncations (n, T) and the env's info keys :data:`INFO` (n, T+1, ...;
     the entry before the first shot holds the rack and zeros)."""
-    from billiards.bench.run import play_innings
+    from billiards.bench.protocols import play_innings
 
     out = {"observations": [], "actions": [], "rewards": [], "terminations": [], "truncations": []}
     infos = {k: [] for k in INFO}

@@ -12,7 +12,7 @@ Every package that plays, scores, reports or shows a protocol asks this registry
 (how a unit starts, what one is called, which figure ranks it, what range one unit's score
 takes) instead of comparing the protocol's name as a string: a new protocol is a member of
 :class:`Protocol` and an entry of :data:`PROTOCOLS`, and the code that plays it (the benchmark's
-``billiards.bench.run.PLAYERS``, keyed by this enum). The values are the names written in
+``billiards.bench.protocols.PROTOCOLS``, keyed by this enum). The values are the names written in
 configs, tracks, scorecards and run records, so reading a record needs no upgrade.
 """
 

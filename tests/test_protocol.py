@@ -1,6 +1,6 @@
 """The protocols' registry (billiards/protocol.py): one description per protocol, asked by every
 package instead of comparing a protocol's name as a string, and one player per protocol that
-plays a unit for any agent (the benchmark's ``PLAYERS``)."""
+plays a unit for any agent (the benchmark's ``PROTOCOLS``)."""
 
 import ast
 import dataclasses
@@ -66,15 +66,16 @@ def test_no_module_compares_a_protocols_name_as_a_string():
 
 @pytest.mark.slow
 def test_every_protocol_plays_a_unit_for_any_agent_within_its_tracks_rules():
-    """The benchmark plays every protocol through one table of players; each protocol's first
+    """The benchmark plays every protocol through its protocol object; each protocol's first
     unit, played by the nearest-red reference agent on a track of that protocol (cut short), gives
-    a record the track's own rules accept and values inside the protocol's range."""
+    a record the track's rules accept and values inside the protocol's range."""
     from billiards.bench.adapters import NearestRedAgent
-    from billiards.bench.run import PLAYERS, play_unit, unit_values
+    from billiards.bench.protocols import PROTOCOLS, record_problem
+    from billiards.bench.run import play_unit, unit_values
     from billiards.bench.tracks import TRACKS
     from billiards.physics import get_params
 
-    assert set(PLAYERS) == set(Protocol)
+    assert set(PROTOCOLS) == set(Protocol) and all(p.kind is k for k, p in PROTOCOLS.items())
     for protocol in Protocol:
         track = next(t for t in TRACKS.values() if t.protocol is protocol)
         if protocol.spec.two_player:  # one short match against the random player
@@ -84,7 +85,7 @@ def test_every_protocol_plays_a_unit_for_any_agent_within_its_tracks_rules():
             track = dataclasses.replace(track, units=3, block=3, shots=min(track.shots, 4))
         agent = NearestRedAgent(get_params(track.physics))
         rec = {"unit": 0, **play_unit(agent, track, 0)}
-        assert track.record_problem(rec) is None, (protocol, rec)
+        assert record_problem(track, rec) is None, (protocol, rec)
         values = unit_values(track, [rec])
         lo, hi, _ = protocol.spec.value_range(track.shots)
         assert values and all(lo <= v <= hi for v in values), (protocol, values)

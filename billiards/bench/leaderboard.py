@@ -204,7 +204,7 @@ def derive(path: Path, card: dict) -> dict:
 
     * the ledger: every record sealed, of the scorecard's run, each unit once, every one of the
       track's units and no other (:func:`billiards.bench.run.read_ledger`), each within the
-      track's rules (:meth:`~billiards.bench.tracks.Track.record_problem`: points per inning in
+      track's rules (:func:`~billiards.bench.protocols.record_problem`: points per inning in
       [0, shots], a shot scoring 0 or 1, chains within the cap, match results as the match rules
       give them, decisions as the protocol asks, simulations within the budget);
     * the run: the identity its records carry is the one of the track, the agent and the limit

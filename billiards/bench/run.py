@@ -11,7 +11,7 @@ scorecard is only returned. A scorecard claims no status: the leaderboard gives 
 
 The agent is timed alone (CPU seconds of its own calls) and its simulations counted; its every
 answer is checked (real, finite numbers of the right shape) and its counter must never go down.
-Every ledger record is held to the track's rules (:meth:`Track.record_problem`) when it is
+Every ledger record is held to the track's rules (:func:`~billiards.bench.protocols.record_problem`) when it is
 written and when it is read back. A failure is put on the agent only when it is the agent's
 (:func:`whose_failure`).
 """
@@ -22,18 +22,16 @@ import contextlib
 import hashlib
 import json
 import os
-import time
 from pathlib import Path
 
-import numpy as np
 
-from billiards import domain, files
+from billiards import files
 from billiards.files import (IDENTITY_FILE, SCORECARD_JSON, SCORECARD_MD, UNITS_FILE, LedgerKind, atomic_write_text,
                              display_path)
 from billiards.protocol import Protocol
 
-from billiards import stats
-from .adapters import Agent, AgentError, checked_action, resolve_agent
+from .adapters import Agent, AgentError, resolve_agent
+from .protocols import fingerprint_data, protocol_of, record_problem
 from .text import md_code, md_text, one_line
 from .tracks import Track, get_track
 
@@ -45,223 +43,13 @@ class EvaluationError(RuntimeError):
     directory is not this evaluation's."""
 
 
-# ----------------------------------------------------------------------------- playing units
-
-
-def params_noise(track: Track):
-    from billiards.physics import get_params
-    from billiards.physics.noise import get_noise
-
-    return get_params(track.physics), get_noise(track.noise)
-
-
-class _Clock:
-    """The agent's own cost: seconds of its calls (wall clock, on the one thread it runs on;
-    the CPU clock costs tens of microseconds a read on some machines), decisions, simulations.
-    Every answer of every agent passes here: its shots checked (:func:`checked_action`: real,
-    finite numbers of the right shape) and its simulation counter read, which must be a whole
-    number that never goes down."""
-
-    def __init__(self, agent: Agent):
-        self.agent, self.cpu, self.decisions = agent, 0.0, 0
-        self.sims0 = self.sims = _sims(agent, None)
-
-    def act(self, obs, tables, levels):
-        t0 = time.perf_counter()
-        raw = self.agent.act(obs, tables, levels)
-        self.cpu += time.perf_counter() - t0
-        self.decisions += len(tables)
-        shots = checked_action(raw, len(tables), self.agent.name)
-        self.sims = _sims(self.agent, self.sims)
-        return shots
-
-    def record(self) -> dict:
-        return {"decisions": self.decisions, "cpu_s": round(self.cpu, 6), "sims": int(self.sims - self.sims0)}
-
-
-def _sims(agent: Agent, before: int | None) -> int:
-    """The agent's simulation counter (``agent.sims``: simulations used so far), checked: a whole
-    number >= 0, never below ``before`` (what it said after its previous call); an AgentError
-    naming the agent otherwise."""
-    sims = getattr(agent, "sims", 0)
-    whole = isinstance(sims, (int, np.integer)) and not isinstance(sims, (bool, np.bool_))
-    if not whole or sims < 0:
-        raise AgentError(f"agent {agent.name}'s simulation counter (sims) is {str(sims)[:40]!r}, not a whole number >= 0: "
-                         f"it counts the simulations the agent has used so far")
-    if before is not None and sims < before:
-        raise AgentError(f"agent {agent.name}'s simulation counter (sims) went down from {before} to {sims}: it counts "
-                         f"the simulations the agent has used so far and never goes down")
-    return int(sims)
-
-
-def _levels(env) -> np.ndarray | None:
-    return None if env._levels is None else env._levels.copy()
-
-
-def play_innings(agent: Agent, track: Track, first: int, n: int, on_shot=None, on_step=None) -> dict:
-    """Innings ``first .. first + n - 1`` of an innings or P1 track, side by side: inning i's
-    rack and noise from seed ``track.seed + i`` (each inning depends only on its seed and the
-    agent). ``on_shot(row, shot, before, info, level)`` after every shot of every inning (a replay
-    records them): the inning's row in the block, the shot's index, its table, the env's info
-    rows and the level it played at. ``on_step(shot, before, obs, raw, step)`` after every step
-    of the whole block (a dataset records them): the tables and observations before the shot,
-    the raw shots played and the env's ``step`` return (observation, reward, terminated,
-    truncated, info)."""
-    from billiards.envs.gym_vector import Billiards4BallVectorEnv
-
-    spec = track.protocol.spec
-    env = Billiards4BallVectorEnv(n, start=spec.start, on_miss=spec.on_miss, max_shots=track.shots, physics=track.physics,
-                                  noise=track.noise, normalize_actions=False)
-    obs, info = env.reset(seed=track.seed + first)
-    agent.reset(track.seed + first)
-    clock = _Clock(agent)
-    score = np.zeros((n, track.shots), dtype=bool)
-    foul = np.zeros((n, track.shots), dtype=bool)
-    tables = info["positions"]
-    for t in range(track.shots):
-        levels = _levels(env)
-        raw = clock.act(obs, tables.copy(), levels if track.tells_level else None)
-        step = env.step(raw)
-        if on_step is not None:
-            on_step(t, tables, obs, raw, step)
-        obs, _, _, _, info = step
-        score[:, t], foul[:, t] = info["score"], info["foul"]
-        if on_shot is not None:
-            for i in range(n):
-                on_shot(i, t, tables[i], {k: v[i] for k, v in info.items()}, None if levels is None else levels[i])
-        tables = info["positions"]
-    return {"first": first, "n": n, "score": score.astype(int).tolist(), "foul": foul.astype(int).tolist(), **clock.record()}
-
-
-def play_chain(agent: Agent, track: Track, index: int, on_shot=None) -> dict:
-    """Chain ``index`` of a P3 track: the opening rack, seed ``track.seed + index``, until the first
-    miss or foul or the cap (``on_shot`` as for :func:`play_innings`, the row always 0)."""
-    from billiards.envs.gym_vector import Billiards4BallVectorEnv
-
-    seed, spec = track.seed + index, track.protocol.spec
-    env = Billiards4BallVectorEnv(1, start=spec.start, on_miss=spec.on_miss, max_shots=track.shots, physics=track.physics,
-                                  noise=track.noise, normalize_actions=False)
-    obs, info = env.reset(seed=seed)
-    agent.reset(seed)
-    clock = _Clock(agent)
-    length, fouled = 0, False
-    while True:
-        before, levels = info["positions"].copy(), _levels(env)
-        raw = clock.act(obs, before.copy(), levels if track.tells_level else None)
-        obs, _, terminated, truncated, info = env.step(raw)
-        if on_shot is not None:
-            on_shot(0, length, before[0], {k: v[0] for k, v in info.items()}, None if levels is None else levels[0])
-        if not info["score"][0]:
-            fouled = bool(info["foul"][0])
-            break
-        length += 1
-        if terminated[0] or truncated[0]:
-            break
-    return {"index": index, "seed": seed, "length": length, "ended_by_foul": fouled, **clock.record()}
-
-
-class _MatchPlayer:
-    """The scored agent as a player of :func:`billiards.league.play.play_match`."""
-
-    def __init__(self, clock: _Clock, tells_level: bool):
-        self.clock, self.tells_level = clock, tells_level
-
-    def reseed(self, seed: int) -> None:
-        self.clock.agent.reset(seed)
-
-    def act(self, view: np.ndarray, level: float | None = None) -> np.ndarray:
-        from billiards.envs._common import with_levels
-        from billiards.league.players import to_env_action
-
-        levels = None if level is None or not self.tells_level else np.array([float(level)])
-        obs = with_levels(domain.observation(view[None]), levels)
-        raw = self.clock.act(obs, view[None].astype(np.float64), levels)
-        return to_env_action(raw[0])
-
-
-_POOL: dict = {}  # (track name, opponent) -> league player (built once a process)
-
-
-def play_match(agent: Agent, track: Track, index: int, on_shot=None, opponent=None) -> dict:
-    """Match ``index`` of a match track: opponent ``index // units``, the break alternating; the
-    agent plays white. ``on_shot`` as for :func:`billiards.league.play.play_match`; ``opponent``:
-    the pool player to use (default: the process's own, built once)."""
-    from billiards.league.play import play_match as play
-
-    from .adapters import league_player
-
-    params, noise = params_noise(track)
-    j, i = divmod(index, track.units)
-    name = track.opponents[j]
-    if opponent is None:
-        if (track.name, name) not in _POOL:
-            _POOL[(track.name, name)] = league_player(name, noise, params)[0]
-        opponent = _POOL[(track.name, name)]
-    clock = _Clock(agent)
-    seed = track.seed + 1000 * j + i
-    result = play(_MatchPlayer(clock, track.tells_level), opponent, seed=seed,
-                  first="white" if i % 2 == 0 else "yellow", target=track.target, max_innings=track.max_innings,
-                  start=track.protocol.spec.start, noise=noise, physics=params, on_shot=on_shot)
-    winner = {"white": "agent", "yellow": "opponent", None: None}[result["winner"]]
-    return {"index": index, "opponent": name, "seed": seed, "first": "agent" if i % 2 == 0 else "opponent",
-            "winner": winner, "points": [result["scores"]["white"], result["scores"]["yellow"]],
-            "innings": result["innings"], **clock.record()}
-
-
-def _play_block(agent: Agent, track: Track, unit: int, on_shot=None) -> dict:
-    first = unit * track.block
-    return play_innings(agent, track, first, min(track.block, track.units - first), on_shot)
-
-
-# how each protocol plays one resumable unit for any agent (billiards.protocol names them)
-PLAYERS = {Protocol.INNINGS: _play_block, Protocol.P1: _play_block, Protocol.P3: play_chain, Protocol.MATCH: play_match}
+# ----------------------------------------------------------------------------- playing units and the fingerprint
 
 
 def play_unit(agent: Agent, track: Track, unit: int, on_shot=None) -> dict:
-    """One resumable unit of ``track`` (a block of innings, a chain, a match); ``on_shot`` as the
-    protocol's own function takes it."""
-    return PLAYERS[track.protocol](agent, track, unit, on_shot)
-
-
-# ----------------------------------------------------------------------------- the fingerprint
-
-
-def fingerprint_data(track: Track) -> list:
-    """What a track's fingerprint covers: its first racks and the nearest-red reference agent's
-    first decisions on them (the shots, and the tables and outcomes they give, noise included),
-    rounded to 1e-9."""
-    from billiards.envs.gym_vector import Billiards4BallVectorEnv
-
-    from .adapters import NearestRedAgent
-
-    params, noise = params_noise(track)
-    ref = NearestRedAgent(params)
-    r9 = lambda a: np.round(np.asarray(a, dtype=np.float64), 9).tolist()
-    out: list = []
-    if track.protocol.spec.two_player:
-        from billiards.envs import sagu_v0
-        from billiards.envs.sagu import AGENTS, shooter_view
-        from billiards.league.players import to_env_action
-
-        env = sagu_v0.raw_env(first="white", target=track.target, max_innings=track.max_innings, start=track.protocol.spec.start,
-                              noise=noise, physics=params)
-        env.reset(seed=track.seed)
-        for _ in range(6):
-            view = shooter_view(env.game.positions, AGENTS.index(env.agent_selection))
-            action = to_env_action(ref.act(None, view[None], None)[0])
-            env.step(action)
-            out.append([r9(env.game.positions), list(env.game.scores), env.agent_selection])
-        return out
-    spec = track.protocol.spec
-    env = Billiards4BallVectorEnv(4, start=spec.start, on_miss=spec.on_miss, max_shots=max(track.shots, 2), physics=track.physics,
-                                  noise=track.noise, normalize_actions=False)
-    obs, info = env.reset(seed=track.seed)
-    out.append([r9(info["positions"]), r9(obs), None if env._levels is None else r9(env._levels)])
-    for _ in range(2):
-        raw = ref.act(obs, info["positions"], None)
-        obs, reward, term, trunc, info = env.step(raw)
-        out.append([r9(raw), r9(info["positions"]), info["score"].astype(int).tolist(), info["foul"].astype(int).tolist()])
-    return out
+    """One resumable unit of ``track`` (a block of innings, a chain, a match), played by its
+    protocol (:mod:`billiards.bench.protocols`); ``on_shot`` as the protocol's own function takes it."""
+    return protocol_of(track).play(agent, track, unit, on_shot)
 
 
 def fingerprint(track: Track) -> str:
@@ -276,24 +64,10 @@ def fingerprint(track: Track) -> str:
 # ----------------------------------------------------------------------------- the scorecard
 
 
-def _per_inning(records: list[dict], key: str) -> np.ndarray:
-    return np.asarray([row for r in records for row in r[key]], dtype=float)
-
-
-def _match_score(rec: dict) -> float:
-    return 1.0 if rec["winner"] == "agent" else 0.0 if rec["winner"] == "opponent" else 0.5
-
-
 def unit_values(track: Track, records: list[dict]) -> list:
     """The per-unit scores the intervals resample (a scorecard's ``values``): points per inning
     (innings), each inning's success rate (P1), chain lengths (P3), match scores (1, 0.5, 0)."""
-    if track.protocol is Protocol.INNINGS:
-        return _per_inning(records, "score").sum(axis=1).astype(int).tolist()
-    if track.protocol is Protocol.P1:
-        return [round(float(v), 6) for v in _per_inning(records, "score").mean(axis=1)]
-    if track.protocol is Protocol.P3:
-        return [int(r["length"]) for r in records]
-    return [_match_score(r) for r in records]
+    return protocol_of(track).values(track, records)
 
 
 def score_records(track: Track, records: list[dict]) -> dict:
@@ -304,33 +78,7 @@ def score_records(track: Track, records: list[dict]) -> dict:
                  "sims_per_decision": round(sum(r["sims"] for r in records) / max(decisions, 1), 2)}
     if not records:
         return out
-    if track.protocol.spec.by_innings:
-        score, foul = _per_inning(records, "score"), _per_inning(records, "foul")
-        rate = score.mean(axis=1)  # each inning's success rate: the unit of resampling
-        out["success_per_shot"] = {"mean": round(float(score.mean()), 6), "ci95": stats.bootstrap_ci(rate),
-                                   "n_shots": int(score.size), "n_innings": int(len(rate))}
-        out["foul_per_shot"] = {"mean": round(float(foul.mean()), 6), "ci95": stats.bootstrap_ci(foul.mean(axis=1))}
-        out["points_per_inning"] = stats.summary(score.sum(axis=1))
-    elif track.protocol is Protocol.P3:
-        lengths = np.asarray([r["length"] for r in records], dtype=float)
-        out["chain"] = {**stats.summary(lengths), "max": int(lengths.max()), "reached_cap": int((lengths >= track.shots).sum()),
-                        "cap": track.shots}
-        shots = lengths.sum() + sum(1 for r in records if r["length"] < track.shots)
-        out["success_per_shot"] = {"mean": round(float(lengths.sum() / max(shots, 1)), 6), "n_shots": int(shots)}
-    else:
-        ratings = dict(track.ratings)
-        scores = [_match_score(r) for r in records]
-        total = float(sum(scores))
-        out["match"] = {"matches": len(records), "wins": sum(r["winner"] == "agent" for r in records),
-                        "draws": sum(r["winner"] is None for r in records), "win_rate": round(total / len(records), 6),
-                        "ci95": stats.wilson(total, len(records)),
-                        "points_for": round(float(np.mean([r["points"][0] for r in records])), 4),
-                        "points_against": round(float(np.mean([r["points"][1] for r in records])), 4),
-                        "by_opponent": {o: round(float(np.mean([s for s, r in zip(scores, records) if r["opponent"] == o])), 4)
-                                        for o in track.opponents if any(r["opponent"] == o for r in records)}}
-        results = [(ratings[r["opponent"]], s) for r, s in zip(records, scores)]
-        out["elo"] = stats.elo_against(results)
-        out["elo_ci95"] = stats.elo_interval(results)
+    out.update(protocol_of(track).figures(track, records))
     out["values"] = unit_values(track, records)
     return out
 
@@ -453,7 +201,7 @@ def scorecard_problems(records: list[dict], card: dict, name: str) -> list[str]:
             return [f"{name}: its limit {_short(limit)} is not a whole number in 1..{track.units}"]
         track = track.scaled(limit)
     out = [f"{name}: unit {r['unit']} of its ledger breaks the rules of {track.name}: {why}"
-           for r in records if (why := track.record_problem(r)) is not None]
+           for r in records if (why := record_problem(track, r)) is not None]
     if out:
         return out
     if "partial" in card and card["partial"] != (len(records) < track.n_blocks()):
@@ -471,7 +219,7 @@ def read_ledger(path: Path, run_id: str, repair: bool = True, track: Track | Non
     """The finished units of a ledger by index (:func:`billiards.files.read_ledger`): every record
     sealed, of this run, each unit once; a torn last line (a kill mid-append) is cut off the file
     (``repair``; else left out) so its unit is played again; anything else is refused by name.
-    With ``track``, every record is held to the track's rules too (:meth:`Track.record_problem`:
+    With ``track``, every record is held to the track's rules too (:func:`~billiards.bench.protocols.record_problem`:
     a unit index in range, outcomes the protocol allows): a record that breaks them is refused
     naming the file and the unit, never counted."""
     try:
@@ -482,7 +230,7 @@ def read_ledger(path: Path, run_id: str, repair: bool = True, track: Track | Non
         raise EvaluationError(f"{display_path(path)}: its last line is torn (an interrupted append): resume the evaluation")
     if track is not None:
         for rec in scan.records:
-            if (why := track.record_problem(rec)) is not None:
+            if (why := record_problem(track, rec)) is not None:
                 raise EvaluationError(f"{display_path(path)}: unit {rec['unit']} breaks the rules of {track.name}: {why}")
     return {r["unit"]: r for r in scan.records}
 
@@ -743,7 +491,7 @@ def _play(agent, track, full, out, ledger, done, identity_agent, run_id, command
             except Exception as err:
                 raise EvaluationError(failure_message(err, agent, f"{one} {unit} of {full.name}", kept)) from err
             rec = {"unit": unit, **rec}
-            if (why := track.record_problem(rec)) is not None:  # what the reader would refuse is never written
+            if (why := record_problem(track, rec)) is not None:  # what the reader would refuse is never written
                 raise EvaluationError(f"agent {agent.name} broke the rules of {full.name} on {one} {unit}: {why} ({kept})")
             if ledger is not None:
                 rec = files.append_record(ledger, rec, run_id)

@@ -130,95 +130,11 @@ class Track:
             return f"{len(values)} unit scores, but a whole evaluation of {self.name} has {count}"
         lo, hi, whole = self.unit_range()
         for i, v in enumerate(values):
-            why = _number_problem(v, lo, hi, whole)
+            why = number_problem(v, lo, hi, whole)
             if why is None and self.protocol.spec.two_player and v not in (0, 0.5, 1):
                 why = "not a match's score (1 a win, 0.5 a draw, 0 a loss)"
             if why is not None:
                 return f"unit score {i} ({str(v)[:40]}): {why} on {self.name}"
-        return None
-
-    def record_problem(self, rec: dict) -> str | None:
-        """What in the ledger record of one finished unit (a block of innings, a chain, a match;
-        its shape already checked: ``unit``, ``decisions`` and ``sims`` integers >= 0, ``cpu_s``
-        a number >= 0) breaks this track's rules, or None: its index among the track's units,
-        its innings, seeds, opponent and break as the track plays them, every outcome within
-        what the protocol allows (a shot scores 0 or 1 and is not both a score and a foul; a
-        chain lies within the cap and ends as chains end; a match's points, winner and innings
-        follow the match rules), the decisions the protocol asks for, and the simulations within
-        the track's budget."""
-        unit, n_units = rec["unit"], self.n_blocks()
-        if unit >= n_units:
-            return f"unit {unit} is not one of {self.name}'s {n_units} units (0 to {n_units - 1})"
-        if not (isinstance(rec["cpu_s"], (int, float)) and math.isfinite(rec["cpu_s"])):
-            return f"its cpu_s {rec['cpu_s']!r} is not a finite number"
-        if rec["sims"] > self.budget * rec["decisions"]:
-            return (f"{rec['sims']} simulations for {rec['decisions']} decisions, past the track's budget of {self.budget} "
-                    "per decision")
-        check = {Protocol.INNINGS: self._innings_problem, Protocol.P1: self._innings_problem, Protocol.P3: self._chain_problem,
-                 Protocol.MATCH: self._match_problem}[self.protocol]
-        try:
-            return check(rec)
-        except (KeyError, TypeError, ValueError) as err:  # a key missing or of another kind: a sentence
-            return f"it is not a {self.protocol} unit record ({type(err).__name__}: {str(err)[:80]})"
-
-    def _innings_problem(self, rec: dict) -> str | None:
-        first = rec["unit"] * self.block
-        n = min(self.block, self.units - first)
-        if not (_is_int(rec["first"]) and _is_int(rec["n"]) and rec["first"] == first and rec["n"] == n):
-            return f"a block of {self.name} starting at inning {first} holds innings {first} to {first + n - 1}"
-        for key in ("score", "foul"):
-            rows = rec[key]
-            if not (isinstance(rows, list) and len(rows) == n and all(isinstance(r, list) and len(r) == self.shots for r in rows)):
-                return f"its {key} must be {n} innings of {self.shots} shots each"
-            if any(not _is_int(x) or x not in (0, 1) for r in rows for x in r):
-                return f"its {key} holds a shot that is not 0 or 1 (a shot scores one point or none)"
-        if any(s and f for rs, rf in zip(rec["score"], rec["foul"]) for s, f in zip(rs, rf)):
-            return "a shot both scores and fouls"
-        if rec["decisions"] != n * self.shots:
-            return f"{rec['decisions']} decisions, but {n} innings of {self.shots} shots take {n * self.shots}"
-        return None
-
-    def _chain_problem(self, rec: dict) -> str | None:
-        unit, cap = rec["unit"], self.shots
-        if not (_is_int(rec["index"]) and _is_int(rec["seed"]) and rec["index"] == unit and rec["seed"] == self.seed + unit):
-            return f"chain {unit} of {self.name} has index {unit} and seed {self.seed + unit}"
-        length = rec["length"]
-        if not (_is_int(length) and 0 <= length <= cap):
-            return f"its length {str(length)[:40]} is not a whole number in [0, {cap}] (the chain's cap)"
-        if not isinstance(rec["ended_by_foul"], bool) or (length == cap and rec["ended_by_foul"]):
-            return "its ended_by_foul must be true or false, and false for a chain that reached the cap"
-        decisions = length + (1 if length < cap else 0)  # every scoring shot, and the miss or foul that ended it
-        if rec["decisions"] != decisions:
-            return f"{rec['decisions']} decisions, but a chain of {length} (cap {cap}) takes {decisions}"
-        return None
-
-    def _match_problem(self, rec: dict) -> str | None:
-        unit = rec["unit"]
-        j, i = divmod(unit, self.units)
-        want = {"index": unit, "opponent": self.opponents[j], "seed": self.seed + 1000 * j + i,
-                "first": "agent" if i % 2 == 0 else "opponent"}
-        if any(rec[k] != v or isinstance(rec[k], bool) for k, v in want.items()):
-            return f"match {unit} of {self.name} is {', '.join(f'{k} {v!r}' for k, v in want.items())}"
-        points = rec["points"]
-        if not (isinstance(points, list) and len(points) == 2):
-            return "its points must be [the agent's, the opponent's]"
-        for who, p in zip(("agent's", "opponent's"), points):
-            if why := _number_problem(p, 0, self.target, True):
-                return f"the {who} points {str(p)[:40]}: {why} (a match to {self.target})"
-        mine, theirs = points
-        if mine >= self.target and theirs >= self.target:
-            return f"both players reached {self.target} points: the match ends when the first does"
-        winner = "agent" if mine > theirs else "opponent" if theirs > mine else None
-        if rec["winner"] != winner:
-            return f"its winner {rec['winner']!r} is not the one its points {mine:g} - {theirs:g} give ({winner!r})"
-        innings = rec["innings"]
-        if not (_is_int(innings) and 1 <= innings <= self.max_innings + 1):
-            return f"its innings {str(innings)[:40]} is not a whole number in [1, {self.max_innings + 1}]"
-        if (max(mine, theirs) >= self.target) == (innings > self.max_innings):
-            return (f"{innings} innings with points {mine:g} - {theirs:g}: a match ends at {self.target} points or, "
-                    f"short of them, after {self.max_innings} innings")
-        if mine > rec["decisions"]:
-            return f"the agent scored {mine:g} points with {rec['decisions']} shots (a point takes a shot)"
         return None
 
     def scaled(self, units: int) -> Track:
@@ -264,11 +180,11 @@ _REGISTRY: tuple[Track, ...] = (
 TRACKS: dict[str, Track] = {t.name: t for t in _REGISTRY}
 
 
-def _is_int(x) -> bool:
+def is_int(x) -> bool:
     return isinstance(x, int) and not isinstance(x, bool)
 
 
-def _number_problem(v, lo: float, hi: float, whole: bool) -> str | None:
+def number_problem(v, lo: float, hi: float, whole: bool) -> str | None:
     """Why ``v`` is not a real, finite number in [lo, hi] (a whole one where ``whole``), or None."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return f"not a number but {type(v).__name__}"
@@ -295,4 +211,4 @@ def track_help() -> str:
     return "\n".join(f"  {t.name}: {t.rules()}" for t in TRACKS.values())
 
 
-__all__ = ["TRACKS", "Track", "get_track", "track_help"]
+__all__ = ["TRACKS", "Track", "get_track", "is_int", "number_problem", "track_help"]

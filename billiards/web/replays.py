@@ -165,8 +165,8 @@ def scorecard_units(track, records: list[dict]) -> list[dict]:
 
 
 def _innings_recorded(agent, track, first: int, n: int) -> tuple[dict, list[list[dict]]]:
-    """:func:`billiards.bench.run.play_innings`, every shot recorded: (its record, shots per inning)."""
-    from billiards.bench.run import play_innings
+    """:func:`billiards.bench.protocols.play_innings`, every shot recorded: (its record, shots per inning)."""
+    from billiards.bench.protocols import play_innings
 
     shots: list[list[dict]] = [[] for _ in range(n)]
 
@@ -178,8 +178,8 @@ def _innings_recorded(agent, track, first: int, n: int) -> tuple[dict, list[list
 
 
 def _chain_recorded(agent, track, index: int) -> tuple[dict, list[dict]]:
-    """:func:`billiards.bench.run.play_chain`, every shot recorded."""
-    from billiards.bench.run import play_chain
+    """:func:`billiards.bench.protocols.play_chain`, every shot recorded."""
+    from billiards.bench.protocols import play_chain
 
     shots: list[dict] = []
 
@@ -191,10 +191,10 @@ def _chain_recorded(agent, track, index: int) -> tuple[dict, list[dict]]:
 
 
 def _match_recorded(agent, track, index: int) -> tuple[dict, list[dict]]:
-    """:func:`billiards.bench.run.play_match`, every shot recorded: the agent is white, the pool
+    """:func:`billiards.bench.protocols.play_match`, every shot recorded: the agent is white, the pool
     player yellow (a player of its own, reseeded per match as the pool's is)."""
     from billiards.bench.adapters import league_player
-    from billiards.bench.run import params_noise, play_match
+    from billiards.bench.protocols import params_noise, play_match
 
     params, noise = params_noise(track)
     name = track.opponents[index // track.units]
