@@ -465,6 +465,10 @@ def _search(parsed: AgentSpec, track) -> Agent:
     if proposer:  # for_noise: the track's noise's shot proposer (search.py's proposer=for_noise_<preset>)
         overrides.append(f"proposer={proposer}_{track.noise}" if proposer == "for_noise" else f"proposer={proposer}")
     try:
+        planned = search_config.compose_search([o for o in overrides if not o.startswith("search.budget=")])
+        if planned.search.kind == "h2" and planned.search.budget != track.budget:  # h2's split, scaled to the track's budget
+            k1, m1 = search_config.option("search", planned.search).split_for(track.budget)
+            overrides += [f"search.k1={k1}", f"search.m1={m1}"]
         cfg = search_config.compose_search(overrides)
     except search_config.SearchConfigError as err:
         raise AgentError(f"agent {spec!r}: {err}") from None

@@ -150,6 +150,19 @@ class Track:
 # results/sagu/fastfiz_x5_run (0.5675 of their 400 matches; billiards.stats.elo_against).
 _MATCH_RATINGS = (("greedy", 1500.0), ("greedy_r", 1547.1))
 
+BUDGETS = (25, 50, 100)  # the compute-limited exact tracks' simulations per decision (the others allow 400)
+_BUDGET_FINGERPRINTS = {
+    "innings-b25-v1": "5e393765cb7f99656c5166009c6b5873b4b6f8870a4b58a7faef86b249c4b68d",
+    "innings-b50-v1": "3cb3ad291203d8bfa0bae0f0bb3c599d9be6ea0543c018f3ce2068ab9633c733",
+    "innings-b100-v1": "818516af714c22a6b46f5a99e726fa3293d27f9b4fa54da752e069d1ec655d78",
+    "p1-exact-b25-v1": "77680b45010cb991750be00b6ae2aa9ca08954f8a0c74c98e8748127e974b634",
+    "p1-exact-b50-v1": "c9477ccf6c7f22e75a2f28e8e1ca6171a504a2c946e47d3711fa73e65e4ebe03",
+    "p1-exact-b100-v1": "714f019cdf7008dd46f488914351147706663c768f549011f136d34cbcb259a9",
+    "p3-exact-b25-v1": "ab8d521d3ef1d636a968069d8c144abc5a5118ae3cd63fb3c969d4c36e98d916",
+    "p3-exact-b50-v1": "bac0e970fcf2de07e3cc8c40b54ffa0b4eb96d77622288205efa253f774fbb13",
+    "p3-exact-b100-v1": "6b9b5d5865c4b8e2c907389dbec8d047404d92d22a6a1f76e18ebd1b5fdf5e68",
+}
+
 _REGISTRY: tuple[Track, ...] = (
     Track("innings-v1", Protocol.INNINGS, "The paper's evaluation protocol: points per 10-shot inning from random racks, exact play",
           units=100, shots=10, seed=7_100_000,
@@ -160,6 +173,15 @@ _REGISTRY: tuple[Track, ...] = (
     Track("p3-exact-v1", Protocol.P3, "Chains from the opening rack, exact play",
           units=20, shots=1000, seed=7_300_000,
           fingerprint="ed89d0bb2a977de82ed0d01dcbb269e036fc547adabafb6fdf5f9c326f2bb17b"),
+    # the exact tracks at small budgets: the same racks and seeds as the three above, the search
+    # budget cut to 25, 50 and 100 simulations per decision (how cheaply search solves the game)
+    *(Track(f"{base}-b{budget}-v1", protocol, f"{what} at {budget} simulations per decision", units=units, shots=shots,
+            seed=seed, budget=budget, fingerprint=_BUDGET_FINGERPRINTS.get(f"{base}-b{budget}-v1", ""))
+      for base, protocol, what, units, shots, seed in (
+          ("innings", Protocol.INNINGS, "Points per 10-shot inning from random racks, exact play", 100, 10, 7_100_000),
+          ("p1-exact", Protocol.P1, "Per-shot success from random racks, exact play", 100, 20, 7_200_000),
+          ("p3-exact", Protocol.P3, "Chains from the opening rack, exact play", 20, 1000, 7_300_000))
+      for budget in BUDGETS),
     Track("p1-fastfiz-v1", Protocol.P1, "Per-shot success from random racks under fastfiz execution noise",
           units=100, shots=20, seed=7_400_000, noise="fastfiz",
           fingerprint="3af43f59e5a5084ad25b11190a174655d1a4abe04fb3bdcabe171e19c4c9c3da"),
@@ -211,4 +233,4 @@ def track_help() -> str:
     return "\n".join(f"  {t.name}: {t.rules()}" for t in TRACKS.values())
 
 
-__all__ = ["TRACKS", "Track", "get_track", "is_int", "number_problem", "track_help"]
+__all__ = ["BUDGETS", "TRACKS", "Track", "get_track", "is_int", "number_problem", "track_help"]

@@ -63,7 +63,7 @@ class SearchSettings:
         finite_number(self.foul_penalty, "foul_penalty", 0.0)  # billiards.domain.check_coefficient
 
     def settings(self):
-        """This object, checked (:meth:`check`): what :meth:`actor` searches with."""
+        """This object, checked (:meth:`check`): what its actor searches with."""
         self.check()
         return self
 
@@ -97,6 +97,22 @@ class H2Config(SearchSettings):
     def from_budget(cls, budget: int, k1: int, m1: int, **kw) -> "H2Config":
         """The checked config splitting ``budget`` simulations per decision: K2 = (budget - K1) / M1."""
         return cls(budget=budget, k1=k1, m1=m1, **kw).settings()
+
+    def split_for(self, budget: int) -> tuple[int, int]:
+        """(k1, m1) for ``budget`` simulations per shot, scaled from this split (k1 and m1 in
+        proportion, at least one candidate and one expansion where this split expands; k1
+        lowered until ``budget - k1`` is a multiple of m1): how a benchmark track's budget sizes
+        h2 (400 = 200 + 10 x 20 gives 25 = 12 + 1 x 13, 50 = 25 + 1 x 25, 100 = 50 + 2 x 25)."""
+        if budget < 1:
+            raise ValueError(f"h2 search needs a budget >= 1, got {budget}")
+        ratio = budget / self.budget
+        k1 = min(budget, max(1, round(self.k1 * ratio)))
+        m1 = 0 if self.m1 == 0 or k1 == budget else min(k1, max(1, round(self.m1 * ratio)))
+        if m1 == 0:
+            return budget, 0
+        while (budget - k1) % m1:
+            k1 -= 1
+        return k1, m1
 
     @property
     def k2(self) -> int:
