@@ -43,7 +43,7 @@ from billiards import stats
 from billiards.protocol import Protocol
 
 from .text import md_text, one_line, plot_label
-from .tracks import TRACKS
+from .tracks import COMPUTE_CURVES, TRACKS
 
 STATUSES = ("verified", "recorded", "unverified")
 OUTSIDE = "unverified"  # the status of outside submissions: counted apart from the project's rows
@@ -361,7 +361,24 @@ def leaderboard(root: Path, report: Callable[[str], None] | None = None) -> dict
     if outside["agents"]:  # present only where there are outside rows
         board["outside"] = outside
     board["tracks"] = tracks
+    board["compute_curves"] = compute_curves(tracks)
     return board
+
+
+def compute_curves(tracks: dict) -> dict:
+    """Each exact track's compute curve (:data:`~billiards.bench.tracks.COMPUTE_CURVES`): for every
+    row scored on at least two of its budgets, its figure with the interval and its milliseconds
+    per decision at each budget (simulations per decision, cheapest first)."""
+    out = {}
+    for base, names in COMPUTE_CURVES.items():
+        points: dict[str, list] = {}
+        for name in names:
+            for r in tracks[name]["rows"]:
+                points.setdefault(r["row"], []).append({"budget": TRACKS[name].budget, "track": name, "score": r["score"],
+                                                         "ci95": r["ci95"], "ms_per_decision": r["ms_per_decision"]})
+        out[base] = {"tracks": list(names), "metric": TRACKS[names[-1]].metric,
+                     "rows": {row: p for row, p in sorted(points.items()) if len(p) >= 2}}
+    return out
 
 
 def _counts(tracks: dict, cards: list[dict], own: bool) -> dict:
@@ -414,6 +431,36 @@ def _division_markdown(name: str, track, t: dict) -> list[str]:
     return lines + [""]
 
 
+def _curves_markdown(board: dict) -> list[str]:
+    """The compute curves: each search row's figure on an exact track at each budget."""
+    curves = {base: c for base, c in board.get("compute_curves", {}).items() if c["rows"]}
+    if not curves:
+        return []
+    lines = ["## How cheaply search solves the exact tracks", "",
+             "Each row's figure on an exact track and on its compute-limited versions (the same racks and seeds, the "
+             "search budget cut to 25, 50 and 100 simulations per decision): figure [95 %] · ms per decision "
+             "(`leaderboard_compute.png`). An agent that acts without the simulator scores the same at every budget.", ""]
+    for base, c in curves.items():
+        protocol = TRACKS[c["tracks"][-1]].protocol
+        budgets = [TRACKS[n].budget for n in c["tracks"]]
+        lines += [f"### {base}: {protocol.spec.metric_name}", "",
+                  "| agent | " + " | ".join(f"{b} sims" for b in budgets) + " |", "|---|" + "---|" * len(budgets)]
+        for row, pts in c["rows"].items():
+            at = {p["budget"]: p for p in pts}
+            cells = []
+            for b in budgets:
+                p = at.get(b)
+                if p is None:
+                    cells.append("—")
+                    continue
+                fmt = lambda v: format_score(protocol, v)  # noqa: E731
+                cost = "" if p["ms_per_decision"] is None else f" · {p['ms_per_decision']:.2f}"
+                cells.append(f"{fmt(p['score'])} [{fmt(p['ci95'][0])}, {fmt(p['ci95'][1])}]{cost}")
+            lines.append(f"| {md_text(row)} | " + " | ".join(cells) + " |")
+        lines.append("")
+    return lines
+
+
 def markdown(board: dict) -> str:
     """``leaderboard.md``."""
     outside = board.get("outside")
@@ -427,7 +474,7 @@ def markdown(board: dict) -> str:
              "intervals resampled by inning, chain or match (rows pooling training seeds: a stratified bootstrap over "
              "seeds and their units; IQM: the interquartile mean); match win rates carry Wilson intervals. Compute: "
              "the agent's own CPU milliseconds per decision on one core of the machine that played it, and simulations "
-             "per decision (the tracks allow 400). Status: **verified** played here by the recorded command; "
+             "per decision (the tracks allow 400; a -b<N> track N). Status: **verified** played here by the recorded command; "
              "**recorded** a training setting's own final evaluations (same protocol, the training runs' evaluation "
              "racks, no weights in the repository); **unverified** an outside submission not yet re-run.", ""]
     for name, t in board["tracks"].items():
@@ -462,6 +509,7 @@ def markdown(board: dict) -> str:
                          f"| {r['status']} | {earlier} |")
         lines.append("")
         lines += _division_markdown(name, track, t)
+    lines += _curves_markdown(board)
     lines += ["P(above the next): the probability that a unit (inning, chain) of the row scores above one of the row "
               "below it, ties counting half (rliable's probability of improvement, stratified bootstrap interval); 0.5 "
               "means the two rows cannot be told apart. `leaderboard.json` also holds each track's performance profiles "
@@ -527,7 +575,46 @@ def write(board: dict, out: Path, figure: bool = True) -> list[Path]:
     if figure:
         paths.append(draw_figure(board, out / "leaderboard.png"))
         paths.append(draw_profiles(board, out / "leaderboard_profiles.png"))
+        if any(c["rows"] for c in board.get("compute_curves", {}).values()):
+            paths.append(draw_compute_curves(board, out / "leaderboard_compute.png"))
     return paths
+
+
+def draw_compute_curves(board: dict, path: Path) -> Path:
+    """``leaderboard_compute.png``: each search row's figure against its simulations per decision,
+    one panel per exact track, with the intervals."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curves = {base: c for base, c in board["compute_curves"].items() if c["rows"]}
+    rows = sorted({row for c in curves.values() for row in c["rows"]})
+    colour = {row: plt.get_cmap("tab10" if len(rows) <= 10 else "tab20")(i) for i, row in enumerate(rows)}  # one per row, every panel
+    fig, axes = plt.subplots(1, len(curves), figsize=(4.8 * len(curves), 4.2), squeeze=False)
+    for ax, (base, c) in zip(axes[0], curves.items()):
+        protocol = TRACKS[c["tracks"][-1]].protocol
+        scale = 100.0 if protocol is Protocol.P1 else 1.0
+        for row, pts in c["rows"].items():
+            x = np.array([p["budget"] for p in pts], dtype=float)
+            y = np.array([p["score"] for p in pts]) * scale
+            lo = y - np.array([p["ci95"][0] for p in pts]) * scale
+            hi = np.array([p["ci95"][1] for p in pts]) * scale - y
+            ax.errorbar(x, y, yerr=[lo, hi], marker=".", linewidth=1, capsize=2, color=colour[row], label=plot_label(row, 40, 40, ""))
+        ax.set_xscale("log")
+        if protocol is Protocol.P3:  # chains from under one to the cap: a log scale past 1
+            ax.set_yscale("symlog", linthresh=1.0)
+        budgets = [TRACKS[n].budget for n in c["tracks"]]
+        ax.set_xticks(budgets, [str(b) for b in budgets], fontsize=7)
+        ax.minorticks_off()
+        ax.set_xlabel("simulations per decision", fontsize=7)
+        ax.set_title(f"{base}: {protocol.spec.metric_name}" + (" (%)" if scale != 1.0 else ""), fontsize=8)
+        ax.tick_params(axis="y", labelsize=6)
+        ax.legend(fontsize=4, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    plt.close(fig)
+    return path
 
 
 def draw_profiles(board: dict, path: Path) -> Path:
@@ -706,6 +793,7 @@ def compare(first: Path, second: Path) -> dict:
 
 
 __all__ = ["COMPUTE", "EARLIER", "OUTSIDE", "PROFILE_THRESHOLDS", "REBUILD", "SOURCES", "STATUSES", "build",
-           "check_against_ledger", "check_recorded", "collect", "compare", "derive", "draw_figure", "draw_profiles",
+           "check_against_ledger", "check_recorded", "collect", "compare", "compute_curves", "derive", "draw_compute_curves",
+           "draw_figure", "draw_profiles",
            "earlier_figure", "format_score", "headline_value", "leaderboard", "left_out", "looks_like_path", "markdown",
            "placement", "placement_line", "record_training", "snapshot_path", "write"]

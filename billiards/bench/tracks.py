@@ -200,6 +200,9 @@ _REGISTRY: tuple[Track, ...] = (
 )
 
 TRACKS: dict[str, Track] = {t.name: t for t in _REGISTRY}
+# each exact track and its compute-limited versions, cheapest first: one compute curve each
+COMPUTE_CURVES: dict[str, tuple[str, ...]] = {base: tuple(f"{base}-b{budget}-v1" for budget in BUDGETS) + (f"{base}-v1",)
+                                              for base in ("innings", "p1-exact", "p3-exact")}
 
 
 def is_int(x) -> bool:
@@ -233,4 +236,4 @@ def track_help() -> str:
     return "\n".join(f"  {t.name}: {t.rules()}" for t in TRACKS.values())
 
 
-__all__ = ["BUDGETS", "TRACKS", "Track", "get_track", "is_int", "number_problem", "track_help"]
+__all__ = ["BUDGETS", "COMPUTE_CURVES", "TRACKS", "Track", "get_track", "is_int", "number_problem", "track_help"]
