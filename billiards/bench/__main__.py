@@ -5,6 +5,7 @@
     python -m billiards.bench leaderboard --scorecards DIR --out /tmp/lb  # from another folder of scorecards
     python -m billiards.bench campaign                   # play every missing scorecard of the project's own entries
     python -m billiards.bench campaign --only h2_ --tracks p3-exact-v1
+    python -m billiards.bench campaign --multirun --launcher slurm   # ... as Hydra multiruns on a launcher
     python -m billiards.bench record-training results/training/paper/table1/sac --row "SAC plain (Table 1)"
     python -m billiards.bench fingerprint                # each track's fingerprint, recomputed
     python -m billiards.bench compare <scorecard> <scorecard>  # two agents on one track, paired by unit
@@ -32,20 +33,46 @@ def _checkout_only(what: str) -> None:
 def campaign(only: str | None, tracks: list[str] | None, progress: bool) -> None:
     from billiards.device import set_threads
 
-    from .entries import ENTRIES, check_entries
-    from .run import SCORECARD_JSON, evaluate
+    from .run import evaluate
 
-    check_entries()
     set_threads(1)
-    jobs = [(e, t) for e in ENTRIES for t in e.tracks if (only is None or only in e.slug) and (tracks is None or t in tracks)]
+    jobs = _missing(only, tracks)
     for i, (entry, track) in enumerate(jobs, 1):
         out = SCORECARDS / track / entry.slug
-        card = ROOT / out / SCORECARD_JSON
-        if card.is_file() and not read_run_json(card).get("partial"):
-            continue
         command = f"python evaluate.py track={track} agent={entry.spec} name={entry.slug} \"group='{entry.row}'\" out={out}"
         print(f"[{i}/{len(jobs)}] {command}", flush=True)
         evaluate(entry.spec, track, out=ROOT / out, name=entry.slug, group=entry.row, command=command, progress=progress)
+
+
+def _missing(only: str | None, tracks: list[str] | None) -> list:
+    """(entry, track) of every scorecard of the project's own entries not finished yet."""
+    from .entries import ENTRIES, check_entries
+    from .run import SCORECARD_JSON
+
+    check_entries()
+    jobs = [(e, t) for e in ENTRIES for t in e.tracks if (only is None or only in e.slug) and (tracks is None or t in tracks)]
+    out = []
+    for entry, track in jobs:
+        card = ROOT / SCORECARDS / track / entry.slug / SCORECARD_JSON
+        if not (card.is_file() and not read_run_json(card).get("partial")):
+            out.append((entry, track))
+    return out
+
+
+def multirun_commands(only: str | None, tracks: list[str] | None, launcher: str | None = None) -> list[str]:
+    """The campaign as Hydra multiruns of ``evaluate.py``: one command per entry, sweeping the
+    tracks it has yet to play, each job writing (and, run again, resuming) its scorecard folder;
+    ``launcher`` a Hydra launcher option (``local_parallel``, ``slurm``, ``ray_tasks``) to run the jobs
+    on."""
+    by_entry: dict = {}
+    for entry, track in _missing(only, tracks):
+        by_entry.setdefault(entry, []).append(track)
+    out = []
+    for entry, missing in by_entry.items():
+        command = (f"python evaluate.py -m track={','.join(missing)} agent={entry.spec} name={entry.slug} "
+                   f"\"group='{entry.row}'\" 'out={SCORECARDS.as_posix()}/${{track}}/{entry.slug}'")
+        out.append(command + (f" hydra/launcher={launcher}" if launcher else ""))
+    return out
 
 
 def main(argv=None) -> int:
@@ -62,6 +89,9 @@ def main(argv=None) -> int:
     cp.add_argument("--only", help="entries whose slug contains this")
     cp.add_argument("--tracks", nargs="*", help="only these tracks")
     cp.add_argument("--quiet", action="store_true")
+    cp.add_argument("--multirun", action="store_true",
+                    help="print the missing scorecards as Hydra multiruns of evaluate.py (one per entry) instead of playing them")
+    cp.add_argument("--launcher", help="with --multirun: the Hydra launcher to run them on (local_parallel, slurm, ray_tasks)")
     rt = sub.add_parser("record-training", help="a recorded scorecard from a training setting's committed evaluations")
     rt.add_argument("setting", type=Path, help="a folder of seed<k>/ training run dirs with eval.json")
     rt.add_argument("--row", required=True)
@@ -102,7 +132,10 @@ def main(argv=None) -> int:
         print("\n".join(str(p) for p in paths))
     elif args.command == "campaign":
         _checkout_only("campaign")
-        campaign(args.only, args.tracks, not args.quiet)
+        if args.multirun:
+            print("\n".join(multirun_commands(args.only, args.tracks, args.launcher)))
+        else:
+            campaign(args.only, args.tracks, not args.quiet)
     elif args.command == "record-training":
         from .leaderboard import record_training
 

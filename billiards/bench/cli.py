@@ -7,10 +7,11 @@ import sys
 from billiards.files import recorded_command
 
 
-def run(cfg, out_dir: str) -> dict:
+def run(cfg, out_dir: str, job_overrides: list[str] | None = None) -> dict:
     """Evaluate the config's agent on its track into ``out_dir``; then say where the scorecard
     would rank on the committed leaderboard (a limited run with its caveat), and, without
-    ``name=``, what the scorecard names the agent (a submission needs a name)."""
+    ``name=``, what the scorecard names the agent (a submission needs a name). A job of a
+    multirun (``job_overrides``: its own overrides) records the command that plays it alone."""
     from billiards.device import set_threads
 
     from .config import build_agent
@@ -19,7 +20,8 @@ def run(cfg, out_dir: str) -> dict:
 
     if cfg.threads is not None:
         set_threads(cfg.threads)
-    command = " ".join(recorded_command(["python", *sys.argv]))
+    argv = sys.argv if job_overrides is None else [sys.argv[0], *job_overrides]
+    command = " ".join(recorded_command(["python", *argv]))
     try:
         card = evaluate(build_agent(cfg), cfg.track, out=out_dir, limit=cfg.limit, progress=cfg.progress, command=command,
                         group=cfg.group, spec=cfg.agent)

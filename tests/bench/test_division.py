@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+from billiards.bench.entries import LIMITED
 from billiards.bench.leaderboard import markdown
 from billiards.bench.tracks import TRACKS
 from billiards.files import ROOT
@@ -18,6 +19,8 @@ def test_every_track_ranks_its_observation_agents_among_themselves():
     for name, t in BOARD["tracks"].items():
         division = t["no_simulator"]["rows"]
         assert division == [r["row"] for r in t["rows"] if r["compute"] == "observation"], name
+        if name in LIMITED:  # a compute-limited track: an observation agent plays it as its 400-budget track (same racks)
+            continue
         assert division, f"{name}: no agent of the division"  # every track has learned policies or baselines
         if TRACKS[name].protocol != "match":
             # one probability per row of the division but its last, each against the next row of the division
