@@ -15,6 +15,7 @@ from .tracks import BUDGETS
 
 EXACT = ("innings-v1", "p1-exact-v1", "p3-exact-v1")
 # the same exact tracks at 25, 50 and 100 simulations per decision: every search agent plays them
+LONG = ("p3-exact-long-v1",)  # chains to 10,000: the searches that reach p3-exact-v1's cap of 1,000 (or nearly)
 LIMITED = tuple(f"{base}-b{budget}-v1" for budget in BUDGETS for base in ("innings", "p1-exact", "p3-exact"))
 NOISY_P1 = ("p1-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
 NOISY = ("p1-fastfiz-v1", "p3-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
@@ -49,10 +50,11 @@ ENTRIES: tuple[BoardEntry, ...] = (
     BoardEntry("expert iteration policy started from SAC (exact), seed 0", "exit_sac_s0", "results/policies/exit_sac/seed0.pt",
           EXACT + NOISY_P1),
     BoardEntry("h2, geometric proposer", "h2_geometric", "search:h2/geometric", EXACT + LIMITED + ("p1-fastfiz-v1",)),
-    BoardEntry("h2, expert-iteration policy proposer", "h2_exit", "search:h2/exit", EXACT + LIMITED),
-    BoardEntry("h2, SAC ensemble proposer (base)", "h2_base", "search:h2/base", EXACT + LIMITED),
+    BoardEntry("h2, expert-iteration policy proposer", "h2_exit", "search:h2/exit", EXACT + LIMITED + LONG),
+    BoardEntry("h2, SAC ensemble proposer (base)", "h2_base", "search:h2/base", EXACT + LIMITED + LONG),
     BoardEntry("h2, exact-play shot ranker proposer", "h2_ranked_exact", "search:h2/ranked_exact", EXACT + LIMITED),
-    BoardEntry("h2, small exact-play shot ranker proposer", "h2_ranked_exact_small", "search:h2/ranked_exact_small", EXACT + LIMITED),
+    BoardEntry("h2, small exact-play shot ranker proposer", "h2_ranked_exact_small", "search:h2/ranked_exact_small",
+               EXACT + LIMITED + LONG),
     BoardEntry("PUCT, geometric proposer", "puct_geometric", "search:puct/geometric", EXACT + LIMITED),
     BoardEntry("PUCT, SAC ensemble proposer (near_miss)", "puct_near_miss", "search:puct/near_miss", EXACT + LIMITED),
     BoardEntry("robust search over the shot ranker, blind to the leave", "robust_ranked", "search:robust/for_noise", NOISY),
