@@ -55,13 +55,46 @@ if os.environ.get("SAGU_PROCESS_LOG"):
     _record_processes(os.environ["SAGU_PROCESS_LOG"])
 
 
+def _once_per_process() -> None:
+    """What a process starts once, for whichever test comes first, started here before any test:
+    so that the process log (SAGU_PROCESS_LOG) names the tests that start processes of their own,
+    in whatever order pytest-xdist deals the tests out.
+
+    * The commit a run records (``billiards.provenance.git_commit``: ``git rev-parse`` and
+      ``git status``, two processes for each record) is read once, here: every record of the
+      session names the commit and the ``+dirty`` of the session's start.
+    * ``uname -p``: ``platform`` asks it once per process, when h5py is first imported (tensordict
+      imports it lazily).
+    * multiprocessing's resource tracker: once TorchRL has made ``spawn`` the start method, the
+      first semaphore (a replay buffer's counters, tqdm's lock) starts it."""
+    import platform
+    from multiprocessing import resource_tracker
+
+    import billiards.provenance as provenance
+
+    answers: dict[tuple, subprocess.CompletedProcess] = {}
+
+    def run_once(cmd, **kwargs):
+        if tuple(cmd) not in answers:
+            answers[tuple(cmd)] = subprocess.run(cmd, **kwargs)
+        return answers[tuple(cmd)]
+
+    provenance.subprocess = type("GitOnce", (), {"run": staticmethod(run_once)})  # the module's only use: git_commit
+    provenance.git_commit()
+    platform.processor()
+    resource_tracker.ensure_running()
+
+
 def pytest_configure(config):
     """Under pytest-xdist (``-n N``) the controller compiles the simulator once before the workers
-    start, so that they load its kernels from numba's cache instead of all compiling at once."""
+    start, so that they load its kernels from numba's cache instead of all compiling at once. A
+    process that runs tests starts what it starts once (:func:`_once_per_process`)."""
     if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
         from billiards.physics.warmup import warm_up
 
         warm_up(log=lambda message: None)
+    else:
+        _once_per_process()
 
 
 REPO = Path(__file__).resolve().parents[1]
@@ -165,7 +198,7 @@ def app_here(script: Path | str, *args: str, cwd: Path, env: dict | None = None)
     4-6 s a fresh interpreter spends importing torch, TorchRL and Hydra. What a process holds is
     put back afterwards (working directory, environment, argv, every logger's handlers, level
     and state, torch's and numba's thread counts, torch's global generator, signal handlers,
-    Hydra's global state and the composition guard the entry point puts on Hydra's config
+    Hydra's global state (a context the test holds included) and the composition guard the entry point puts on Hydra's config
     loader). A multirun (its launcher's processes) and wandb (a service process of its own) get
     a process here, as a user's would; a signal, a kill and a fresh import stay the subprocess
     tests'."""
@@ -198,6 +231,7 @@ def app_here(script: Path | str, *args: str, cwd: Path, env: dict | None = None)
              torch.get_rng_state(), {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)},
              ConfigLoaderImpl.load_configuration)  # the entry point's guard wraps Hydra's loader (app_config)
     code: int = 0
+    running = GlobalHydra.instance().hydra  # a Hydra context the test holds (compose's), put back afterwards
     GlobalHydra.instance().clear()
     try:
         os.chdir(cwd)
@@ -228,6 +262,8 @@ def app_here(script: Path | str, *args: str, cwd: Path, env: dict | None = None)
                     code = 1
     finally:
         GlobalHydra.instance().clear()
+        if running is not None:
+            GlobalHydra.instance().initialize(running)
         cwd_was, environ, argv, torch_threads, numba_threads, rng, handlers, load_configuration = saved
         ConfigLoaderImpl.load_configuration = load_configuration
         os.chdir(cwd_was)

@@ -14,8 +14,6 @@ import errno
 import json
 import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -397,8 +395,11 @@ def test_a_write_that_fails_gives_a_sentence(tmp_path, monkeypatch):
 # ----------------------------------------------------------------------------- the command line
 
 
-@pytest.mark.slow  # starts processes (about 1 s each)
+@pytest.mark.slow
 def test_the_command_line_says_one_sentence_and_no_traceback(tmp_path, dataset):
+    """``python -m billiards.offline ...``, in this process (conftest.app_here)."""
+    from conftest import app_here
+
     (tmp_path / "file").write_text("x")
     _truncate(dataset / "blocks" / "block00000.npz")
     damaged = write_dataset(tmp_path / "damaged")
@@ -413,7 +414,7 @@ def test_the_command_line_says_one_sentence_and_no_traceback(tmp_path, dataset):
         (["iql", str(dataset), "--updates", "-3", "--out", str(tmp_path / "iql")], "--updates must be at least 1"),
     ]
     for argv, match in cases:
-        run = subprocess.run([sys.executable, "-m", "billiards.offline", *argv], capture_output=True, text=True, cwd=tmp_path)
+        run = app_here("billiards.offline", *argv, cwd=tmp_path)
         assert run.returncode == 1 and "Traceback" not in run.stderr, (argv, run.stderr)
         assert run.stderr.startswith("Error: ") and match in run.stderr and run.stderr.count("\n") == 1, (argv, run.stderr)
     assert not (tmp_path / "x").exists() and not (tmp_path / "iql").exists()

@@ -41,6 +41,7 @@ def _literal_names(node) -> bool:
     return isinstance(node, (ast.Tuple, ast.List, ast.Set)) and any(_literal_names(e) for e in node.elts)
 
 
+@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
 def test_no_module_compares_a_protocols_name_as_a_string():
     """Outside the registry a protocol is its enum member: ``==``/``!=`` against a protocol's
     name, ``x in ("innings", "p1")`` and a dict spelled by protocol names are refused."""

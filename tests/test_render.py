@@ -87,9 +87,7 @@ def test_render_draws_a_trained_policys_shots_on_its_own_table(tmp_path, capsys,
 @pytest.mark.slow
 def test_the_former_command_line_points_to_the_new_one():
     """``python -m billiards.render`` only draws now; it says where the command line went."""
-    import subprocess
-    import sys
+    from conftest import app_here
 
-    proc = subprocess.run([sys.executable, "-m", "billiards.render", "shot", "--out", "x.png"], capture_output=True,
-                          text=True, timeout=900, cwd=Path(__file__).resolve().parents[1])
+    proc = app_here("billiards.render", "shot", "--out", "x.png", cwd=Path(__file__).resolve().parents[1])
     assert proc.returncode != 0 and "python -m billiards.pictures" in proc.stderr

@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,11 +27,12 @@ from hydra.errors import ConfigCompositionException
 
 import billiards.league.config as match_config
 import billiards.rl.config as train_config
+import billiards.rl.validation as train_validation
 import billiards.search.config as search_config
 from billiards.files import ROOT, SEAL_KEY, save_tagged
 
 CONF = str(ROOT / "conf")
-VALIDATE = {"config": train_config.validate, "search": search_config.validate, "match": match_config.validate}
+VALIDATE = {"config": train_validation.validate, "search": search_config.validate, "match": match_config.validate}
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -144,8 +143,9 @@ def test_the_bounds_are_listed_in_the_docs_and_the_shipped_configurations_keep_w
 
 @pytest.mark.slow
 def test_an_app_refuses_a_bound_before_writing_anything(tmp_path):
-    proc = subprocess.run([sys.executable, str(ROOT / "train.py"), "algo.utd=2147483647", f"hydra.run.dir={tmp_path}/run"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    proc = app_here("train.py", "algo.utd=2147483647", f"hydra.run.dir={tmp_path}/run", cwd=tmp_path)
     assert proc.returncode == 1 and "algo.utd must be at most 64" in proc.stderr, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr and list(tmp_path.iterdir()) == []
 
@@ -319,7 +319,7 @@ def test_a_checkpoint_as_the_trainer_writes_it_passes(tmp_path):
     _checkpoint(tmp_path / "run")
     assert load_checkpoint(tmp_path / "run")["counters"]["frames"] == ROWS
     assert policy_file_error(tmp_path / "run") is None
-    train_config.validate(composed("config", f"resume={tmp_path / 'run'}"))
+    train_validation.validate(composed("config", f"resume={tmp_path / 'run'}"))
 
 
 @pytest.mark.parametrize("change, says", list(CHECKPOINT_CASES.values()), ids=list(CHECKPOINT_CASES))
@@ -352,8 +352,9 @@ def test_an_app_naming_a_file_that_means_nothing_writes_nothing(tmp_path, app, k
     else:
         payload.pop(key)
     path = save_tagged(tmp_path / "resealed.pt", payload)
-    proc = subprocess.run([sys.executable, str(ROOT / app), *(o.format(f=path) for o in overrides),
-                           f"hydra.run.dir={tmp_path}/run"], cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    proc = app_here(app, *(o.format(f=path) for o in overrides), f"hydra.run.dir={tmp_path}/run", cwd=tmp_path)
     assert proc.returncode == 1 and "resealed.pt" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["resealed.pt"]
 

@@ -2,10 +2,16 @@
 never a path to a YAML file; no override value carries a ``_target_`` or a logging factory;
 and every config Hydra composes -- whatever files the overrides pulled in -- is checked against
 the same app's config composed without overrides before Hydra builds its callbacks, logging,
-launcher or sweeper. One mechanism for the four apps; docs/reliability.md."""
+launcher or sweeper. One mechanism for the four apps; docs/reliability.md.
+
+The checks run in this process (a single run of an app too: conftest.app_here); a multirun
+(``-m``) runs as a user types it, in a process of its own, since Hydra's launcher starts the
+jobs' processes: the three holes refused in a multirun, a multirun over proposers, and a bad
+job that stops a multirun before any job runs. (train.py's multiruns: tests/rl/test_train.py.)"""
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -217,10 +223,21 @@ def test_each_app_refuses_the_three_holes_and_writes_nothing(app, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("app", APPS)
-def test_each_app_checks_what_its_options_compose_to(app, tmp_path):
+def test_each_app_checks_what_its_options_compose_to(app, tmp_path, monkeypatch):
     """The app as shipped, but conf/physics/international.yaml replaced by a hostile file: the
     name passes the command-line check, and the composed config is refused before its callback
-    is built; the untouched option still runs (--cfg)."""
+    is built; the untouched option still runs (--cfg). In this process (conftest.app_here), the
+    app's module imported afresh and put back afterwards, CONF_DIR too."""
+    import importlib
+
+    import billiards.apps
+    import billiards.files
+    from conftest import app_here
+
+    module = importlib.import_module(f"billiards.apps.{app}")
+    monkeypatch.delitem(sys.modules, module.__name__)  # imported afresh by the script below
+    monkeypatch.setattr(billiards.apps, app, module)
+    monkeypatch.setattr(billiards.files, "CONF_DIR", billiards.files.CONF_DIR)  # the script sets it
     shutil.copytree(CONF, tmp_path / "conf")
     # the app as shipped, composing this copy of conf/ (billiards.files.CONF_DIR, read when the app is imported)
     (tmp_path / f"{app}.py").write_text(f"import pathlib\nimport billiards.files\n\nbilliards.files.CONF_DIR = "
@@ -230,11 +247,11 @@ def test_each_app_checks_what_its_options_compose_to(app, tmp_path):
     work = tmp_path / "work"
     work.mkdir()
     option = "+physics=international" if app == "evaluate" else "physics=international"
-    refused(run_app(app, "threads=0", option, cwd=work, script_dir=tmp_path),
+    refused(app_here(tmp_path / f"{app}.py", "threads=0", option, cwd=work),
             "hydra.callbacks.x._target_='billiards.files.atomic_write_text': neither the project's configuration")
     assert not marker.exists() and list(work.iterdir()) == []
-    shown = run_app(app, "--cfg", "hydra", "physics=korean_medium" if app != "evaluate" else "threads=1",
-                    "hydra/launcher=joblib", cwd=work, script_dir=tmp_path)
+    shown = app_here(tmp_path / f"{app}.py", "--cfg", "hydra", "physics=korean_medium" if app != "evaluate" else "threads=1",
+                     "hydra/launcher=joblib", cwd=work)
     assert shown.returncode == 0 and "JoblibLauncher" in shown.stdout, shown.stderr[-3000:]
 
 
@@ -275,3 +292,43 @@ def test_a_config_group_is_listed_as_hydra_lists_it_without_copying_the_reposito
     assert loader.get_group_options("algo", ObjectType.CONFIG, "config", ["algo=td3"]) == hydras(loader, "algo", ObjectType.CONFIG)
     assert len(copies) > listed
     GlobalHydra.instance().clear()
+
+
+# ----------------------------------------------------------------------------- multiruns: every job checked first
+
+
+@pytest.mark.slow
+def test_a_search_multirun_over_proposers_runs_and_a_bad_job_stops_it_first(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    search = [sys.executable, str(REPO / "search.py"), "-m"]
+    bad = subprocess.run([*search, "search=puct,h2", "search.c_puct=5", f"hydra.sweep.dir={tmp_path / 'bad'}"],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
+    assert bad.returncode != 0 and "Key 'c_puct' not in 'H2Config'" in bad.stderr, bad.stderr[-2000:]
+    assert "Traceback" not in bad.stderr and not (tmp_path / "bad").exists()
+    good = subprocess.run([*search, "proposer=geometric,base", "search=puct", "search.budget=4", "search.pool=2",
+                           "protocol=p1", "protocol.n_innings=1", "protocol.shots=1",
+                           "progress=false", f"hydra.sweep.dir={tmp_path / 'sweep'}"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert good.returncode == 0, good.stderr[-3000:]
+    results = {json.loads(p.read_text())["proposer"]: json.loads(p.read_text())
+               for p in (tmp_path / "sweep").glob("*/results.json")}
+    assert sorted(results) == ["base", "geometric"]
+    assert results["base"]["config"]["proposer"]["checkpoints"] == [f"results/policies/base/seed{s}.pt" for s in range(3)]
+    assert all(r["search"] == "puct" and r["sims_per_decision"] == 4 for r in results.values())
+
+
+# search.py's bad overrides that only a multirun shows (the others: tests/search/test_search_runs.py)
+SEARCH_MULTIRUN_BAD = [
+    (["-m", "search=puct,h2", "search.budget=401"], "job ['search=h2', 'search.budget=401']: invalid search config"),
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("overrides,message", SEARCH_MULTIRUN_BAD, ids=[" ".join(o) for o, _ in SEARCH_MULTIRUN_BAD])
+def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
+    proc = subprocess.run([sys.executable, str(REPO / "search.py"), *overrides], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=900)  # guards against a hang only
+    assert proc.returncode != 0 and message in proc.stderr, proc.stderr
+    assert not (tmp_path / "pwned").exists()
+    assert "Traceback" not in proc.stderr
+    assert list(tmp_path.iterdir()) == [], f"wrote {list(tmp_path.rglob('*'))}"

@@ -5,9 +5,6 @@ name, saved configs of every form loading, one spelling of the paradigms, one re
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import warnings
 from pathlib import Path
 
@@ -326,39 +323,6 @@ def test_the_algorithms_are_listed_once():
     assert issubclass(ValidateConfig, ValidatingCallback)
 
 
-@pytest.mark.slow
-def test_registration_is_the_same_idiom_in_a_fresh_process():
-    """A fresh process that imports only billiards.search.config can compose search.py's config
-    (and only billiards.rl.config, train.py's): nothing else has to be called."""
-    for module, name in (("billiards.search.config", "search"), ("billiards.rl.config", "config")):
-        code = (f"import {module}\n"
-                "from hydra import compose, initialize_config_dir\n"
-                f"with initialize_config_dir(config_dir={str(REPO / 'conf')!r}, version_base='1.3'):\n"
-                f"    print('SEED', compose({name!r}).seed)\n")
-        proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=900)
-        assert proc.returncode == 0 and "SEED 0" in proc.stdout, proc.stderr[-2000:]
-
-
-@pytest.mark.slow
-def test_a_search_multirun_over_proposers_runs_and_a_bad_job_stops_it_first(tmp_path):
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    search = [sys.executable, str(REPO / "search.py"), "-m"]
-    bad = subprocess.run([*search, "search=puct,h2", "search.c_puct=5", f"hydra.sweep.dir={tmp_path / 'bad'}"],
-                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
-    assert bad.returncode != 0 and "Key 'c_puct' not in 'H2Config'" in bad.stderr, bad.stderr[-2000:]
-    assert "Traceback" not in bad.stderr and not (tmp_path / "bad").exists()
-    good = subprocess.run([*search, "proposer=geometric,base", "search=puct", "search.budget=4", "search.pool=2",
-                           "protocol=p1", "protocol.n_innings=1", "protocol.shots=1",
-                           "progress=false", f"hydra.sweep.dir={tmp_path / 'sweep'}"],
-                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
-    assert good.returncode == 0, good.stderr[-3000:]
-    results = {json.loads(p.read_text())["proposer"]: json.loads(p.read_text())
-               for p in (tmp_path / "sweep").glob("*/results.json")}
-    assert sorted(results) == ["base", "geometric"]
-    assert results["base"]["config"]["proposer"]["checkpoints"] == [f"results/policies/base/seed{s}.pt" for s in range(3)]
-    assert all(r["search"] == "puct" and r["sims_per_decision"] == 4 for r in results.values())
-
-
 # ----------------------------------------------------------------------------- one spelling, one path rule
 
 
@@ -392,11 +356,10 @@ def test_repo_path_is_the_one_rule(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_each_apps_help_lists_its_own_groups_and_fixed_choices():
-    import subprocess
-    import sys
+    from conftest import app_here
 
     def help_of(app):
-        out = subprocess.run([sys.executable, str(REPO / app), "--help"], capture_output=True, text=True, timeout=900)
+        out = app_here(app, "--help", cwd=REPO)
         assert out.returncode == 0, out.stderr[-2000:]
         return out.stdout
 
@@ -417,11 +380,9 @@ def test_each_apps_help_lists_its_own_groups_and_fixed_choices():
 
 @pytest.mark.slow
 def test_train_refuses_search_apps_preset_at_once(tmp_path):
-    import subprocess
-    import sys
+    from conftest import app_here
 
-    out = subprocess.run([sys.executable, str(REPO / "train.py"), "experiment=table6"], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=900)
+    out = app_here("train.py", "experiment=table6", cwd=tmp_path)
     assert out.returncode != 0 and "experiment=table6 is a search.py preset: python search.py -m experiment=table6" in out.stderr
     assert not (tmp_path / "outputs").exists()
 

@@ -6,16 +6,14 @@ so is a path that is a file, cannot be created or written, or is too long. A res
 finished run says so and changes nothing.
 
 The checks run in-process on configs composed by Hydra's compose API (what the validating
-callback is handed); one subprocess per app shows that Hydra's own ``.hydra/`` is never written
-over another run's."""
+callback is handed); one run of each app's entry point (conftest.app_here) shows that Hydra's
+own ``.hydra/`` is never written over another run's."""
 
 from __future__ import annotations
 
 import contextlib
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -355,9 +353,9 @@ def test_hydra_never_writes_its_records_over_another_run(app, tmp_path):
     before any code of the app runs; the directory check runs before that."""
     done = MAKE[app](tmp_path / "done")
     before = files(tmp_path)
-    proc = subprocess.run([sys.executable, str(REPO / f"{app}.py"), f"hydra.run.dir={done}"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=900,
-                          env={**os.environ, "PYTHONPATH": str(REPO), "HYDRA_FULL_ERROR": "0"})
+    from conftest import app_here
+
+    proc = app_here(f"{app}.py", f"hydra.run.dir={done}", cwd=tmp_path, env={"HYDRA_FULL_ERROR": "0"})
     assert proc.returncode == 1, proc.stderr[-3000:]
     assert f"Error: {done} holds a finished " in proc.stderr and "resume=" in proc.stderr, proc.stderr[-3000:]
     assert "Traceback" not in proc.stderr + proc.stdout

@@ -6,8 +6,6 @@ import dataclasses
 import importlib.util
 import json
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -665,8 +663,10 @@ def test_config_errors_check_the_output_directory(tmp_path):
 
 
 def _app(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, str(ROOT / "evaluate.py"), *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=900)
+    """``python evaluate.py <args>``, in this process (conftest.app_here)."""
+    from conftest import app_here
+
+    return app_here("evaluate.py", *args, cwd=cwd)
 
 
 @pytest.mark.slow
@@ -770,22 +770,7 @@ def test_elo_against_the_anchor():
 
 
 # ----------------------------------------------------------------------------- registration
-
-
-@pytest.mark.slow
-def test_import_billiards_registers_the_gymnasium_env_and_the_module_prefix_works():
-    """``gym.make("billiards:Billiards4Ball-v0")`` in a fresh interpreter, with no import of ours,
-    and ``import billiards`` alone registering the ID, without loading torch."""
-    code = ("import sys, gymnasium as gym\n"
-            "env = gym.make('billiards:Billiards4Ball-v0')\n"
-            "obs, _ = env.reset(seed=0)\n"
-            "assert obs.shape == (28,), obs.shape\n"
-            "import billiards\n"
-            "assert billiards.GYM_ID in gym.registry\n"
-            "print('TORCH', 'torch' in sys.modules)\n")
-    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "TORCH False" in proc.stdout
+# (import billiards in a fresh interpreter: tests/test_fresh_interpreter.py)
 
 
 # ----------------------------------------------------------------------------- the leaderboard
@@ -840,8 +825,9 @@ def test_the_committed_leaderboard_regenerates_byte_for_byte(tmp_path):
     committed = ROOT / "results" / "leaderboard.json"
     if not committed.is_file():
         pytest.skip("no committed leaderboard")
-    proc = subprocess.run([sys.executable, "-m", "billiards.bench", "leaderboard", "--out", str(tmp_path), "--no-figure"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    proc = app_here("billiards.bench", "leaderboard", "--out", str(tmp_path), "--no-figure", cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:]
     for name in ("leaderboard.json", "leaderboard.md"):
         assert (tmp_path / name).read_bytes() == (ROOT / "results" / name).read_bytes(), name
@@ -874,9 +860,9 @@ def test_two_scorecards_of_one_track_are_compared_unit_by_unit(tmp_path):
     other = ROOT / "results/bench/scorecards/p1-exact-v1/sac_base_s0"
     with pytest.raises(ValueError, match="is on innings-v1"):
         compare(mine, other)
-    out = subprocess.run([sys.executable, "-m", "billiards.bench", "compare", str(tmp_path / "better.json"), str(mine)],
-                         capture_output=True, text=True, cwd=ROOT)
+    from conftest import app_here
+
+    out = app_here("billiards.bench", "compare", str(tmp_path / "better.json"), str(mine), cwd=ROOT)
     assert out.returncode == 0 and "paired 95 % interval" in out.stdout and f"{100 * gain:+.2f} points" in out.stdout
-    bad = subprocess.run([sys.executable, "-m", "billiards.bench", "compare", str(mine), str(other)],
-                         capture_output=True, text=True, cwd=ROOT)
+    bad = app_here("billiards.bench", "compare", str(mine), str(other), cwd=ROOT)
     assert bad.returncode == 1 and "Error:" in bad.stderr and "compare one track" in bad.stderr

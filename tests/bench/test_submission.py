@@ -8,7 +8,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -36,9 +35,11 @@ def agent_file(folder: Path) -> Path:
     return path
 
 
-def bench_cli(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "billiards.bench", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=600)
+def bench_cli(*args: str, cwd: Path = ROOT):
+    """``python -m billiards.bench <args>``, in this process (conftest.app_here)."""
+    from conftest import app_here
+
+    return app_here("billiards.bench", *args, cwd=cwd)
 
 
 @pytest.fixture(scope="module")
@@ -184,7 +185,7 @@ def test_the_board_counts_outside_submissions_apart(board_root, tmp_path):
     board, md = build_board(board_root, tmp_path / "out")
     assert (board["agents"], board["scorecards"]) == (2, 2)  # the project's: random row, nearest row
     assert board["outside"] == {"agents": 1, "scorecards": 1}
-    assert list(board) == ["rebuild", "agents", "scorecards", "outside", "tracks"]
+    assert list(board) == ["rebuild", "agents", "scorecards", "outside", "tracks", "compute_curves"]
     header = md.splitlines()[2]
     assert header.startswith("Every agent of the project on every track it applies to (2 agents, 2 scorecards), and 1 outside "
                              "agent submitted to it (1 scorecard; status unverified). Rebuilt by")
@@ -342,21 +343,7 @@ def test_evaluate_py_ends_with_the_placement_line(tmp_path, capsys):
 
 
 # ----------------------------------------------------------------------------- 8. the framework's failures are not the agent's
-
-
-@pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)
-def test_a_missing_dependency_of_the_package_is_named_with_its_install_not_put_on_the_agent():
-    """In a fresh interpreter without pettingzoo (a dependency every match plays through)."""
-    code = ("import sys\nsys.modules['pettingzoo'] = None  # as if not installed\n"
-            "import billiards.bench as bench\n"
-            "try:\n    bench.evaluate('random', 'match-x5-v1', limit=1, progress=False)\n"
-            "except bench.EvaluationError as err:\n    print(err)\n")
-    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    msg = proc.stdout.strip()
-    assert msg.startswith("the evaluation cannot play match 0 of match-x5-v1: it needs pettingzoo, which is not installed"), msg
-    assert 'install it: pip install "pettingzoo' in msg and "Not a failure of agent random" in msg
-    assert "agent random failed" not in msg
+# (a dependency missing in a fresh interpreter: tests/test_fresh_interpreter.py)
 
 
 def _env_that(monkeypatch, fails):

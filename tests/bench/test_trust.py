@@ -18,8 +18,6 @@ import dataclasses
 import json
 import re
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -424,8 +422,9 @@ def test_an_out_that_cannot_be_written_gives_a_sentence(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_evaluate_py_refuses_an_out_in_a_system_directory_in_one_line(tmp_path):
-    proc = subprocess.run([sys.executable, str(ROOT / "evaluate.py"), "agent=nearest", "out=/sys/sagu-evaluate"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    proc = app_here("evaluate.py", "agent=nearest", "out=/sys/sagu-evaluate", cwd=tmp_path)
     assert proc.returncode != 0 and "out=/sys/sagu-evaluate: lies in a system directory" in proc.stderr + proc.stdout
     assert "Traceback" not in proc.stderr + proc.stdout
 
@@ -440,9 +439,11 @@ def _card(tmp_path: Path, name: str, values) -> Path:
     return path
 
 
-def _compare_cli(a: Path, b: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "billiards.bench", "compare", str(a), str(b)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=300)
+def _compare_cli(a: Path, b: Path):
+    """``python -m billiards.bench compare a b``, in this process (conftest.app_here)."""
+    from conftest import app_here
+
+    return app_here("billiards.bench", "compare", str(a), str(b), cwd=ROOT)
 
 
 @pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)

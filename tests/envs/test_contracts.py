@@ -204,16 +204,13 @@ def test_a_file_written_before_seals_is_refused_until_sealed(tmp_path):
     ("train.py", "reward model", ["shaping=rm", "shaping.rm_model={f}"]),
 ])
 def test_a_damaged_file_named_by_config_is_refused_before_anything_is_written(tmp_path, app, kind, overrides):
-    import subprocess
-    import sys
-
     from billiards.files import ROOT
+    from conftest import app_here
 
     data = bytearray((ROOT / SHIPPED[kind]).read_bytes())
     damaged = tmp_path / "damaged.pt"
     damaged.write_bytes(bytes(data[: len(data) // 2]))  # truncated
-    proc = subprocess.run([sys.executable, str(ROOT / app), *(o.format(f=damaged) for o in overrides)], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=900)
+    proc = app_here(app, *(o.format(f=damaged) for o in overrides), cwd=tmp_path)
     assert proc.returncode != 0 and "damaged.pt" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.pt"]
 

@@ -1,13 +1,10 @@
-"""The envs meet the tools researchers already use: a gymnasium path free of torch, a
-normalised action space, info that TorchRL's GymEnv reads, an exact table that TorchRL's
-DoubleToFloat cannot round, numpy (Stable-Baselines3-style) policies under the protocol."""
+"""The envs meet the tools researchers already use: a gymnasium path free of torch (checked in a
+fresh interpreter: tests/test_fresh_interpreter.py), a normalised action space, info that
+TorchRL's GymEnv reads, an exact table that TorchRL's DoubleToFloat cannot round, numpy
+(Stable-Baselines3-style) policies under the protocol."""
 
-import importlib.util
 import math
-import os
-import subprocess
 import sys
-import textwrap
 import warnings
 from pathlib import Path
 
@@ -26,30 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 R = DEFAULT_PARAMS.ball_radius
 
 
-def run_python(code: str) -> str:
-    """Run code in a fresh interpreter on this checkout; its stdout."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=900)
-    assert out.returncode == 0, out.stderr[-3000:]
-    return out.stdout
-
-
 # ----------------------------------------------------------------------------- gymnasium path
-
-
-@pytest.mark.slow
-def test_gym_path_imports_neither_torch_nor_torchrl_and_keeps_the_start_method():
-    out = run_python("""
-        import multiprocessing as mp, sys
-        import gymnasium as gym
-        import billiards.envs
-        env = gym.make("Billiards4Ball-v0")
-        env.reset(seed=0)
-        env.step(env.action_space.sample())
-        print(sorted(m for m in ("torch", "torchrl", "tensordict") if m in sys.modules), mp.get_start_method(allow_none=True))
-    """).splitlines()
-    assert out == ["[] None"]  # (the TorchRL names still load on use: every other test imports them)
 
 
 def test_gym_info_has_the_same_numpy_keys_on_reset_and_step():
@@ -229,24 +203,6 @@ def test_human_render_names_the_missing_dependency(monkeypatch):
     monkeypatch.setitem(sys.modules, "pygame", None)  # as if not installed
     with pytest.raises(gym.error.DependencyNotInstalled, match=r"pygame.*billiards\[render\]"):
         Billiards4BallInningEnv(render_mode="human")
-
-
-@pytest.mark.slow
-def test_human_render_mode_listed_only_with_its_renderer_and_the_checker_passes_without_it():
-    """gymnasium's checker opens one env per listed render mode: on the default install (no
-    pygame) "human" is not listed, so check_env passes; where pygame imports it is listed."""
-    code = (
-        "import sys, warnings; sys.modules['pygame'] = None\n"
-        "import importlib.util; importlib.util.find_spec = (lambda f: lambda name, *a: None if name == 'pygame' else f(name, *a))"
-        "(importlib.util.find_spec)\n"
-        "import gymnasium as gym; from gymnasium.utils.env_checker import check_env\n"
-        "from billiards.envs import GYM_ID, Billiards4BallInningEnv\n"
-        "assert Billiards4BallInningEnv.metadata['render_modes'] == ['rgb_array'], Billiards4BallInningEnv.metadata\n"
-        "warnings.simplefilter('ignore'); check_env(gym.make(GYM_ID).unwrapped); print('ok')\n"
-    )
-    assert run_python(code).strip().endswith("ok")
-    has = importlib.util.find_spec("pygame") is not None
-    assert ("human" in Billiards4BallInningEnv.metadata["render_modes"]) == has
 
 
 def test_human_render_shows_frames(monkeypatch):

@@ -4,8 +4,6 @@ envs) and handed to the noise-aware search; a multiplier of any preset's sigmas,
 bit for bit as it was."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -99,8 +97,9 @@ def test_bad_scale_and_level_range_are_named(node, message):
 @pytest.mark.parametrize("app,override", [("search.py", "noise.scale=-1"), ("train.py", "noise.scale=nan")])
 @pytest.mark.slow
 def test_a_bad_noise_scale_fails_before_any_directory_is_written(tmp_path, app, override):
-    proc = subprocess.run([sys.executable, str(ROOT / app), "noise=fastfiz", override], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=900)
+    from conftest import app_here
+
+    proc = app_here(app, "noise=fastfiz", override, cwd=tmp_path)
     assert proc.returncode != 0 and "noise.scale must be a finite number >= 0" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr and list(tmp_path.iterdir()) == []
 

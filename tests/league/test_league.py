@@ -4,8 +4,6 @@ matches, a league that resumes, the Elo fit and the interval, and the app's conf
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -122,8 +120,9 @@ def test_each_bad_match_setting_is_refused_with_its_message(tmp_path, args, mess
 @pytest.mark.slow
 @pytest.mark.parametrize("args, message", MATCH_BAD[2:])
 def test_a_bad_match_config_fails_at_once_and_writes_nothing(tmp_path, args, message):
-    proc = subprocess.run([sys.executable, str(REPO / "match.py"), *args, f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=900)  # guards against a hang only
+    from conftest import app_here
+
+    proc = app_here("match.py", *args, f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
     assert proc.returncode != 0 and message in proc.stderr + proc.stdout and not (tmp_path / "run").exists()
 
 

@@ -1,5 +1,7 @@
 """The simulator's first use on a machine: it says so before it compiles, once, and compiles
-each kernel once (billiards.physics.first_use, billiards.physics.core's "Compile time")."""
+each kernel once (billiards.physics.first_use, billiards.physics.core's "Compile time"); the
+warm-up looks for the kernels where numba caches them. A fresh process (its numba cache given
+by NUMBA_CACHE_DIR, read when numba starts) is the point of the tests that start one."""
 
 import json
 import os
@@ -133,3 +135,16 @@ def test_the_first_use_on_a_machine_says_so_before_it_compiles(tmp_path):
     assert "compiling" not in cached.stderr and "simulator ready" not in cached.stderr, cached.stderr
     loaded = {"checked_shot", "run_batch_serial", "run_batch", "check_actions", "check_positions"}  # the API's kernels
     assert json.loads(cached.stdout.splitlines()[-1]) == dict.fromkeys(loaded, 1)  # loaded, nothing compiled
+
+
+def test_the_warm_up_looks_for_the_kernels_where_numba_caches_them(tmp_path):
+    """Under NUMBA_CACHE_DIR numba caches the kernels there, not in the package: the warm-up
+    looks there too (an empty folder: not compiled yet, so it says it will compile)."""
+    import os
+    import subprocess
+    import sys
+
+    probe = "from billiards.physics import warmup; print(warmup.CACHE_DIR); print(warmup.kernels_cached())"
+    out = subprocess.run([sys.executable, "-c", probe], env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)},
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out[0].startswith(str(tmp_path)) and out[1] == "False"

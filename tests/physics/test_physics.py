@@ -8,11 +8,7 @@ tests/physics/test_presets.py).
 
 import dataclasses
 import math
-import os
-import subprocess
-import sys
 from functools import partial
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -297,40 +293,6 @@ def test_determinism_and_batch_equals_single_bit_for_bit():
         assert np.array_equal(res.closest, batch.closest[n]) and res.duration == batch.duration[n]
         assert np.array_equal(res.hits, batch.hits[n]) and res.score == batch.score[n]
 
-
-
-LEAK_CHECK = """
-import dataclasses
-import numpy as np
-from numba.core.runtime import rtsys
-from billiards.physics import PRESETS, random_racks, simulate_batch, simulate_shot
-# lively balls and cloth: long shots, event logs that grow past their first 64 rows
-P = dataclasses.replace(PRESETS["international"], u_roll=0.0002, e_ball=1.0, e_cushion=0.98)
-rng = np.random.default_rng(0)
-racks = random_racks(rng, 300, P)
-acts = np.column_stack([rng.uniform(0, 2 * np.pi, 300), np.ones(300), rng.uniform(-1, 1, (300, 2))])
-simulate_batch(racks[:2], acts[:2], P), simulate_shot(racks[0], acts[0], P)  # compile or load
-before = rtsys.get_allocation_stats()
-batch = simulate_batch(racks, acts, P)
-logs = [simulate_shot(r, a, P).event_time.size for r, a in zip(racks, acts)]
-del batch
-after = rtsys.get_allocation_stats()
-print(after.alloc - before.alloc, after.free - before.free, after.mi_alloc - before.mi_alloc,
-      after.mi_free - before.mi_free, max(logs))
-"""
-
-
-@pytest.mark.slow
-def test_the_kernel_frees_every_array_it_allocates():
-    """The event loop's helpers run without numba's reference counting (see core's
-    docstring); every array a shot allocates (state, caches, outcome vectors, an event log
-    grown past its first 64 rows) is freed all the same, on the batch and the single path."""
-    env = {**os.environ, "NUMBA_NRT_STATS": "1"}
-    out = subprocess.run([sys.executable, "-c", LEAK_CHECK], env=env, capture_output=True, text=True, check=True,
-                         cwd=Path(__file__).resolve().parents[2])
-    alloc, free, mi_alloc, mi_free, longest_log = map(int, out.stdout.split())
-    assert alloc > 1000 and alloc == free and mi_alloc == mi_free
-    assert longest_log > 64
 
 def kinetic_energy(state):
     v2 = state[..., VX] ** 2 + state[..., VY] ** 2

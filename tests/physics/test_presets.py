@@ -4,8 +4,6 @@ international table beside it, and the ``physics=`` choice reaching every place 
 import dataclasses
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -230,8 +228,7 @@ def test_search_app_plays_the_chosen_table(tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     results = json.loads((tmp_path / "results.json").read_text())
     assert results["physics"] == "international" and results["config"]["physics"]["preset"] == "international"
-    bad = subprocess.run([sys.executable, str(REPO / "search.py"), "physics.e_ball=2"], cwd=tmp_path, capture_output=True, text=True,
-                         timeout=900)
+    bad = app_here("search.py", "physics.e_ball=2", cwd=tmp_path)
     assert bad.returncode != 0 and "physics.e_ball" in bad.stderr and "Traceback" not in bad.stderr
 
 
@@ -280,16 +277,3 @@ def test_warm_up_says_when_it_compiles(tmp_path, monkeypatch):
     said.clear()
     warmup.warm_up(log=said.append)  # cached and already loaded: silent
     assert warmup.kernels_cached() and said == []
-
-
-def test_the_warm_up_looks_for_the_kernels_where_numba_caches_them(tmp_path):
-    """Under NUMBA_CACHE_DIR numba caches the kernels there, not in the package: the warm-up
-    looks there too (an empty folder: not compiled yet, so it says it will compile)."""
-    import os
-    import subprocess
-    import sys
-
-    probe = "from billiards.physics import warmup; print(warmup.CACHE_DIR); print(warmup.kernels_cached())"
-    out = subprocess.run([sys.executable, "-c", probe], env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)},
-                         capture_output=True, text=True, check=True).stdout.split()
-    assert out[0].startswith(str(tmp_path)) and out[1] == "False"

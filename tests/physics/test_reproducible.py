@@ -1,7 +1,10 @@
 """Reproducible anywhere: nothing committed names a folder of the machine that wrote it, the
 committed report regenerates byte for byte from the committed run directories, and the
 project's own arithmetic (networks, elementary functions) gives the same bits whatever BLAS
-kernel, NumPy loops or numba target the processor picks."""
+kernel, NumPy loops or numba target the processor picks, and the simulator's kernels free every
+array they allocate. Each check under another setting runs in a fresh interpreter: OpenBLAS,
+NumPy and numba read the setting (OPENBLAS_CORETYPE, NPY_DISABLE_CPU_FEATURES, NUMBA_CPU_NAME,
+NUMBA_NRT_STATS) once, when a process starts."""
 
 from __future__ import annotations
 
@@ -60,9 +63,10 @@ def test_the_committed_report_regenerates_byte_for_byte(tmp_path):
     committed = json.loads((REPO / "results" / "reproduction.json").read_text())
     command = committed["regenerate"].split()
     assert command[:3] == ["python", "-m", "billiards.campaign"]
-    env = dict(os.environ, PYTHONPATH=str(REPO), MPLBACKEND="Agg")
-    proc = subprocess.run([sys.executable, *command[1:], "--out", str(tmp_path)], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=600)
+    from conftest import app_here
+
+    # python -m <module> <args>, as recorded, in this process (conftest.app_here)
+    proc = app_here(command[2], *command[3:], "--out", str(tmp_path), cwd=tmp_path, env={"MPLBACKEND": "Agg"})
     assert proc.returncode == 0, proc.stderr[-3000:]
     for name in ("reproduction.json", "reproduction.md"):
         assert (tmp_path / name).read_bytes() == (REPO / "results" / name).read_bytes(), name
@@ -152,3 +156,39 @@ def test_starting_a_process_on_a_loaded_machine_is_retried(monkeypatch):
     monkeypatch.setattr(conftest.time, "sleep", lambda s: None)
     out = subprocess.run([sys.executable, "-c", "print('started')"], capture_output=True, text=True, timeout=900)
     assert out.stdout.strip() == "started" and len(calls) == 3
+
+
+# ----------------------------------------------------------------------------- every array freed
+
+LEAK_CHECK = """
+import dataclasses
+import numpy as np
+from numba.core.runtime import rtsys
+from billiards.physics import PRESETS, random_racks, simulate_batch, simulate_shot
+# lively balls and cloth: long shots, event logs that grow past their first 64 rows
+P = dataclasses.replace(PRESETS["international"], u_roll=0.0002, e_ball=1.0, e_cushion=0.98)
+rng = np.random.default_rng(0)
+racks = random_racks(rng, 300, P)
+acts = np.column_stack([rng.uniform(0, 2 * np.pi, 300), np.ones(300), rng.uniform(-1, 1, (300, 2))])
+simulate_batch(racks[:2], acts[:2], P), simulate_shot(racks[0], acts[0], P)  # compile or load
+before = rtsys.get_allocation_stats()
+batch = simulate_batch(racks, acts, P)
+logs = [simulate_shot(r, a, P).event_time.size for r, a in zip(racks, acts)]
+del batch
+after = rtsys.get_allocation_stats()
+print(after.alloc - before.alloc, after.free - before.free, after.mi_alloc - before.mi_alloc,
+      after.mi_free - before.mi_free, max(logs))
+"""
+
+
+@pytest.mark.slow
+def test_the_kernel_frees_every_array_it_allocates():
+    """The event loop's helpers run without numba's reference counting (see core's
+    docstring); every array a shot allocates (state, caches, outcome vectors, an event log
+    grown past its first 64 rows) is freed all the same, on the batch and the single path."""
+    env = {**os.environ, "NUMBA_NRT_STATS": "1"}
+    out = subprocess.run([sys.executable, "-c", LEAK_CHECK], env=env, capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[2])
+    alloc, free, mi_alloc, mi_free, longest_log = map(int, out.stdout.split())
+    assert alloc > 1000 and alloc == free and mi_alloc == mi_free
+    assert longest_log > 64

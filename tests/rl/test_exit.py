@@ -1,18 +1,16 @@
-"""Expert iteration (``python train.py algo=exit``, billiards/exit.py): the labelling rule, the
-loop end to end on a tiny budget, a stop and resume to the uninterrupted run's bits, the
-exported policy played alone and as a proposer, and the config's refusals."""
+"""Expert iteration (``python train.py algo=exit``, billiards/exit.py): the labelling rule, runs
+on a tiny budget (under noise, from a trained policy), and the config's refusals. The loop end
+to end, stopped by a signal and resumed to the uninterrupted run's bits, and its exported
+policy played alone and as a proposer: tests/rl/test_train.py (a signal gets a process)."""
 
 from __future__ import annotations
 
 import json
-import signal
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from test_train import ENV, REPO, TRAIN, check_finished, ok, same, train
+from test_train import REPO, check_finished, ok, train
 
 SAC_POLICY = "results/policies/base/seed0.pt"  # SAC with the aim constraint and the carom features
 TINY = ["algo=exit", "env=aim_features", "algo.innings=10", "algo.shots_per_round=200", "algo.search_budget=60",
@@ -190,91 +188,6 @@ def test_bad_exit_configs_are_refused_with_their_message(tmp_path, overrides, me
     assert message in refusal("train.py", *overrides, cwd=tmp_path)
 
 
-# train.py sending itself SIGTERM as expert iteration starts its AT-th block (argv[1]): a test hook
-# around the real entry point, like test_train's SIGTERM_AT_STEP
-SIGTERM_AT_BLOCK = f"""
-import os, runpy, signal, sys
-sys.path.insert(0, {str(REPO)!r})
-import billiards.exit as exit_
-
-at, play, calls = int(sys.argv.pop(1)), exit_.play_block, []
-
-def signalling(*args, **kwargs):
-    calls.append(1)
-    if len(calls) == at:
-        os.kill(os.getpid(), signal.SIGTERM)
-    return play(*args, **kwargs)
-
-exit_.play_block = signalling
-sys.argv[0] = {TRAIN!r}
-runpy.run_path({TRAIN!r}, run_name="__main__")
-"""
-
-
-@pytest.mark.slow
-def test_an_exit_run_trains_stops_resumes_bit_for_bit_and_exports_a_policy_that_plays_and_proposes(tmp_path):
-    """Three rounds of two blocks: the run writes what every training run writes; SIGTERM in the
-    block that ends round 0 stops it before the round's updates (owed, checkpointed); resumed,
-    it ends with the uninterrupted run's evaluation, networks, optimiser, labelled shots and
-    counters, bit for bit. The exported policy loads as every policy file does, plays alone
-    and proposes for the search."""
-    from billiards.rl.checkpoint import load_checkpoint
-
-    whole, stopped = tmp_path / "whole", tmp_path / "stopped"
-    ok(train(tmp_path, *TINY, f"hydra.run.dir={whole}"))
-    check_finished(whole, 600)
-    summary = json.loads((whole / "summary.json").read_text())
-    assert summary["algo"] == "exit" and summary["updates"] == sum(round(2 * n / 64) for n in (200, 400, 600))
-    rows = [r for r in (json.loads(line) for line in (whole / "eval_history.jsonl").read_text().splitlines())]
-    assert [r["step"] for r in rows] == [200, 400, 600]
-
-    proc = subprocess.run([sys.executable, "-c", SIGTERM_AT_BLOCK, "2", *TINY, f"hydra.run.dir={stopped}", "progress=false"],
-                          cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 128 + signal.SIGTERM, proc.stderr[-3000:]
-    ckpt = load_checkpoint(stopped)
-    assert ckpt["counters"]["frames"] == 200 and ckpt["counters"]["owed"] >= 1  # the round's updates are owed
-    assert not (stopped / "eval.json").exists()
-    ok(train(tmp_path, f"resume={stopped}"))
-    assert (stopped / "eval.json").read_bytes() == (whole / "eval.json").read_bytes()
-    untimed = lambda d: [{k: v for k, v in json.loads(line).items() if not k.endswith("_time")}
-                         for line in (d / "eval_history.jsonl").read_text().splitlines()]
-    assert untimed(stopped) == untimed(whole)  # every evaluation due, at its step, the one at the stop too
-    a, b = load_checkpoint(whole), load_checkpoint(stopped)
-    for key in ("agent", "agent_extra", "buffer", "counters"):
-        if key == "counters":
-            a[key], b[key] = ({k: v for k, v in c[key].items() if not k.endswith("_seconds")} for c in (a, b))
-        assert same(a[key], b[key]), key
-
-    out = tmp_path / "policies"
-    from conftest import app_here
-
-    ok(app_here("billiards.rl.policy", "export", str(whole), "--out", str(out), cwd=tmp_path, env=ENV))
-    from billiards.bench.adapters import resolve_agent
-    from billiards.bench.tracks import get_track
-    from billiards.rl.policy import policy_file_error
-    from billiards.search.proposers import load_policy_proposer
-
-    path = out / "seed0.pt"
-    assert policy_file_error(path) is None
-    import torch
-
-    payload = torch.load(path, weights_only=True)
-    weight = next(k for k in payload["actor"] if k.endswith("weight"))
-    payload["actor"][weight][0, 0] += 1.0
-    torch.save(payload, tmp_path / "bad.pt")  # one weight changed, the seal kept
-    assert "do not match its sha256" in policy_file_error(tmp_path / "bad.pt")  # checked on load like every model file
-    track = get_track("innings-v1")
-    from billiards.envs.gym_vector import Billiards4BallVectorEnv
-
-    obs, info = Billiards4BallVectorEnv(4, start="random").reset(seed=5)
-    agent = resolve_agent(str(path), track)
-    shots = agent.act(obs, info["positions"], None)
-    assert shots.shape == (4, 4) and np.isfinite(shots).all()
-    proposer = load_policy_proposer([path])
-    candidates = proposer.propose(info["positions"], 8, np.random.default_rng(0))
-    assert candidates.shape == (4, 8, 4) and np.allclose(candidates[:, 0], shots)  # candidate 0: the policy's own shot
-
-
 def test_the_trainer_alone_refuses_exit_without_its_loop(tmp_path):
     from hydra import compose, initialize_config_dir
 
@@ -285,7 +198,6 @@ def test_the_trainer_alone_refuses_exit_without_its_loop(tmp_path):
     with pytest.raises(SystemExit, match="algo=exit has no training loop here"):
         train_library(cfg, tmp_path / "run")
     assert not (tmp_path / "run").exists()
-
 
 
 @pytest.mark.slow  # over a second (the fast tier holds the in-process tests under one)

@@ -2,8 +2,6 @@
 identical to exact play; reproducible from the seed; the noise-aware searches count every
 simulation and sample the configured noise model."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -133,8 +131,9 @@ def test_each_bad_noise_override_is_refused_with_its_message(tmp_path, overrides
 @pytest.mark.slow
 @pytest.mark.parametrize("overrides,message", [BAD[0], BAD[5]], ids=[" ".join(BAD[0][0]), " ".join(BAD[5][0])])
 def test_bad_noise_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
-    proc = subprocess.run([sys.executable, str(ROOT / "search.py"), *overrides], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=900)  # guards against a hang only
+    from conftest import app_here
+
+    proc = app_here("search.py", *overrides, cwd=tmp_path)
     assert proc.returncode != 0 and message in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
     assert list(tmp_path.iterdir()) == []

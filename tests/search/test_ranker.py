@@ -1,7 +1,5 @@
 """The learned shot ranker and the ranked proposer (billiards/search/ranker.py)."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -163,8 +161,9 @@ def test_training_command_writes_a_ranker_the_search_app_plays(tmp_path):
 
 @pytest.mark.slow
 def test_a_missing_ranker_fails_fast_and_writes_nothing(tmp_path):
-    proc = subprocess.run([sys.executable, str(ROOT / "search.py"), "noise=fastfiz", "proposer=ranked",
-                           "proposer.ranker=nowhere/r.pt"], cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    from conftest import app_here
+
+    proc = app_here("search.py", "noise=fastfiz", "proposer=ranked", "proposer.ranker=nowhere/r.pt", cwd=tmp_path)
     assert proc.returncode != 0 and "no ranker file at nowhere/r.pt" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr and list(tmp_path.iterdir()) == []
 

@@ -113,13 +113,13 @@ SEARCH_BAD = [
     (["search=h2", "search.c_puct=5"], "Key 'c_puct' not in 'H2Config'"),  # a PUCT knob
     (["search=h2", "+search.c_puct=5"], "search.c_puct: not a key of H2Config"),
     (["protocol=p3", "protocol.shots=5"], "Key 'shots' not in 'P3Config'"),
-    (["-m", "search=puct,h2", "search.budget=401"], "job ['search=h2', 'search.budget=401']: invalid search config"),
-]
+]  # a multirun's bad job: tests/apps/test_composition_guard.py
 
 
 def _through_the_app(overrides) -> bool:
-    """The cases only the entry point shows (flags, multiruns, a callback that would run code)
-    and one refusal of each step: the guard, Hydra's composition, the validator."""
+    """The cases only the entry point shows (flags, a callback that would run code; a multirun's:
+    tests/apps/test_composition_guard.py) and one refusal of each step: the guard, Hydra's
+    composition, the validator."""
     return overrides[0].startswith(("-", "+hydra")) or overrides in (["physics=bogus"], ["search=h2", "search.c_puct=5"], ["seed=-1"])
 
 
@@ -138,13 +138,9 @@ def test_each_bad_search_override_is_refused_with_its_message(tmp_path, override
 @pytest.mark.parametrize("overrides,message", [b for b in SEARCH_BAD if _through_the_app(b[0])],
                          ids=[" ".join(o) for o, _ in SEARCH_BAD if _through_the_app(o)])
 def test_bad_search_overrides_fail_fast_and_write_nothing(tmp_path, overrides, message):
-    import subprocess
-    import sys
-    from pathlib import Path
+    from conftest import app_here
 
-    search_py = Path(__file__).resolve().parents[2] / "search.py"
-    proc = subprocess.run([sys.executable, str(search_py), *overrides], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=900)  # guards against a hang only
+    proc = app_here("search.py", *overrides, cwd=tmp_path)
     assert proc.returncode != 0 and message in proc.stderr, proc.stderr
     assert not (tmp_path / "pwned").exists()
     assert "Traceback" not in proc.stderr

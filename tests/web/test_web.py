@@ -708,8 +708,9 @@ def test_python_m_billiards_files_verify_accepts_an_unfinished_match(client, out
                     "know the viewer's match ledger (shots.jsonl) yet")
     state = _start(client, seed=30)
     _shoot(client, state, SHOTS[0])
-    out = subprocess.run([sys.executable, "-m", "billiards.files", "verify", str(_folder(out_dir, state["id"]))], cwd=ROOT,
-                         capture_output=True, text=True, timeout=600)
+    from conftest import app_here
+
+    out = app_here("billiards.files", "verify", str(_folder(out_dir, state["id"])), cwd=ROOT)
     assert out.returncode == 0 and "ledger and summary agree" in out.stdout, out.stdout + out.stderr
 
 
