@@ -518,12 +518,28 @@ def markdown(board: dict) -> str:
     return "\n".join(lines)
 
 
-def draw_figure(board: dict, path: Path) -> Path:
-    """``leaderboard.png``: one panel per track, each row's figure with its interval."""
+def _pyplot():
+    """matplotlib's pyplot on the file backend (the figures are written, never shown)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _saved(plt, fig, path: Path) -> Path:
+    """Write ``fig`` to ``path`` as every figure of the board is written (the same bytes for the
+    same board: no software stamp) and close it."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    plt.close(fig)
+    return path
+
+
+def draw_figure(board: dict, path: Path) -> Path:
+    """``leaderboard.png``: one panel per track, each row's figure with its interval."""
+    plt = _pyplot()
 
     names = [n for n, t in board["tracks"].items() if t["rows"]]
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 1.2 + 0.28 * sum(len(board["tracks"][n]["rows"]) for n in names)),
@@ -554,10 +570,7 @@ def draw_figure(board: dict, path: Path) -> Path:
     axes[0, 0].legend(handles=[Patch(color="tab:blue", label="observation only"),
                                Patch(color="tab:orange", label="searches with the simulator (400 / decision)")],
                       fontsize=6, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, metadata={"Software": None})
-    plt.close(fig)
-    return path
+    return _saved(plt, fig, path)
 
 
 def build(root: Path, out: Path, figure: bool = True, report: Callable[[str], None] | None = None) -> list[Path]:
@@ -583,10 +596,7 @@ def write(board: dict, out: Path, figure: bool = True) -> list[Path]:
 def draw_compute_curves(board: dict, path: Path) -> Path:
     """``leaderboard_compute.png``: each search row's figure against its simulations per decision,
     one panel per exact track, with the intervals."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     curves = {base: c for base, c in board["compute_curves"].items() if c["rows"]}
     rows = sorted({row for c in curves.values() for row in c["rows"]})
@@ -611,18 +621,12 @@ def draw_compute_curves(board: dict, path: Path) -> Path:
         ax.set_title(f"{base}: {protocol.spec.metric_name}" + (" (%)" if scale != 1.0 else ""), fontsize=8)
         ax.tick_params(axis="y", labelsize=6)
         ax.legend(fontsize=4, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, metadata={"Software": None})
-    plt.close(fig)
-    return path
+    return _saved(plt, fig, path)
 
 
 def draw_profiles(board: dict, path: Path) -> Path:
     """``leaderboard_profiles.png``: the performance profiles of the exact tracks' rows."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     names = [n for n in ("innings-v1", "p1-exact-v1", "p3-exact-v1", "p3-fastfiz-v1") if board["tracks"][n].get("profiles")]
     fig, axes = plt.subplots(1, len(names), figsize=(4.6 * len(names), 4.2), squeeze=False)
@@ -636,10 +640,7 @@ def draw_profiles(board: dict, path: Path) -> Path:
         ax.set_ylim(-0.02, 1.02)
         ax.tick_params(axis="y", labelsize=6)
         ax.legend(fontsize=4, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, metadata={"Software": None})
-    plt.close(fig)
-    return path
+    return _saved(plt, fig, path)
 
 
 def record_training(setting: Path, row: str, slug: str, root: Path | None = None) -> Path:
