@@ -59,6 +59,8 @@ ENTRIES: tuple[BoardEntry, ...] = (
     BoardEntry("PUCT, SAC ensemble proposer (near_miss)", "puct_near_miss", "search:puct/near_miss", EXACT + LIMITED),
     BoardEntry("PUCT, SAC ensemble proposer (base)", "puct_base", "search:puct/base", EXACT + LIMITED),
     BoardEntry("PUCT, expert-iteration policy proposer", "puct_exit", "search:puct/exit", EXACT + LIMITED),
+    BoardEntry("PUCT, small exact-play shot ranker proposer", "puct_ranked_exact_small", "search:puct/ranked_exact_small",
+               EXACT + LIMITED),
     BoardEntry("robust search over the shot ranker, blind to the leave", "robust_ranked", "search:robust/for_noise", NOISY),
     BoardEntry("position-aware robust search (the default of search.py under noise)", "position_default", "search:default", NOISY),
     BoardEntry("position-aware robust search over the shot ranker", "position_ranked", "search:default/for_noise",
