@@ -37,11 +37,31 @@ def campaign(only: str | None, tracks: list[str] | None, progress: bool) -> None
 
     set_threads(1)
     jobs = _missing(only, tracks)
+    warmed: set[str] = set()
     for i, (entry, track) in enumerate(jobs, 1):
+        if entry.spec not in warmed:  # what the agent compiles on first use is not its time per decision
+            warm_up_agent(entry.spec, track)
+            warmed.add(entry.spec)
         out = SCORECARDS / track / entry.slug
         command = f"python evaluate.py track={track} agent={entry.spec} name={entry.slug} \"group='{entry.row}'\" out={out}"
         print(f"[{i}/{len(jobs)}] {command}", flush=True)
         evaluate(entry.spec, track, out=ROOT / out, name=entry.slug, group=entry.row, command=command, progress=progress)
+
+
+def warm_up_agent(spec: str, track: str) -> None:
+    """Play ``spec`` for a decision or two on a cut-down copy of ``track`` (one unit of two shots,
+    a match to one point), writing nothing: the kernels it compiles on first use (the
+    simulator's, a search's tree, a network's) are compiled before the campaign times it. The
+    agent is built afresh for the scorecard (each unit reseeds it: the scores do not depend on
+    this)."""
+    import dataclasses
+
+    from .run import evaluate
+    from .tracks import get_track
+
+    t = get_track(track).scaled(1)
+    t = dataclasses.replace(t, target=1, max_innings=1) if t.protocol.spec.two_player else dataclasses.replace(t, shots=2)
+    evaluate(spec, t, progress=False)
 
 
 def _missing(only: str | None, tracks: list[str] | None) -> list:

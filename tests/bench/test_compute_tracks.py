@@ -82,3 +82,22 @@ def test_the_campaign_as_multiruns_puts_each_job_in_its_scorecard_folder(monkeyp
             cfg = compose("evaluate", overrides=[f"track={track}" if o.startswith("track=") else o for o in overrides])
             assert (cfg.out, cfg.agent, cfg.name, cfg.group) == (f"results/bench/scorecards/{track}/puct_geometric",
                                                                  "search:puct/geometric", "puct_geometric", "PUCT, geometric proposer")
+
+
+def test_the_campaign_warms_each_agent_up_once_before_timing_it(monkeypatch):
+    """Each agent plays a cut-down unit (nothing written) before its first timed scorecard of the
+    campaign, so what it compiles on first use is not in its milliseconds per decision."""
+    import billiards.bench.__main__ as bench_main
+    import billiards.bench.run as run
+    import billiards.device as device
+    from billiards.bench.entries import BoardEntry
+
+    monkeypatch.setattr(device, "set_threads", lambda n: None)  # the test process keeps its threads
+    calls = []
+    monkeypatch.setattr(run, "evaluate", lambda spec, track, **kw: calls.append((spec, getattr(track, "name", track), kw.get("out"))))
+    a, b = BoardEntry("a", "a", "nearest", ()), BoardEntry("b", "b", "random", ())
+    monkeypatch.setattr(bench_main, "_missing", lambda only, tracks: [(a, "p3-exact-v1"), (a, "p1-exact-v1"), (b, "match-x5-v1")])
+    bench_main.campaign(None, None, progress=False)
+    assert [(spec, track, out is None) for spec, track, out in calls] == [
+        ("nearest", "p3-exact-v1", True), ("nearest", "p3-exact-v1", False), ("nearest", "p1-exact-v1", False),
+        ("random", "match-x5-v1", True), ("random", "match-x5-v1", False)]
