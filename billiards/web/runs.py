@@ -130,7 +130,7 @@ class RunStore:
                 d = Path(dirpath)
                 files = {f for f in filenames if not (d / f).is_symlink()}
                 kind = self.kind_here(d, files.__contains__)
-                if kind is not None and (entry := self._entry_of(kind)(d)) is not None:
+                if kind is not None and (entry := self._handlers(kind)[0](d)) is not None:
                     runs[self.display(d)] = entry
                 if kind != "scorecard" and (SCORECARD_JSON in files or d.is_relative_to(self.results / "bench" / "recorded")):
                     for name in sorted(files):
@@ -272,7 +272,7 @@ class RunStore:
         or None: one answer, in one order, for listing, loading and asking again -- a P3 (its
         chains' ledger), a league or a viewer match (its matches' ledger), a benchmark
         evaluation (its identity and ledger), a P1 search run, a training run's evaluation.
-        Each kind has its listing's line (:meth:`_entry_of`) and its loader (:meth:`_load_of`)."""
+        Each kind has its listing's line and its loader (:meth:`_handlers`)."""
         if has(CHAINS_FILE):
             return Protocol.P3
         if has(MATCHES_FILE):
@@ -285,13 +285,11 @@ class RunStore:
             return "training"
         return None
 
-    def _entry_of(self, kind: str):
-        return {Protocol.P3: self._p3_entry, "league": self._league_entry, "scorecard": self._scorecard_entry,
-                Protocol.P1: self._p1_entry, "training": self._training_entry}[kind]
-
-    def _load_of(self, kind: str):
-        return {Protocol.P3: self._load_p3, "league": self._load_league, "scorecard": self._load_scorecard,
-                Protocol.P1: self._load_p1, "training": self._load_training}[kind]
+    def _handlers(self, kind) -> tuple:
+        """(its listing's line, its loader) of a kind :meth:`kind_here` names."""
+        return {Protocol.P3: (self._p3_entry, self._load_p3), "league": (self._league_entry, self._load_league),
+                "scorecard": (self._scorecard_entry, self._load_scorecard), Protocol.P1: (self._p1_entry, self._load_p1),
+                "training": (self._training_entry, self._load_training)}[kind]
 
     def load(self, path: str, unit: int | None = None) -> dict:
         """A run's replayable shots (see the module docstring); ``unit``: the match, inning or
@@ -300,7 +298,7 @@ class RunStore:
         if real.is_file() and real.name == SCORECARD_JSON and (real.parent / IDENTITY_FILE).is_file():
             real = real.parent  # a scorecard's run is its directory
         if real.is_dir() and (kind := self.kind_here(real, lambda name: (real / name).is_file())) is not None:
-            return self._load_of(kind)(real, unit)
+            return self._handlers(kind)[1](real, unit)
         if real.is_file() and real.suffix == ".json":
             card = _read_json(real)
             if isinstance(card, dict) and isinstance(card.get("track"), str) and "agent" in card:
