@@ -163,11 +163,7 @@ def test_a_lab_shot_is_the_simulator_s(page):
 
 
 def test_a_match_against_random_plays_to_its_end(page):
-    page.click("#tabs button[data-view=play]")
-    page.select_option("#play-opponent", "random")
-    page.select_option("#play-noise", "none")
-    page.fill("#play-target", "1")
-    page.select_option("#hint-select", "search:h2")
+    fill_match_form(page, opponent="random", noise="none", target=1, hint="search:h2")
     page.click("#btn-start")
     wait_until(page, "window.billiards.match.state && window.billiards.match.state.id")
     for _ in range(15):
@@ -199,6 +195,19 @@ def screenshot(pg, name: str) -> None:
     if SCREENSHOTS:
         Path(SCREENSHOTS).mkdir(parents=True, exist_ok=True)
         pg.screenshot(path=str(Path(SCREENSHOTS) / name), scale="css")
+
+
+MATCH_FORM = {"opponent": "#play-opponent", "noise": "#play-noise", "target": "#play-target", "seed": "#play-seed",
+              "first": "#play-first", "hint": "#hint-select", "speed": "#speed"}  # the play view's fields
+TYPED = ("target", "seed")  # number inputs; the others are selects
+
+
+def fill_match_form(pg, tap: bool = False, **fields) -> None:
+    """The play view opened (by a tap on a phone) and each of ``fields`` set in its form (keys of
+    :data:`MATCH_FORM`); the match is not started."""
+    (pg.tap if tap else pg.click)("#tabs button[data-view=play]")
+    for key, value in fields.items():
+        (pg.fill if key in TYPED else pg.select_option)(MATCH_FORM[key], str(value))
 
 
 def idle(pg, timeout_s: float = 600.0) -> None:
@@ -236,13 +245,8 @@ def test_start_and_shoot_are_locked_while_answered_and_each_turn_starts_from_the
     start, shot = Match.start, Match.human_shot  # each answer takes a second at least: the clicks below come while it is awaited
     monkeypatch.setattr(Match, "start", lambda self: (time.sleep(1.0), start(self))[1])
     monkeypatch.setattr(Match, "human_shot", lambda self, *a: (time.sleep(1.0), shot(self, *a))[1])
-    page.click("#tabs button[data-view=play]")
-    page.select_option("#play-opponent", "greedy")
-    page.select_option("#play-noise", "fastfiz_x5")
-    page.fill("#play-target", "10")
-    page.fill("#play-seed", "3")
-    page.select_option("#play-first", "agent")  # greedy breaks: the person's first turn follows its shots
-    page.select_option("#speed", "4")
+    # greedy breaks: the person's first turn follows its shots
+    fill_match_form(page, opponent="greedy", noise="fastfiz_x5", target=10, seed=3, first="agent", speed=4)
     before = set(p.name for p in (out_dir / "matches").iterdir()) if (out_dir / "matches").is_dir() else set()
     starts = page.evaluate("window.billiards.match.starts")
     page.evaluate("for (let i = 0; i < 3; i++) document.getElementById('btn-start').click()")  # three clicks in one go
@@ -289,11 +293,7 @@ def test_start_and_shoot_are_locked_while_answered_and_each_turn_starts_from_the
 
 
 def test_a_turn_played_elsewhere_is_a_sentence_and_the_page_takes_the_server_s_table(page):
-    page.click("#tabs button[data-view=play]")
-    page.select_option("#play-opponent", "random")
-    page.select_option("#play-noise", "none")
-    page.select_option("#play-first", "human")
-    page.fill("#play-target", "10")
+    fill_match_form(page, opponent="random", noise="none", first="human", target=10)
     page.click("#btn-start")
     idle(page)
     state = page.evaluate("window.billiards.match.state")
@@ -487,14 +487,8 @@ def test_a_phone_plays_a_match_against_greedy_by_touch_through_a_reload_and_a_se
     url = servers[0].__enter__()
     try:
         pg = open_page(browser, url, **PHONE)
-        pg.tap("#tabs button[data-view=play]")
-        pg.select_option("#play-opponent", "greedy")
-        pg.select_option("#play-noise", "fastfiz_x5")
-        pg.fill("#play-target", "10")
-        pg.fill("#play-seed", "1")
-        pg.select_option("#play-first", "human")
-        pg.select_option("#hint-select", "search:default")
-        pg.select_option("#speed", "4")
+        fill_match_form(pg, tap=True, opponent="greedy", noise="fastfiz_x5", target=10, seed=1, first="human",
+                        hint="search:default", speed=4)
         pg.tap("#btn-start")
         idle(pg)
         match_id = pg.evaluate("window.billiards.match.state.id")
@@ -567,13 +561,7 @@ def test_a_phone_plays_a_match_against_greedy_by_touch_through_a_reload_and_a_se
 
 def test_a_match_some_exchanges_in_shows_the_score_the_guide_the_cue_and_a_hint_beside(page):
     """A match against greedy a few exchanges in, the person to play: the score, the aim guide, the cue, a hint beside."""
-    page.click("#tabs button[data-view=play]")
-    page.select_option("#play-opponent", "greedy")
-    page.select_option("#play-noise", "fastfiz_x5")
-    page.select_option("#play-first", "human")
-    page.fill("#play-target", "10")
-    page.fill("#play-seed", "7")
-    page.select_option("#hint-select", "search:default")
+    fill_match_form(page, opponent="greedy", noise="fastfiz_x5", first="human", target=10, seed=7, hint="search:default")
     page.click("#btn-start")
     idle(page)
     for _ in range(3):
