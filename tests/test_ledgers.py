@@ -378,14 +378,17 @@ def test_a_league_json_edited_to_other_elo_values_is_recomputed_on_resume(tmp_pa
     data = json.loads((tmp_path / "league.json").read_text())
     data["elo"] = {"r1": 1700.0, "r2": 1300.0}
     data["pairs"][0]["a_score_rate"] = 0.99
+    data["elo_ci95"]["r2"] = [1000.0, 2000.0]
     (tmp_path / "league.json").write_text(json.dumps(data))
     assert files_main(["verify", str(tmp_path)]) == 1
     out = capsys.readouterr().out
     assert f"league.json rates r1 at 1700.0 Elo; its matches give {first['elo']['r1']}" in out
     assert f"league.json gives r1 vs r2 a_score_rate 0.99; its matches give {first['pairs'][0]['a_score_rate']}" in out
+    lo, hi = first["elo_ci95"]["r2"]
+    assert f"league.json gives r2 the Elo interval an array; its matches give [{lo}, {hi}]" in out
     again = league(tmp_path)
     assert "league.json is written again from matches.jsonl" in capsys.readouterr().out
-    assert again["elo"] == first["elo"] and again["pairs"] == first["pairs"]
+    assert again["elo"] == first["elo"] and again["pairs"] == first["pairs"] and again["elo_ci95"] == first["elo_ci95"]
     assert json.loads((tmp_path / "league.json").read_text())["elo"] == first["elo"]
     assert (tmp_path / "matches.jsonl").read_text().splitlines() == lines
     assert files_main(["verify", str(tmp_path)]) == 0

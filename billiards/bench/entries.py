@@ -20,7 +20,8 @@ LIMITED = tuple(f"{base}-b{budget}-v1" for budget in BUDGETS for base in ("innin
 NOISY_P1 = ("p1-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
 NOISY = ("p1-fastfiz-v1", "p3-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
 ALL_SINGLE = EXACT + NOISY
-MATCH = ("match-x5-v1",)
+MATCH = ("match-x5-v1", "match-x5-v2")
+RANKING_MATCH = ("match-x5-v2",)  # the league's strongest players, 100 matches against each of the pool
 
 
 @dataclass(frozen=True)
@@ -68,7 +69,8 @@ ENTRIES: tuple[BoardEntry, ...] = (
     BoardEntry("position-aware robust search over the shot ranker", "position_ranked", "search:default/for_noise",
           ("p1-x5-v1", "p1-variable-v1")),
     BoardEntry("position-aware robust search over the expert-iteration policy", "position_exit", "search:default/exit", NOISY_P1),
-    BoardEntry("expert iteration policy (fastfiz_x5), seed 0", "exit_x5_s0", "results/policies/exit_x5/seed0.pt", NOISY_P1),
+    BoardEntry("expert iteration policy (fastfiz_x5), seed 0", "exit_x5_s0", "results/policies/exit_x5/seed0.pt",
+               NOISY_P1 + RANKING_MATCH),
     BoardEntry("position-aware robust search over the fastfiz_x5 expert-iteration policy", "position_exit_x5", "search:default/exit_x5",
           NOISY_P1),
     BoardEntry("position-aware robust search over the fastfiz_x5 expert-iteration policy and shot ranker (half each)",
@@ -78,6 +80,10 @@ ENTRIES: tuple[BoardEntry, ...] = (
     BoardEntry("league: greedy", "league_greedy", "league:greedy", MATCH),
     BoardEntry("league: greedy_r (run value)", "league_greedy_r", "league:greedy_r", MATCH),
     BoardEntry("league: safety_r (run value, safety shots)", "league_safety_r", "league:safety_r", MATCH),
+    BoardEntry("league: greedy_v (table value)", "league_greedy_v", "league:greedy_v", RANKING_MATCH),
+    BoardEntry("league: safety_v (table value, safety shots)", "league_safety_v", "league:safety_v", RANKING_MATCH),
+    BoardEntry("league: safety_rx (run value, safety shots, fastfiz_x5 expert-iteration proposer)", "league_safety_rx",
+               "league:safety_rx", RANKING_MATCH),
 )
 
 

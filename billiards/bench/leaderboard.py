@@ -296,8 +296,10 @@ def _row(track, cards: list[dict]) -> dict:
         ratings = dict(track.ratings)
         opponents = [track.opponents[u // track.units] for u in range(len(card["values"]))]
         results = [(ratings[o], v) for o, v in zip(opponents, card["values"])]
+        against = {o: [v for p, v in zip(opponents, card["values"]) if p == o] for o in track.opponents}
         row.update(score=stats.elo_against(results), elo_ci95=stats.elo_interval(results), win_rate=card["match"]["win_rate"],
-                   ci95=card["match"]["ci95"], matches=card["match"]["matches"], by_opponent=card["match"]["by_opponent"])
+                   ci95=card["match"]["ci95"], matches=card["match"]["matches"], by_opponent=card["match"]["by_opponent"],
+                   by_opponent_ci95={o: stats.wilson(sum(v), len(v)) for o, v in against.items() if v})
     else:
         if len(runs) == 1:
             summary = stats.summary(runs[0])
@@ -431,6 +433,26 @@ def _division_markdown(name: str, track, t: dict) -> list[str]:
     return lines + [""]
 
 
+def _opponents_markdown(name: str, track, t: dict) -> list[str]:
+    """A match track's rows against each opponent of its pool: the score (a draw counting half)
+    and its Wilson 95 % interval."""
+    if not track.protocol.spec.two_player or not t["rows"]:
+        return []
+    ratings = dict(track.ratings)
+    lines = [f"### {name}: against each opponent", "",
+             f"Each row's score against each player of the pool ({track.units} matches each, the break alternating; "
+             "a draw counts half), with its Wilson 95 % interval; the pool's ratings in the header.", "",
+             "| agent | " + " | ".join(f"{md_text(o)} ({ratings[o]:.0f})" for o in track.opponents) + " |",
+             "|---|" + "---|" * len(track.opponents)]
+    for r in t["rows"]:
+        cells = []
+        for o in track.opponents:
+            ci = r.get("by_opponent_ci95", {}).get(o)
+            cells.append("" if ci is None else f"{100 * r['by_opponent'][o]:.0f} % [{100 * ci[0]:.0f}, {100 * ci[1]:.0f}]")
+        lines.append(f"| {md_text(r['row'])} | " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
 def _curves_markdown(board: dict) -> list[str]:
     """The compute curves: each search row's figure on an exact track at each budget."""
     curves = {base: c for base, c in board.get("compute_curves", {}).items() if c["rows"]}
@@ -508,6 +530,7 @@ def markdown(board: dict) -> str:
             lines.append(f"| {i} | {md_text(r['row'])} | {main} | {more} | {above} | {r['seeds']} | {cost} | {md_text(r['compute'])} "
                          f"| {r['status']} | {earlier} |")
         lines.append("")
+        lines += _opponents_markdown(name, track, t)
         lines += _division_markdown(name, track, t)
     lines += _curves_markdown(board)
     lines += ["P(above the next): the probability that a unit (inning, chain) of the row scores above one of the row "

@@ -150,6 +150,15 @@ class Track:
 # results/sagu/fastfiz_x5_run (0.5675 of their 400 matches; billiards.stats.elo_against).
 _MATCH_RATINGS = (("greedy", 1500.0), ("greedy_r", 1547.1))
 
+# The ranking match track's pool: the league's strongest players under fastfiz_x5 (each beat greedy
+# in 56-63 % of 400 matches; results/sagu/README.md) and greedy, whose rating anchors the scale at
+# 1500. Their ratings are the Bradley-Terry fit of their round robin, 100 matches per pair
+# (results/sagu/fastfiz_x5_pool, league.json's ``elo`` and ``elo_ci95``), shifted so that greedy
+# is 1500; a test recomputes them from that league's matches.
+POOL_LEAGUE = "results/sagu/fastfiz_x5_pool"
+_POOL_RATINGS = (("greedy", 1500.0), ("greedy_v", 1560.6), ("safety_v", 1552.5), ("greedy_r", 1566.4), ("safety_r", 1580.2),
+                 ("safety_rx", 1589.5))
+
 BUDGETS = (25, 50, 100)  # the compute-limited exact tracks' simulations per decision (the others allow 400)
 _BUDGET_FINGERPRINTS = {
     "innings-b25-v1": "5e393765cb7f99656c5166009c6b5873b4b6f8870a4b58a7faef86b249c4b68d",
@@ -199,6 +208,11 @@ _REGISTRY: tuple[Track, ...] = (
     Track("match-x5-v1", Protocol.MATCH, "Matches to 10 under fastfiz_x5 against the reference pool",
           units=10, seed=7_800_000, noise="fastfiz_x5", opponents=("greedy", "greedy_r"), ratings=_MATCH_RATINGS,
           anchor="greedy", fingerprint="5e6bf1ae696bf9691ae21d6706926dd3187da7476a94e0415db3e8d8ce680657"),
+    # a match track that ranks: 100 matches against each of the league's strongest (a Wilson
+    # half-width of at most 10 points per opponent), Elo against the pool's round-robin ratings
+    Track("match-x5-v2", Protocol.MATCH, "Matches to 10 under fastfiz_x5 against the league's strongest players, 100 per opponent",
+          units=100, seed=8_000_000, noise="fastfiz_x5", opponents=tuple(n for n, _ in _POOL_RATINGS), ratings=_POOL_RATINGS,
+          anchor="greedy", fingerprint="1d022bbde07ca64123d78c68d8ffa62c2103baacbcdd7f1acb027800cb35782a"),
 )
 
 TRACKS: dict[str, Track] = {t.name: t for t in _REGISTRY}
@@ -238,4 +252,4 @@ def track_help() -> str:
     return "\n".join(f"  {t.name}: {t.rules()}" for t in TRACKS.values())
 
 
-__all__ = ["BUDGETS", "COMPUTE_CURVES", "TRACKS", "Track", "get_track", "is_int", "number_problem", "track_help"]
+__all__ = ["BUDGETS", "COMPUTE_CURVES", "POOL_LEAGUE", "TRACKS", "Track", "get_track", "is_int", "number_problem", "track_help"]

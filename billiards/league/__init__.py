@@ -139,7 +139,9 @@ def run(cfg, out_dir) -> dict:
     for p in league["pairs"]:
         print(f"{p['a']} vs {p['b']}: {p['a_wins']}-{p['b_wins']} ({p['draws']} draws) of {p['matches']}, "
               f"{p['a']}'s score rate {p['a_score_rate']:.3f} [{p['ci95'][0]:.3f}, {p['ci95'][1]:.3f}]", flush=True)
-    print("Elo: " + ", ".join(f"{n} {r:.0f}" for n, r in sorted(league["elo"].items(), key=lambda x: -x[1])), flush=True)
+    ci = league["elo_ci95"]
+    print("Elo [95 %]: " + ", ".join(f"{n} {r:.0f} [{ci[n][0]:.0f}, {ci[n][1]:.0f}]"
+                                      for n, r in sorted(league["elo"].items(), key=lambda x: -x[1])), flush=True)
     if cfg.picture:  # the league's first match again, shot by shot (the same seed: the same match)
         a, b = cfg.players[0], cfg.players[1]
         frames: list = []

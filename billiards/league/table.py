@@ -1,6 +1,6 @@
 """A league's tables from its matches: the pairs (wins, draws, the Wilson interval of the score
-rate, points and CPU per turn) and the Elo ratings of a Bradley-Terry fit -- ``league.json``'s
-``pairs`` and ``elo`` -- and the check that a ``league.json`` holds the tables its
+rate, points and CPU per turn) and the Elo ratings of a Bradley-Terry fit with their bootstrap
+intervals -- ``league.json``'s ``pairs``, ``elo`` and ``elo_ci95`` -- and the check that a ``league.json`` holds the tables its
 ``matches.jsonl`` gives (:func:`summary_problems`: ``python -m billiards.files verify`` and a
 resume run it; a league's tables are never trusted, only recomputed from its ledger).
 
@@ -25,11 +25,19 @@ def wilson(successes: float, n: int) -> list[float]:
     return stats.wilson(successes, n, z=1.96, digits=4)
 
 
-def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 2000) -> dict[str, float]:
-    """Bradley-Terry strengths by minorisation-maximisation over ``(a, b, a's score)`` results
-    (1 win, 0.5 draw, 0 loss), as Elo ratings (400 log10 of the strength) with mean 1500. A
-    player that never lost or never won gets a finite rating through one virtual draw against
-    every other player (a weak prior)."""
+def _strengths(wins: np.ndarray, games: np.ndarray, iters: int) -> np.ndarray:
+    """Bradley-Terry log10-strengths by minorisation-maximisation, for a stack of leagues at
+    once: ``wins[..., i, j]`` is i's score against j (virtual draws included), ``games`` the
+    matches between them; the mean log-strength of each league is 0."""
+    gamma = np.ones(wins.shape[:-1])
+    for _ in range(iters):
+        denom = (games / (gamma[..., :, None] + gamma[..., None, :])).sum(axis=-1)
+        gamma = wins.sum(axis=-1) / denom
+        gamma /= np.exp(np.log(gamma).mean(axis=-1, keepdims=True))
+    return np.log10(gamma)
+
+
+def _tables(names: list[str], results: list[tuple[str, str, float]]) -> tuple[np.ndarray, np.ndarray]:
     idx = {n: i for i, n in enumerate(names)}
     k = len(names)
     wins, games = np.zeros((k, k)), np.zeros((k, k))
@@ -39,14 +47,49 @@ def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 20
         games[idx[a], idx[b]] += 1
         games[idx[b], idx[a]] += 1
     off = ~np.eye(k, dtype=bool)
-    wins, games = wins + 0.5 * off, games + 1.0 * off  # the virtual draws
-    gamma = np.ones(k)
-    for _ in range(iters):
-        denom = (games / (gamma[:, None] + gamma[None, :])).sum(axis=1)
-        gamma = wins.sum(axis=1) / denom
-        gamma /= np.exp(np.log(gamma).mean())
-    rating = 400 * np.log10(gamma)
-    return {n: round(float(1500 + rating[i] - rating.mean()), 1) for n, i in idx.items()}
+    return wins + 0.5 * off, games + 1.0 * off  # the virtual draws
+
+
+def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 2000) -> dict[str, float]:
+    """Bradley-Terry strengths by minorisation-maximisation over ``(a, b, a's score)`` results
+    (1 win, 0.5 draw, 0 loss), as Elo ratings (400 log10 of the strength) with mean 1500. A
+    player that never lost or never won gets a finite rating through one virtual draw against
+    every other player (a weak prior)."""
+    rating = 400 * _strengths(*_tables(names, results), iters)
+    return {n: round(float(1500 + rating[i] - rating.mean()), 1) for i, n in enumerate(names)}
+
+
+ELO_DRAWS = 1000  # bootstrap resamples of a league's Elo intervals (seeded: the same matches, the same intervals)
+
+
+def elo_intervals(names: list[str], results: list[tuple[str, str, float]], draws: int = ELO_DRAWS, seed: int = 0,
+                  confidence: float = 0.95, iters: int = 2000) -> dict[str, list[float]]:
+    """The ``confidence`` intervals of :func:`elo`'s ratings (on its scale: mean 1500): the
+    percentiles of the ratings refit to ``draws`` resamples of the league, each ordered pair's
+    matches drawn again with replacement (their wins, draws and losses from a multinomial); the
+    generator is seeded, so the same matches give the same intervals."""
+    idx = {n: i for i, n in enumerate(names)}
+    k = len(names)
+    counts: dict[tuple[int, int], list[int]] = {}
+    for a, b, s in results:  # per ordered pair: a's wins, draws, losses
+        c = counts.setdefault((idx[a], idx[b]), [0, 0, 0])
+        c[0 if s == 1 else 1 if s == 0.5 else 2] += 1
+    rng = np.random.default_rng(seed)
+    wins, games = np.zeros((draws, k, k)), np.zeros((draws, k, k))
+    for (i, j), c in sorted(counts.items()):
+        n = sum(c)
+        w, d, _ = rng.multinomial(n, np.asarray(c) / n, size=draws).T
+        score = w + 0.5 * d
+        wins[:, i, j] += score
+        wins[:, j, i] += n - score
+        games[:, i, j] += n
+        games[:, j, i] += n
+    off = ~np.eye(k, dtype=bool)
+    rating = 400 * _strengths(wins + 0.5 * off, games + 1.0 * off, iters)
+    rating = 1500 + rating - rating.mean(axis=-1, keepdims=True)
+    tail = 100 * (1 - confidence) / 2
+    lo, hi = np.percentile(rating, [tail, 100 - tail], axis=0)
+    return {n: [round(float(lo[i]), 1), round(float(hi[i]), 1)] for n, i in idx.items()}
 
 
 def summarize(records: list[dict], names: list[str], noise: str) -> dict:
@@ -72,7 +115,9 @@ def summarize(records: list[dict], names: list[str], noise: str) -> dict:
                           "a_ms_per_turn": round(1000 * cpu["white"] / max(turns["white"], 1), 2),
                           "b_ms_per_turn": round(1000 * cpu["yellow"] / max(turns["yellow"], 1), 2)})
             results += [(a, b, 1.0 if r["winner"] == "white" else 0.0 if r["winner"] == "yellow" else 0.5) for r in mine]
-    return {"pairs": pairs, "elo": elo(names, results) if results else {}}
+    if not results:
+        return {"pairs": pairs, "elo": {}, "elo_ci95": {}}
+    return {"pairs": pairs, "elo": elo(names, results), "elo_ci95": elo_intervals(names, results)}
 
 
 def players(records: list[dict]) -> list[str]:
@@ -135,6 +180,15 @@ def summary_problems(records: list[dict], league: dict, name: str) -> list[str]:
     for player, rating in expected.items():
         if not _close(ratings[player], rating, 0.11):  # one rounding step of the table's 0.1
             out.append(f"{name} rates {shown_name(player)} at {shown_number(ratings[player])} Elo; its matches give {rating}")
+    if "elo_ci95" not in league:  # a league written before its ratings had intervals
+        return out
+    intervals, expected = league["elo_ci95"], table["elo_ci95"]
+    if not isinstance(intervals, dict) or sorted(map(str, intervals)) != sorted(expected):
+        return out + [f"{name}'s Elo intervals are not one per player of its matches"]
+    for player, (lo, hi) in expected.items():
+        ci = intervals[player]
+        if not (isinstance(ci, list) and len(ci) == 2 and _close(ci[0], lo, 0.11) and _close(ci[1], hi, 0.11)):
+            out.append(f"{name} gives {shown_name(player)} the Elo interval {described(ci)}; its matches give [{lo}, {hi}]")
     return out
 
 

@@ -13,6 +13,7 @@ pytest.importorskip("pettingzoo")
 
 from billiards.league.players import PolicyPlayer, RandomPlayer, SafetyAgent, SafetyPlayer, SearchPlayer, make_agent, to_env_action  # noqa: E402
 from billiards.league.play import MATCHES_FILE, elo, play_match, run_league, wilson  # noqa: E402
+from billiards.league.table import elo_intervals, summarize  # noqa: E402
 from billiards.physics import DEFAULT_PARAMS  # noqa: E402
 from billiards.physics.noise import get_noise  # noqa: E402
 
@@ -31,6 +32,25 @@ def test_elo_and_the_interval():
     lo, hi = wilson(60, 100)
     assert lo < 0.6 < hi and 0.49 < lo < 0.51
     assert str(wilson(0, 10)[0]) == "0.0" and wilson(10, 10)[1] == 1.0  # no -0.0, nothing beyond [0, 1]
+
+
+def test_the_elo_intervals_hold_the_ratings_and_narrow_with_more_matches():
+    # a beats b 60 of 100, b beats c 60 of 100, a beats c 70 of 100
+    def league(k):
+        return ([("a", "b", 1.0)] * 60 * k + [("a", "b", 0.0)] * 40 * k + [("b", "c", 1.0)] * 60 * k + [("b", "c", 0.0)] * 40 * k
+                + [("a", "c", 1.0)] * 70 * k + [("c", "a", 1.0)] * 30 * k)
+    names = ["a", "b", "c"]
+    r, ci = elo(names, league(1)), elo_intervals(names, league(1))
+    assert ci == elo_intervals(names, league(1))  # seeded: the same matches, the same intervals
+    assert ci != elo_intervals(names, league(1), seed=1)
+    assert all(lo < r[n] < hi for n, (lo, hi) in ci.items()) and ci["a"][0] > ci["c"][1]  # a above c, clearly
+    wide, narrow = ci["b"][1] - ci["b"][0], (lambda c: c["b"][1] - c["b"][0])(elo_intervals(names, league(4)))
+    assert 0.35 < narrow / wide < 0.65  # four times the matches: about half the width
+    even = elo_intervals(["x", "y"], [("x", "y", 1.0), ("x", "y", 0.0)] * 50 + [("x", "y", 0.5)] * 10)
+    assert even["x"][0] < 1500 < even["x"][1] and even["x"] == [3000 - even["y"][1], 3000 - even["y"][0]]
+    table = summarize([{"a": "x", "b": "y", "winner": "white", "scores": {"white": 1, "yellow": 0}, "turns": {"white": 1, "yellow": 0},
+                        "cpu_s": {"white": 0.0, "yellow": 0.0}}], ["x", "y"], "none")
+    assert set(table["elo_ci95"]) == {"x", "y"} and table["elo_ci95"]["x"][0] <= table["elo"]["x"] <= table["elo_ci95"]["x"][1]
 
 
 def test_an_action_of_a_search_is_the_envs_action():
