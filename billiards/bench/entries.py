@@ -20,8 +20,8 @@ LIMITED = tuple(f"{base}-b{budget}-v1" for budget in BUDGETS for base in ("innin
 NOISY_P1 = ("p1-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
 NOISY = ("p1-fastfiz-v1", "p3-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
 ALL_SINGLE = EXACT + NOISY
-MATCH = ("match-x5-v1", "match-x5-v2")
 RANKING_MATCH = ("match-x5-v2",)  # the league's strongest players, 100 matches against each of the pool
+MATCH = ("match-x5-v1",) + RANKING_MATCH
 
 
 @dataclass(frozen=True)
@@ -39,8 +39,9 @@ def _seeds(row: str, slug: str, folder: str, tracks, note: str = "") -> list[Boa
 
 ENTRIES: tuple[BoardEntry, ...] = (
     BoardEntry("random", "random", "random", ALL_SINGLE + MATCH, "uniform in the normalised box"),
-    BoardEntry("nearest-red heuristic", "nearest", "nearest", ALL_SINGLE + MATCH, "full-ball hit on the nearest red, half power"),
-    BoardEntry("random inside the aim window", "random_aim", "random_aim", ALL_SINGLE + MATCH, "uniform u, power, tip"),
+    # the floor of the matches: random alone on match-x5-v2 (the three lose every match of match-x5-v1)
+    BoardEntry("nearest-red heuristic", "nearest", "nearest", ALL_SINGLE + MATCH[:1], "full-ball hit on the nearest red, half power"),
+    BoardEntry("random inside the aim window", "random_aim", "random_aim", ALL_SINGLE + MATCH[:1], "uniform u, power, tip"),
     *_seeds("SAC aim + features, foul penalty (Table 5)", "sac_base", "base", ALL_SINGLE),
     *_seeds("SAC aim + features, gentle (Table 5)", "sac_gentle", "gentle", EXACT),
     *_seeds("SAC aim + features, near-miss (Table 5)", "sac_near_miss", "near_miss", EXACT),
