@@ -32,8 +32,12 @@ def _strengths(wins: np.ndarray, games: np.ndarray, iters: int) -> np.ndarray:
     gamma = np.ones(wins.shape[:-1])
     for _ in range(iters):
         denom = (games / (gamma[..., :, None] + gamma[..., None, :])).sum(axis=-1)
-        gamma = wins.sum(axis=-1) / denom
-        gamma /= np.exp(np.log(gamma).mean(axis=-1, keepdims=True))
+        step = wins.sum(axis=-1) / denom
+        step /= np.exp(np.log(step).mean(axis=-1, keepdims=True))
+        done = np.max(np.abs(step / gamma - 1)) < 1e-13  # converged: the rest of the iterations change nothing
+        gamma = step
+        if done:
+            break
     return np.log10(gamma)
 
 
