@@ -392,6 +392,10 @@ def test_a_league_json_edited_to_other_elo_values_is_recomputed_on_resume(tmp_pa
     assert json.loads((tmp_path / "league.json").read_text())["elo"] == first["elo"]
     assert (tmp_path / "matches.jsonl").read_text().splitlines() == lines
     assert files_main(["verify", str(tmp_path)]) == 0
+    bare = {k: v for k, v in again.items() if k != "elo_ci95"}  # a league.json without its intervals: stale, not trusted
+    (tmp_path / "league.json").write_text(json.dumps(bare))
+    assert files_main(["verify", str(tmp_path)]) == 1
+    assert "league.json holds no Elo intervals" in capsys.readouterr().out
 
 
 def test_the_match_app_calls_a_league_finished_only_when_league_json_is_its_matches(tmp_path, capsys):

@@ -349,11 +349,11 @@ def leaderboard(root: Path, report: Callable[[str], None] | None = None) -> dict
         # the no-simulator division: the agents that act from the observation alone, ranked among themselves
         division = [(row, runs) for row, runs in ranked if row["compute"] == "observation"]
         entry["no_simulator"] = {"rows": [row["row"] for row, _ in division]}
+        for (row, runs), (_, below) in zip(ranked, ranked[1:]):  # is each row really above the next?
+            row["p_above_next"] = stats.probability_of_improvement(runs, below)  # (a unit: an inning, a chain, a match)
+        entry["no_simulator"]["p_above_next"] = {row["row"]: stats.probability_of_improvement(runs, below)
+                                                 for (row, runs), (_, below) in zip(division, division[1:])}
         if not track.protocol.spec.two_player and ranked:
-            for (row, runs), (_, below) in zip(ranked, ranked[1:]):  # is each row really above the next?
-                row["p_above_next"] = stats.probability_of_improvement(runs, below)
-            entry["no_simulator"]["p_above_next"] = {row["row"]: stats.probability_of_improvement(runs, below)
-                                                     for (row, runs), (_, below) in zip(division, division[1:])}
             thresholds = PROFILE_THRESHOLDS[track.protocol]
             entry["profiles"] = {"thresholds": list(thresholds),
                                  "rows": {row["row"]: stats.performance_profile(runs, thresholds) for row, runs in ranked}}
@@ -416,18 +416,19 @@ def _division_markdown(name: str, track, t: dict) -> list[str]:
              "The agents that act from the observation alone (no simulator at decision time: learned policies and "
              "baselines), ranked among themselves.", "",
              f"| # | agent | {track.protocol.spec.metric_name} [95 %] | "
-             + ("win rate [95 %]" if track.protocol.spec.two_player else "P(above the next) [95 %]")
-             + " | ms / decision | overall # | status |", "|---|---|---|---|---|---|---|"]
+             + ("win rate [95 %] | " if track.protocol.spec.two_player else "")
+             + "P(above the next) [95 %] | ms / decision | overall # | status |",
+             "|---|---|---|---|---|---|---|" + ("---|" if track.protocol.spec.two_player else "")]
     overall = {r["row"]: i for i, r in enumerate(t["rows"], 1)}
     above = division.get("p_above_next", {})
     for i, r in enumerate(rows, 1):
+        p = above.get(r["row"])
+        second = "" if p is None else f"{p['p']:.2f} [{p['ci95'][0]:.2f}, {p['ci95'][1]:.2f}]"
         if track.protocol.spec.two_player:
             main = f"{fmt(r['score'])} [{fmt(r['elo_ci95'][0])}, {fmt(r['elo_ci95'][1])}]"
-            second = f"{100 * r['win_rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}]"
+            second = f"{100 * r['win_rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}] | " + second
         else:
             main = f"{fmt(r['score'])} [{fmt(r['ci95'][0])}, {fmt(r['ci95'][1])}]"
-            p = above.get(r["row"])
-            second = "" if p is None else f"{p['p']:.2f} [{p['ci95'][0]:.2f}, {p['ci95'][1]:.2f}]"
         cost = "—" if r["ms_per_decision"] is None else f"{r['ms_per_decision']:.2f}"
         lines.append(f"| {i} | {md_text(r['row'])} | {main} | {second} | {cost} | {overall[r['row']]} | {r['status']} |")
     return lines + [""]
@@ -533,7 +534,7 @@ def markdown(board: dict) -> str:
         lines += _opponents_markdown(name, track, t)
         lines += _division_markdown(name, track, t)
     lines += _curves_markdown(board)
-    lines += ["P(above the next): the probability that a unit (inning, chain) of the row scores above one of the row "
+    lines += ["P(above the next): the probability that a unit (inning, chain, match) of the row scores above one of the row "
               "below it, ties counting half (rliable's probability of improvement, stratified bootstrap interval); 0.5 "
               "means the two rows cannot be told apart. `leaderboard.json` also holds each track's performance profiles "
               "(the share of units above each threshold; `leaderboard_profiles.png`) and each row's scorecards "

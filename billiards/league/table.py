@@ -184,10 +184,10 @@ def summary_problems(records: list[dict], league: dict, name: str) -> list[str]:
     for player, rating in expected.items():
         if not _close(ratings[player], rating, 0.11):  # one rounding step of the table's 0.1
             out.append(f"{name} rates {shown_name(player)} at {shown_number(ratings[player])} Elo; its matches give {rating}")
-    if "elo_ci95" not in league:  # a league written before its ratings had intervals
-        return out
-    intervals, expected = league["elo_ci95"], table["elo_ci95"]
-    if not isinstance(intervals, dict) or sorted(map(str, intervals)) != sorted(expected):
+    intervals, expected = league.get("elo_ci95"), table["elo_ci95"]
+    if not isinstance(intervals, dict):
+        return out + [f"{name} holds no Elo intervals"]
+    if sorted(map(str, intervals)) != sorted(expected):
         return out + [f"{name}'s Elo intervals are not one per player of its matches"]
     for player, (lo, hi) in expected.items():
         ci = intervals[player]

@@ -22,19 +22,16 @@ def test_every_track_ranks_its_observation_agents_among_themselves():
         if name in LIMITED + LONG:  # a compute-limited track (an observation agent plays it as its 400-budget track, same
             continue  # racks) or the long chains (no observation agent reaches p3-exact-v1's cap)
         assert division, f"{name}: no agent of the division"  # every track has learned policies or baselines
-        if TRACKS[name].protocol != "match":
-            # one probability per row of the division but its last, each against the next row of the division
-            assert list(t["no_simulator"]["p_above_next"]) == division[:-1], name
-            for p in t["no_simulator"]["p_above_next"].values():
-                assert 0.0 <= p["ci95"][0] <= p["p"] <= p["ci95"][1] <= 1.0
+        # one probability per row of the division but its last, each against the next row of the division
+        assert list(t["no_simulator"]["p_above_next"]) == division[:-1], name
+        for p in t["no_simulator"]["p_above_next"].values():
+            assert 0.0 <= p["ci95"][0] <= p["p"] <= p["ci95"][1] <= 1.0
 
 
 def test_where_two_observation_agents_are_neighbours_overall_the_division_agrees():
     """The division's P(above the next) compares neighbours of the division; where the two are
     neighbours in the overall table too, it is the overall figure for the same pair."""
     for name, t in BOARD["tracks"].items():
-        if TRACKS[name].protocol == "match":
-            continue
         rows = t["rows"]
         for upper, lower in zip(rows, rows[1:]):
             if upper["compute"] == lower["compute"] == "observation":
