@@ -37,7 +37,7 @@ from typing import Callable
 import numpy as np
 
 from billiards.compat import upgrade_scorecard
-from billiards.files import SCORECARD_JSON, RunFileError, atomic_write_text, display_path, read_run_json
+from billiards.files import SCORECARD_JSON, UNITS_FILE, RunFileError, atomic_write_text, display_path, read_run_json
 
 from billiards import stats
 from billiards.protocol import Protocol
@@ -217,12 +217,12 @@ def derive(path: Path, card: dict) -> dict:
     Returns the figures; a scorecard that claims anything else (:data:`billiards.bench.run.DERIVED`,
     :func:`~billiards.bench.run.claim_problems`) is refused: ValueError naming the file and what
     differs."""
-    from .run import LEDGER_FILE, EvaluationError, claim_problems, ledger_figures, read_ledger, run_identity
+    from .run import EvaluationError, claim_problems, ledger_figures, read_ledger, run_identity
 
     track = TRACKS[card["track"]]
-    ledger = path.parent / LEDGER_FILE
+    ledger = path.parent / UNITS_FILE
     if not os.path.lexists(ledger):
-        raise ValueError(f"{display_path(path)}: no {LEDGER_FILE} beside it (a scorecard is checked against its ledger)")
+        raise ValueError(f"{display_path(path)}: no {UNITS_FILE} beside it (a scorecard is checked against its ledger)")
     run = card.get("run")
     if not isinstance(run, str):
         raise ValueError(f"{display_path(path)}: it names no run (the identity its ledger's records carry)")
@@ -781,7 +781,6 @@ def compare(first: Path, second: Path) -> dict:
     beside it is compared by the scores its ledger gives (:func:`derive`; one that claims others
     is refused); one without, by its own, each within the track's rules. ValueError says what
     differs or why the two cannot be compared (never a NaN)."""
-    from .run import LEDGER_FILE
 
     cards = []
     for path in (Path(first), Path(second)):
@@ -789,7 +788,7 @@ def compare(first: Path, second: Path) -> dict:
         card = _load(path)
         if card.get("partial") or card.get("limit"):
             raise ValueError(f"{display_path(path)}: a partial or limited scorecard (play the whole track first)")
-        if os.path.lexists(path.parent / LEDGER_FILE):
+        if os.path.lexists(path.parent / UNITS_FILE):
             card.update(derive(path, card))
         elif why := TRACKS[card["track"]].values_problem(card.get("values")):
             raise ValueError(f"{display_path(path)}: {why}; it cannot be compared")

@@ -35,7 +35,6 @@ from .protocols import fingerprint_data, protocol_of, record_problem
 from .text import md_code, md_text, one_line
 from .tracks import Track, get_track
 
-LEDGER_FILE = UNITS_FILE  # the evaluation's ledger (billiards.files names a run folder's files)
 
 
 class EvaluationError(RuntimeError):
@@ -211,7 +210,7 @@ def scorecard_problems(records: list[dict], card: dict, name: str) -> list[str]:
 
 
 # the benchmark's ledger, on the one mechanism every ledger of the project uses (billiards.files)
-UNITS = LedgerKind(LEDGER_FILE, "evaluation unit record", lambda r: r["unit"], lambda r: f"unit {r['unit']}", _unit_problem,
+UNITS = LedgerKind(UNITS_FILE, "evaluation unit record", lambda r: r["unit"], lambda r: f"unit {r['unit']}", _unit_problem,
                    SCORECARD_JSON, scorecard_problems)
 
 
@@ -459,7 +458,7 @@ def evaluate(agent, track, *, out: str | Path | None = None, limit: int | None =
             lock.enter_context(files.run_lock(out, command=command))
         except files.RunLockedError as err:
             raise EvaluationError(str(err)) from None
-        ledger = out / LEDGER_FILE
+        ledger = out / UNITS_FILE
     with lock:
         if ledger is not None:
             done = read_ledger(ledger, run_id, track=track)
@@ -533,7 +532,7 @@ def headline(card: dict) -> str:
     return f"{one_line(card['agent']['name'])} on {card['track']}: " + "; ".join(parts) + (" (partial)" if card.get("partial") else "")
 
 
-__all__ = ["DERIVED", "EvaluationError", "IDENTITY_FILE", "LEDGER_FILE", "SCORECARD_JSON", "SCORECARD_MD", "UNITS",
+__all__ = ["DERIVED", "EvaluationError", "IDENTITY_FILE", "UNITS_FILE", "SCORECARD_JSON", "SCORECARD_MD", "UNITS",
            "claim_directory", "claim_problems", "evaluate", "failure_message", "figures", "fingerprint", "fingerprint_data",
            "headline", "ledger_figures", "out_problem", "play_unit", "read_identity", "read_ledger", "run_identity",
            "score_records", "scorecard_markdown", "scorecard_problems", "unit_values", "whose_failure"]

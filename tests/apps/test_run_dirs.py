@@ -119,9 +119,9 @@ MAKE = {"train": train_run, "search": search_run, "match": league_run}
 
 def test_the_run_kinds_name_each_apps_own_files():
     from billiards.app_config import RUN_KINDS
-    from billiards.bench.run import IDENTITY_FILE, LEDGER_FILE, SCORECARD_JSON, SCORECARD_MD
+    from billiards.files import IDENTITY_FILE, SCORECARD_JSON, SCORECARD_MD, UNITS_FILE
 
-    assert RUN_KINDS["evaluate"].marks == (IDENTITY_FILE, LEDGER_FILE, SCORECARD_JSON, SCORECARD_MD)
+    assert RUN_KINDS["evaluate"].marks == (IDENTITY_FILE, UNITS_FILE, SCORECARD_JSON, SCORECARD_MD)
     marks = [m for kind in RUN_KINDS.values() for m in kind.marks]
     assert len(marks) == len(set(marks))  # no file is two apps' mark
 

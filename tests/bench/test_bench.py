@@ -15,7 +15,7 @@ import yaml
 from billiards import domain
 from billiards.bench import TRACKS, AgentError, EvaluationError, evaluate, get_track, resolve_agent
 from billiards.bench.adapters import as_agent
-from billiards.bench.run import IDENTITY_FILE, LEDGER_FILE, SCORECARD_JSON, SCORECARD_MD, fingerprint
+from billiards.bench.run import IDENTITY_FILE, UNITS_FILE, SCORECARD_JSON, SCORECARD_MD, fingerprint
 from billiards.physics import get_params, random_racks
 from billiards.provenance import cpu
 
@@ -107,7 +107,7 @@ def agent_file(tmp_path, body="import numpy as np\n\n\ndef act(obs):\n    return
 
 
 def ledger(out: Path) -> list[dict]:
-    return [json.loads(line) for line in (out / LEDGER_FILE).read_text().splitlines()]
+    return [json.loads(line) for line in (out / UNITS_FILE).read_text().splitlines()]
 
 
 def outcomes(out: Path) -> list:
@@ -548,7 +548,7 @@ def finished(tmp_path):
 
 def test_a_torn_last_line_is_cut_and_its_unit_played_again(finished):
     track, out, card = finished
-    path = out / LEDGER_FILE
+    path = out / UNITS_FILE
     data = path.read_bytes()
     last = data.rstrip(b"\n").rfind(b"\n") + 1
     path.write_bytes(data[:last + (len(data) - last) // 2])  # killed halfway through the last append
@@ -563,7 +563,7 @@ def test_a_torn_last_line_is_cut_and_its_unit_played_again(finished):
 
 def test_an_edited_record_is_refused(finished):
     track, out, _ = finished
-    path = out / LEDGER_FILE
+    path = out / UNITS_FILE
     lines = path.read_text().splitlines()
     rec = json.loads(lines[0])
     rec["score"][0][0] = 1 - rec["score"][0][0]  # the seal kept
@@ -577,7 +577,7 @@ def test_an_edited_record_is_refused(finished):
 
 def test_a_record_without_its_seal_or_of_another_run_is_refused(finished, tmp_path):
     track, out, _ = finished
-    path = out / LEDGER_FILE
+    path = out / UNITS_FILE
     lines = path.read_text().splitlines()
     rec = json.loads(lines[1])
     rec.pop("sha256")
@@ -586,7 +586,7 @@ def test_a_record_without_its_seal_or_of_another_run_is_refused(finished, tmp_pa
         evaluate(Counting(), track, out=out, name="steady", progress=False)
     other = tmp_path / "other"
     evaluate(cut_batch, track, out=other, name="someone else", progress=False)
-    path.write_text("\n".join([lines[0], lines[1], (other / LEDGER_FILE).read_text().splitlines()[2]]) + "\n")
+    path.write_text("\n".join([lines[0], lines[1], (other / UNITS_FILE).read_text().splitlines()[2]]) + "\n")
     with pytest.raises(EvaluationError, match="line 3 belongs to another run"):
         evaluate(Counting(), track, out=out, name="steady", progress=False)
 

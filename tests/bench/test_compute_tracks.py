@@ -36,6 +36,17 @@ def test_each_limited_track_is_its_exact_track_with_a_smaller_budget():
     assert len(searches) >= 3 and all(set(LIMITED) <= set(e.tracks) for e in searches)
 
 
+def test_each_search_plays_over_every_shipped_exact_play_proposer_at_every_budget():
+    from billiards.bench.entries import EXACT
+    from billiards.search.config import SHIPPED_PROPOSERS
+
+    proposers = {"geometric", *SHIPPED_PROPOSERS, "exit", "ranked_exact", "ranked_exact_small"}
+    for search in ("h2", "puct"):
+        played = {e.spec.split("/", 1)[1] for e in ENTRIES
+                  if e.spec.startswith(f"search:{search}/") and set(EXACT + LIMITED) <= set(e.tracks)}
+        assert played >= proposers, (search, sorted(proposers - played))
+
+
 @pytest.mark.slow
 def test_a_search_agent_is_sized_to_the_tracks_budget():
     from billiards.bench.adapters import resolve_agent

@@ -8,7 +8,7 @@ import os
 import pytest
 
 from billiards import files
-from billiards.bench.run import LEDGER_FILE, SCORECARD_JSON, EvaluationError, evaluate
+from billiards.bench.run import UNITS_FILE, SCORECARD_JSON, EvaluationError, evaluate
 
 
 def test_a_second_writer_is_refused_naming_the_holder_and_the_folder_then_resumes(tmp_path):
@@ -17,7 +17,7 @@ def test_a_second_writer_is_refused_naming_the_holder_and_the_folder_then_resume
         with pytest.raises(EvaluationError, match=rf"pid {os.getpid()}|{os.getpid()}") as err:
             evaluate("nearest", "p1-exact-v1", out=out, limit=1, progress=False)
         assert "the first" in str(err.value)
-        assert not (out / LEDGER_FILE).exists() and not (out / SCORECARD_JSON).exists()  # nothing played
+        assert not (out / UNITS_FILE).exists() and not (out / SCORECARD_JSON).exists()  # nothing played
     card = evaluate("nearest", "p1-exact-v1", out=out, limit=1, progress=False)  # the holder gone: it runs
     assert (out / SCORECARD_JSON).is_file() and not card["partial"]
     assert not (out / files.LOCK_FILE).exists()  # released with the scorecard

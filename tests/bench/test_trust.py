@@ -26,7 +26,7 @@ import pytest
 from billiards import files
 from billiards.bench import Agent, EvaluationError, evaluate, get_track
 from billiards.bench.leaderboard import build, compare
-from billiards.bench.run import LEDGER_FILE, SCORECARD_JSON, SCORECARD_MD, score_records
+from billiards.bench.run import UNITS_FILE, SCORECARD_JSON, SCORECARD_MD, score_records
 from billiards.bench.text import md_code, md_text, one_line, plot_label
 from billiards.bench.tracks import TRACKS
 
@@ -44,7 +44,7 @@ def copy_entry(root: Path, track: str, slug: str, where: str = "submissions") ->
 
 def records_of(folder: Path) -> list[dict]:
     return [{k: v for k, v in json.loads(line).items() if k not in ("run", "sha256")}
-            for line in (folder / LEDGER_FILE).read_text().splitlines()]
+            for line in (folder / UNITS_FILE).read_text().splitlines()]
 
 
 def forge(folder: Path, change) -> dict:
@@ -53,9 +53,9 @@ def forge(folder: Path, change) -> dict:
     card = json.loads((folder / SCORECARD_JSON).read_text())
     records = records_of(folder)
     change(records)
-    (folder / LEDGER_FILE).unlink()
+    (folder / UNITS_FILE).unlink()
     for rec in records:
-        files.append_record(folder / LEDGER_FILE, rec, card["run"])
+        files.append_record(folder / UNITS_FILE, rec, card["run"])
     card.update(json.loads(json.dumps(score_records(TRACKS[card["track"]], sorted(records, key=lambda r: r["unit"])))))
     (folder / SCORECARD_JSON).write_text(json.dumps(card, indent=2))
     return card
@@ -277,7 +277,7 @@ def test_the_scorecard_writer_refuses_a_unit_the_track_does_not_have(tmp_path):
     card = evaluate("nearest", P1, out=out, progress=False)
     assert len(card["values"]) == 4
     rec = records_of(out)[-1]
-    files.append_record(out / LEDGER_FILE, dict(rec, unit=7), card["run"])
+    files.append_record(out / UNITS_FILE, dict(rec, unit=7), card["run"])
     with pytest.raises(EvaluationError, match=r"eval/units\.jsonl: unit 7 breaks the rules of p1-exact-v1: unit 7 is not one of "
                                               r"p1-exact-v1's 2 units \(0 to 1\)"):
         evaluate("nearest", P1, out=out, progress=False)
@@ -326,7 +326,7 @@ def test_an_answer_that_is_not_real_finite_numbers_is_refused_naming_the_agent(c
     with pytest.raises(EvaluationError, match=rf"agent wobbly {says}.*on inning block 0 of p1-exact-v1") as err:
         evaluate(agent, P1, name="wobbly", out=tmp_path / "out", progress=False)
     assert "0 finished units kept" in str(err.value)
-    ledger = tmp_path / "out" / LEDGER_FILE
+    ledger = tmp_path / "out" / UNITS_FILE
     assert not ledger.exists() or not ledger.read_text()  # nothing the agent answered was recorded
 
 
@@ -347,7 +347,7 @@ def test_a_simulation_counter_that_goes_down_or_past_the_budget_is_refused_and_n
     out = tmp_path / "out"
     with pytest.raises(EvaluationError, match=says):
         evaluate(Raw(lambda b: np.tile(SHOT, (b, 1)), step, start), P1, out=out, progress=False)
-    assert not (out / LEDGER_FILE).exists() or not (out / LEDGER_FILE).read_text()
+    assert not (out / UNITS_FILE).exists() or not (out / UNITS_FILE).read_text()
 
 
 def test_a_counter_that_only_goes_up_is_reported_per_decision():
