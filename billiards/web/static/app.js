@@ -29,7 +29,7 @@
   };
 
   const S = {
-    config: null, physics: "korean_medium", table: null,
+    config: null, physics: null, table: null,  // the table: set from /api/config's default_physics
     balls: null, before: null,
     aim: { theta: Math.PI / 2, p: 0.5, a: 0, b: 0 }, played: null, shooter: 0,
     anim: null, playing: false, speed: 1,
@@ -581,7 +581,7 @@
       setAddress({ view: "lab" });
       requestPreview();
     } else if (view === "play") {
-      setTable(S.match ? S.match.physics : "korean_medium");
+      setTable(S.match ? S.match.physics : S.config.default_physics);
       S.balls = S.match ? S.match.positions.map((p) => p.slice()) : S.table.opening_rack.map((p) => p.slice());
       S.shooter = 0;
       if (S.match) { showMatch(S.match); beginTurn(); } else showScores(null);
@@ -607,8 +607,8 @@
   }
 
   function setTable(name) {
-    S.physics = name;
-    S.table = S.config.physics[name] || S.config.physics.korean_medium;
+    S.physics = name || S.config.default_physics;
+    S.table = S.config.physics[S.physics] || S.config.physics[S.config.default_physics];
   }
 
   // ------------------------------------------------------------------ replay
