@@ -99,6 +99,10 @@ def pytest_configure(config):
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED_BASE = REPO / "results" / "policies" / "base" / "seed0.pt"
+# the environment of an app's run in the tests (train.py, the report, a fresh interpreter): one
+# thread, wandb offline and quiet, Hydra's short errors
+APP_ENV = {**os.environ, "WANDB_MODE": "offline", "WANDB_SILENT": "true", "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1",
+           "HYDRA_FULL_ERROR": "0"}
 
 
 @pytest.fixture

@@ -15,11 +15,10 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import APP_ENV
 
 REPO = ROOT = Path(__file__).resolve().parents[1]
-# train.py's environment in its tests (tests/rl/test_train.py): one thread, wandb offline
-ENV = {**os.environ, "WANDB_MODE": "offline", "WANDB_SILENT": "true", "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1",
-       "HYDRA_FULL_ERROR": "0"}
+ENV = APP_ENV  # train.py's environment in its tests
 
 
 def ok(proc: subprocess.CompletedProcess) -> subprocess.CompletedProcess:

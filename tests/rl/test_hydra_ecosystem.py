@@ -22,19 +22,12 @@ from omegaconf import OmegaConf
 
 from billiards.rl.config import ConfigError, LoggerBackend
 from billiards.rl.validation import ValidateConfig, validate
+from conftest import APP_ENV
 
 REPO = Path(__file__).resolve().parents[2]
 TRAIN = str(REPO / "train.py")
-ENV = {
-    **os.environ,
-    "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
-    "WANDB_MODE": "offline",
-    "WANDB_SILENT": "true",
-    "OMP_NUM_THREADS": "1",
-    "NUMBA_NUM_THREADS": "1",
-    "HYDRA_FULL_ERROR": "0",
-    "RAY_USAGE_STATS_ENABLED": "0",
-}
+ENV = {**APP_ENV, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+       "RAY_USAGE_STATS_ENABLED": "0"}
 # A run of a few seconds: 4 collector iterations of 32 innings, a 2-inning final evaluation.
 SHORT = ["budget=smoke", "budget.init_random_steps=64", "budget.eval_every=0", "budget.checkpoint_every=0",
          "budget.log_every=64", "budget.final_eval_innings=2", "progress=false"]

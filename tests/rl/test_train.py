@@ -13,7 +13,6 @@ import csv
 import json
 import re
 import math
-import os
 import subprocess
 import sys
 import time
@@ -24,17 +23,11 @@ import yaml
 from omegaconf import OmegaConf
 
 from billiards.evaluation import EvalResult
+from conftest import APP_ENV
 
 REPO = Path(__file__).resolve().parents[2]
 TRAIN = str(REPO / "train.py")
-ENV = {
-    **os.environ,
-    "WANDB_MODE": "offline",
-    "WANDB_SILENT": "true",
-    "OMP_NUM_THREADS": "1",
-    "NUMBA_NUM_THREADS": "1",
-    "HYDRA_FULL_ERROR": "0",
-}
+ENV = APP_ENV
 
 
 def train(tmp_path: Path, *overrides: str, timeout: float = 900) -> subprocess.CompletedProcess:
