@@ -146,7 +146,7 @@ def _held(d: Path) -> Optional[_Held]:
     """Whose run the directory ``d`` holds; None if it is empty. Raises OSError if it cannot be listed.
     The run-folder lock file (:data:`billiards.files.LOCK_FILE`, left by a run killed while it
     wrote) belongs to whatever run the rest is, and says nothing alone."""
-    names = sorted(n for n in os.listdir(d) if n != files.LOCK_FILE)
+    names = files.run_folder_names(d)
     if not names:
         return None
     for kind in RUN_KINDS.values():

@@ -12,7 +12,7 @@ from typing import Optional
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from billiards.app_config import ValidatingCallback, numeric_bound_errors, register_app
-from billiards.files import LOCK_FILE
+from billiards.files import run_folder_names
 
 
 @dataclass
@@ -71,7 +71,7 @@ def errors(cfg) -> list[str]:
                 read_identity(path)
             except EvaluationError as err:
                 errs.append(f"out={out}: {err}")
-        elif path.is_dir() and any(p.name != LOCK_FILE for p in path.iterdir()):
+        elif path.is_dir() and run_folder_names(path):
             errs.append(f"out={out}: not empty and holds no evaluation; choose an empty or new directory")
     if errs:
         return errs

@@ -325,7 +325,7 @@ def claim_directory(out: Path, identity: dict) -> None:
                 f"holds one agent on one track version; choose another directory")
         return
     try:
-        if out.exists() and any(p.name != files.LOCK_FILE for p in out.iterdir()):
+        if out.exists() and files.run_folder_names(out):
             raise EvaluationError(f"{display_path(out)} is not empty and holds no evaluation; choose an empty or new directory")
         out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(path, json.dumps(identity, indent=2, sort_keys=True) + "\n")

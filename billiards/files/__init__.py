@@ -20,7 +20,7 @@ from .atomic import TMP_SUFFIX, atomic_open, atomic_write_bytes, atomic_write_te
 from .describe import described, shown_name, shown_number
 from .ledgers import (CHAINS, LEDGER_PROVIDERS, MATCHES, RUN_KEY, LedgerError, LedgerKind, LedgerScan, append_record, ledger_kinds,
                       read_ledger, register_ledger, run_identity, scan_ledger)
-from .lock import LOCK_FILE, LockHolder, RunLock, RunLockedError, lock_holder, run_lock
+from .lock import LOCK_FILE, LockHolder, RunLock, RunLockedError, lock_holder, run_folder_names, run_lock
 from .paths import (CHAINS_FILE, CHECKPOINT_FILE, CONF_DIR, CONFIG_FILE, EVAL_FILE, EVAL_HISTORY_FILE, IDENTITY_FILE, IN_CHECKOUT,
                     LEAGUE_FILE, MATCHES_FILE, METRICS_FILE, OUTPUTS, PACKAGE, RESULTS_FILE, ROOT, SCORECARD_JSON, SCORECARD_MD,
                     SUMMARY_FILE, UNITS_FILE, display_path, recorded_command, repo_path)
@@ -41,7 +41,7 @@ __all__ = [
     "RUN_FILE_LIMITS", "MAX_JSON_DEPTH", "RunFileError", "run_file_kind", "open_run_file", "read_run_bytes", "read_run_text",
     "json_depth_problem", "parse_json", "read_run_json",
     # lock
-    "LOCK_FILE", "RunLockedError", "LockHolder", "RunLock", "run_lock", "lock_holder",
+    "LOCK_FILE", "RunLockedError", "LockHolder", "RunLock", "run_lock", "lock_holder", "run_folder_names",
     # seals
     "SEAL_KEY", "payload_digest", "non_finite_entry", "record_digest", "sealed_record",
     # describe

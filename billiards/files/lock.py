@@ -26,6 +26,13 @@ from .runfiles import _CLOEXEC, _NOFOLLOW, _not_regular, json_depth_problem, rea
 LOCK_FILE = ".lock"  # in a run folder while a run writes it (readers and the directory checks ignore it)
 
 
+def run_folder_names(d: Path | str) -> list[str]:
+    """The names in the folder ``d``, sorted, but its lock file: a lock (left by a run killed
+    while it wrote) belongs to whatever run the rest is and says nothing alone, so a folder
+    holding only a lock is an empty one. Raises OSError if ``d`` cannot be listed."""
+    return sorted(n for n in os.listdir(d) if n != LOCK_FILE)
+
+
 class RunLockedError(ValueError):
     """A run folder another live run writes; the message names that run."""
 
