@@ -71,17 +71,18 @@ def elo_intervals(names: list[str], results: list[tuple[str, str, float]], draws
     """The ``confidence`` intervals of :func:`elo`'s ratings (on its scale: mean 1500): the
     percentiles of the ratings refit to ``draws`` resamples of the league, each ordered pair's
     matches drawn again with replacement (their wins, draws and losses from a multinomial); the
-    generator is seeded, so the same matches give the same intervals."""
+    generator is seeded and draws the pairs in the order of their names, so the same matches give
+    the same intervals whatever the order of ``names`` or of the matches."""
     idx = {n: i for i, n in enumerate(names)}
     k = len(names)
-    counts: dict[tuple[int, int], list[int]] = {}
+    counts: dict[tuple[str, str], list[int]] = {}
     for a, b, s in results:  # per ordered pair: a's wins, draws, losses
-        c = counts.setdefault((idx[a], idx[b]), [0, 0, 0])
+        c = counts.setdefault((a, b), [0, 0, 0])
         c[0 if s == 1 else 1 if s == 0.5 else 2] += 1
     rng = np.random.default_rng(seed)
     wins, games = np.zeros((draws, k, k)), np.zeros((draws, k, k))
-    for (i, j), c in sorted(counts.items()):
-        n = sum(c)
+    for (a, b), c in sorted(counts.items()):
+        i, j, n = idx[a], idx[b], sum(c)
         w, d, _ = rng.multinomial(n, np.asarray(c) / n, size=draws).T
         score = w + 0.5 * d
         wins[:, i, j] += score

@@ -42,6 +42,7 @@ def test_the_elo_intervals_hold_the_ratings_and_narrow_with_more_matches():
     names = ["a", "b", "c"]
     r, ci = elo(names, league(1)), elo_intervals(names, league(1))
     assert ci == elo_intervals(names, league(1))  # seeded: the same matches, the same intervals
+    assert ci == elo_intervals(["c", "a", "b"], league(1)[::-1])  # whatever the order of the players or the matches
     assert ci != elo_intervals(names, league(1), seed=1)
     assert all(lo < r[n] < hi for n, (lo, hi) in ci.items()) and ci["a"][0] > ci["c"][1]  # a above c, clearly
     wide, narrow = ci["b"][1] - ci["b"][0], (lambda c: c["b"][1] - c["b"][0])(elo_intervals(names, league(4)))
