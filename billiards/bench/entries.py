@@ -11,12 +11,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .tracks import BUDGETS
+from .tracks import COMPUTE_CURVES
 
 EXACT = ("innings-v1", "p1-exact-v1", "p3-exact-v1")
 # the same exact tracks at 25, 50 and 100 simulations per decision: every search agent plays them
+LIMITED = tuple(name for curve in COMPUTE_CURVES.values() for name in curve[:-1])
 LONG = ("p3-exact-long-v1",)  # chains to 10,000: the searches that reach p3-exact-v1's cap of 1,000 (or nearly)
-LIMITED = tuple(f"{base}-b{budget}-v1" for budget in BUDGETS for base in ("innings", "p1-exact", "p3-exact"))
 NOISY_P1 = ("p1-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
 NOISY = ("p1-fastfiz-v1", "p3-fastfiz-v1", "p1-x5-v1", "p1-variable-v1")
 ALL_SINGLE = EXACT + NOISY

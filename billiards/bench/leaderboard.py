@@ -781,7 +781,6 @@ def compare(first: Path, second: Path) -> dict:
     beside it is compared by the scores its ledger gives (:func:`derive`; one that claims others
     is refused); one without, by its own, each within the track's rules. ValueError says what
     differs or why the two cannot be compared (never a NaN)."""
-
     cards = []
     for path in (Path(first), Path(second)):
         path = path / SCORECARD_JSON if path.is_dir() else path

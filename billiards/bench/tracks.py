@@ -172,7 +172,7 @@ _BUDGET_FINGERPRINTS = {
     "p3-exact-b100-v1": "6b9b5d5865c4b8e2c907389dbec8d047404d92d22a6a1f76e18ebd1b5fdf5e68",
 }
 
-_REGISTRY: tuple[Track, ...] = (
+_EXACT: tuple[Track, ...] = (
     Track("innings-v1", Protocol.INNINGS, "The paper's evaluation protocol: points per 10-shot inning from random racks, exact play",
           units=100, shots=10, seed=7_100_000,
           fingerprint="a2f0dab7360af71310fa73a116ad68180829a025e5cc4b1c905e7f83fbc0286b"),
@@ -182,15 +182,24 @@ _REGISTRY: tuple[Track, ...] = (
     Track("p3-exact-v1", Protocol.P3, "Chains from the opening rack, exact play",
           units=20, shots=1000, seed=7_300_000,
           fingerprint="ed89d0bb2a977de82ed0d01dcbb269e036fc547adabafb6fdf5f9c326f2bb17b"),
-    # the exact tracks at small budgets: the same racks and seeds as the three above, the search
-    # budget cut to 25, 50 and 100 simulations per decision (how cheaply search solves the game)
-    *(Track(f"{base}-b{budget}-v1", protocol, f"{what} at {budget} simulations per decision", units=units, shots=shots,
-            seed=seed, budget=budget, fingerprint=_BUDGET_FINGERPRINTS.get(f"{base}-b{budget}-v1", ""))
-      for base, protocol, what, units, shots, seed in (
-          ("innings", Protocol.INNINGS, "Points per 10-shot inning from random racks, exact play", 100, 10, 7_100_000),
-          ("p1-exact", Protocol.P1, "Per-shot success from random racks, exact play", 100, 20, 7_200_000),
-          ("p3-exact", Protocol.P3, "Chains from the opening rack, exact play", 20, 1000, 7_300_000))
-      for budget in BUDGETS),
+)
+# the exact tracks at small budgets: each one's racks and seeds, the search budget cut to 25, 50
+# and 100 simulations per decision (how cheaply search solves the game); what each is called there
+_LIMITED_WHAT = {"innings": "Points per 10-shot inning from random racks, exact play"}
+
+
+def _at_budget(t: Track, budget: int) -> Track:
+    name = f"{t.base}-b{budget}-v1"
+    return dataclasses.replace(t, name=name, budget=budget, fingerprint=_BUDGET_FINGERPRINTS.get(name, ""),
+                               description=f"{_LIMITED_WHAT.get(t.base, t.description)} at {budget} simulations per decision")
+
+
+# each exact track's compute curve: its compute-limited versions, cheapest first, then itself
+_CURVES: dict[str, tuple[Track, ...]] = {t.base: (*(_at_budget(t, b) for b in BUDGETS), t) for t in _EXACT}
+
+_REGISTRY: tuple[Track, ...] = (
+    *_EXACT,
+    *(t for curve in _CURVES.values() for t in curve[:-1]),
     Track("p3-exact-long-v1", Protocol.P3, "Long chains from the opening rack, exact play (for the searches that reach p3-exact-v1's cap)",
           units=10, shots=10_000, seed=7_900_000, fingerprint="a576e51d7fb07fc6b08b022359f57397ab3e058c0bc6056df4e012bc591ec356"),
     Track("p1-fastfiz-v1", Protocol.P1, "Per-shot success from random racks under fastfiz execution noise",
@@ -217,8 +226,7 @@ _REGISTRY: tuple[Track, ...] = (
 
 TRACKS: dict[str, Track] = {t.name: t for t in _REGISTRY}
 # each exact track and its compute-limited versions, cheapest first: one compute curve each
-COMPUTE_CURVES: dict[str, tuple[str, ...]] = {base: tuple(f"{base}-b{budget}-v1" for budget in BUDGETS) + (f"{base}-v1",)
-                                              for base in ("innings", "p1-exact", "p3-exact")}
+COMPUTE_CURVES: dict[str, tuple[str, ...]] = {base: tuple(t.name for t in curve) for base, curve in _CURVES.items()}
 
 
 def is_int(x) -> bool:

@@ -50,8 +50,14 @@ def _tables(names: list[str], results: list[tuple[str, str, float]]) -> tuple[np
         wins[idx[b], idx[a]] += 1 - s
         games[idx[a], idx[b]] += 1
         games[idx[b], idx[a]] += 1
-    off = ~np.eye(k, dtype=bool)
-    return wins + 0.5 * off, games + 1.0 * off  # the virtual draws
+    return _with_virtual_draws(wins, games)
+
+
+def _with_virtual_draws(wins: np.ndarray, games: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The score and match tables (of one league or a stack) with one virtual draw between every
+    two players: the weak prior that keeps a rating finite for a player that never lost or never won."""
+    off = ~np.eye(wins.shape[-1], dtype=bool)
+    return wins + 0.5 * off, games + 1.0 * off
 
 
 def elo(names: list[str], results: list[tuple[str, str, float]], iters: int = 2000) -> dict[str, float]:
@@ -89,8 +95,7 @@ def elo_intervals(names: list[str], results: list[tuple[str, str, float]], draws
         wins[:, j, i] += n - score
         games[:, i, j] += n
         games[:, j, i] += n
-    off = ~np.eye(k, dtype=bool)
-    rating = 400 * _strengths(wins + 0.5 * off, games + 1.0 * off, iters)
+    rating = 400 * _strengths(*_with_virtual_draws(wins, games), iters)
     rating = 1500 + rating - rating.mean(axis=-1, keepdims=True)
     tail = 100 * (1 - confidence) / 2
     lo, hi = np.percentile(rating, [tail, 100 - tail], axis=0)
