@@ -122,7 +122,7 @@ def play_chain(agent: Agent, track: Track, index: int, on_shot=None) -> dict:
     miss or foul or the cap (``on_shot`` as for :func:`play_innings`, the row always 0)."""
     from billiards.envs.gym_vector import Billiards4BallVectorEnv
 
-    seed, spec = track.seed + index, track.protocol.spec
+    seed, spec = track.seed_of(index), track.protocol.spec
     env = Billiards4BallVectorEnv(1, start=spec.start, on_miss=spec.on_miss, max_shots=track.shots, physics=track.physics,
                                   noise=track.noise, normalize_actions=False)
     obs, info = env.reset(seed=seed)
@@ -183,7 +183,7 @@ def play_match(agent: Agent, track: Track, index: int, on_shot=None, opponent=No
             _POOL[(track.name, name)] = league_player(name, noise, params)[0]
         opponent = _POOL[(track.name, name)]
     clock = Clock(agent)
-    seed = track.seed + 1000 * j + i
+    seed = track.seed_of(index)
     result = play(MatchPlayer(clock, track.tells_level), opponent, seed=seed,
                   first="white" if i % 2 == 0 else "yellow", target=track.target, max_innings=track.max_innings,
                   start=track.protocol.spec.start, noise=noise, physics=params, on_shot=on_shot)
@@ -279,7 +279,7 @@ def _chain_problem(track: Track, rec: dict) -> str | None:
 def _match_problem(track: Track, rec: dict) -> str | None:
     unit = rec["unit"]
     j, i = divmod(unit, track.units)
-    want = {"index": unit, "opponent": track.opponents[j], "seed": track.seed + 1000 * j + i,
+    want = {"index": unit, "opponent": track.opponents[j], "seed": track.seed_of(unit),
             "first": "agent" if i % 2 == 0 else "opponent"}
     if any(rec[k] != v or isinstance(rec[k], bool) for k, v in want.items()):
         return f"match {unit} of {track.name} is {', '.join(f'{k} {v!r}' for k, v in want.items())}"

@@ -80,11 +80,18 @@ class Track:
         """The number the leaderboard ranks this track by."""
         return self.protocol.spec.metric
 
+    def seed_of(self, index: int) -> int:
+        """The seed of inning, chain or match ``index`` (match i against opponent j is index
+        ``j * units + i``): ``seed + index``, a match ``seed + 1000 j + i``."""
+        if self.protocol.spec.two_player:
+            j, i = divmod(index, self.units)
+            return self.seed + 1000 * j + i
+        return self.seed + index
+
     def seeds(self) -> list[int]:
         """Every evaluation seed the track plays (innings, chains or matches)."""
-        if self.protocol.spec.two_player:
-            return [self.seed + 1000 * j + i for j in range(len(self.opponents)) for i in range(self.units)]
-        return list(range(self.seed, self.seed + self.units))
+        n = self.units * (len(self.opponents) if self.protocol.spec.two_player else 1)
+        return [self.seed_of(k) for k in range(n)]
 
     def n_blocks(self) -> int:
         """Resumable units: blocks of innings, chains or matches."""
